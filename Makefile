@@ -1,0 +1,47 @@
+# The single entry point. `make demo` and `make test` work on a fresh Debian 12
+# machine as root: both install what is missing, build, then run.
+BUILD ?= build
+JOBS ?= $(shell nproc 2>/dev/null || echo 2)
+CMAKE_FLAGS ?=
+# Debian's own Python sees python3-torch / python3-scipy; another python3 may be first on PATH.
+PYTHON ?= /usr/bin/python3
+
+DEB_PACKAGES := build-essential cmake pkg-config \
+  libeigen3-dev libceres-dev libcli11-dev nlohmann-json3-dev libfmt-dev \
+  libgtest-dev libgmock-dev libbenchmark-dev \
+  libtorch-dev libopenblas0-openmp \
+  pybind11-dev python3-dev python3-numpy python3-torch python3-scipy \
+  gnuplot-nox \
+  libroscpp-dev librosbag-dev libsensor-msgs-dev
+
+.PHONY: deps build test demo bench clean
+
+# Idempotent: asks dpkg first and calls apt only for what is missing.
+deps:
+	@missing=""; for p in $(DEB_PACKAGES); do \
+	  dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q '^install ok installed$$' || missing="$$missing $$p"; \
+	done; \
+	if [ -z "$$missing" ]; then echo "deps: all Debian packages present"; \
+	elif [ "$$(id -u)" != 0 ]; then echo "deps: missing:$$missing -- run 'make deps' as root" >&2; exit 1; \
+	else echo "deps: installing$$missing"; \
+	  export DEBIAN_FRONTEND=noninteractive; \
+	  apt-get update -qq && apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+
+$(BUILD)/CMakeCache.txt:
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release -DPython3_EXECUTABLE=$(PYTHON) $(CMAKE_FLAGS)
+
+build: deps $(BUILD)/CMakeCache.txt
+	cmake --build $(BUILD) -j $(JOBS)
+
+test: build
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+
+demo: build
+	$(BUILD)/bin/rcm demo --out demo-out
+
+bench: build
+	$(PYTHON) bench/run_benchmarks.py --build $(BUILD)
+
+clean:
+	rm -rf $(BUILD)

@@ -1,0 +1,149 @@
+// rcm inspect: validate and summarize a recording or a session manifest.
+
+#include <fmt/format.h>
+
+#include <iostream>
+
+#include "cli_util.hpp"
+#include "command_registry.hpp"
+#include "rcm/common/error.hpp"
+#include "rcm/io/recording.hpp"
+#include "rcm/io/session.hpp"
+
+namespace {
+
+struct Options {
+  std::string file;
+  bool json = false, dedupe = false;
+  double rate_hz = 0.0;
+};
+
+nlohmann::json summary_json(const rcm::Recording& r) {
+  const rcm::RecordingSummary s = rcm::summarize_recording(r);
+  auto ranges = [](const std::vector<rcm::RecordingSummary::Range>& v) {
+    nlohmann::json a = nlohmann::json::array();
+    for (const auto& x : v) a.push_back({x.min, x.max});
+    return a;
+  };
+  nlohmann::json j = {{"file", r.source},
+                      {"layout", r.layout == rcm::RecordingLayout::rostopic_csv ? "rostopic" : "rcm"},
+                      {"samples", s.samples},
+                      {"joints", s.joints},
+                      {"duration_s", s.duration_s},
+                      {"rate_hz", s.rate_hz},
+                      {"dt_median_s", s.dt_median_s},
+                      {"dt_min_s", s.dt_min_s},
+                      {"dt_max_s", s.dt_max_s},
+                      {"jitter_s", s.jitter_s},
+                      {"repeated_rows", s.repeated_rows},
+                      {"repeated_rows_removed", s.repeated_rows_removed},
+                      {"time_from_rate", s.time_from_rate},
+                      {"has_force", s.has_force},
+                      {"position_range", ranges(s.position)},
+                      {"velocity_range", ranges(s.velocity)},
+                      {"effort_range", ranges(s.effort)}};
+  if (s.has_force) j["force_range"] = ranges(s.force);
+  return j;
+}
+
+void print_recording(const nlohmann::json& j, const std::string& indent) {
+  std::cout << fmt::format("{}{}: {} samples, {} joints, {:.3f} s at {:.1f} Hz (dt {:.2f}..{:.2f} ms, jitter {:.3f} ms)\n",
+                           indent, j["file"].get<std::string>(), j["samples"].get<std::size_t>(),
+                           j["joints"].get<int>(), j["duration_s"].get<double>(), j["rate_hz"].get<double>(),
+                           1e3 * j["dt_min_s"].get<double>(), 1e3 * j["dt_max_s"].get<double>(),
+                           1e3 * j["jitter_s"].get<double>());
+  const std::size_t repeated = j["repeated_rows"].get<std::size_t>();
+  if (repeated > 0)
+    std::cout << fmt::format("{}  repeated rows: {} ({:.1f} %){}\n", indent, repeated,
+                             100.0 * repeated / (j["samples"].get<double>() + (j["repeated_rows_removed"].get<bool>() ? repeated : 0)),
+                             j["repeated_rows_removed"].get<bool>() ? ", removed (--dedupe)" : ", kept (use --dedupe to drop them)");
+  if (j["time_from_rate"].get<bool>()) std::cout << indent << "  time: numbered from --rate (no time column)\n";
+  std::vector<std::vector<std::string>> rows;
+  for (std::size_t k = 0; k < j["position_range"].size(); ++k) {
+    auto f = [&](const char* key) {
+      return fmt::format("{:.4g}..{:.4g}", j[key][k][0].get<double>(), j[key][k][1].get<double>());
+    };
+    rows.push_back({std::to_string(k + 1), f("position_range"), f("velocity_range"), f("effort_range")});
+  }
+  std::string table = rcm::cli::format_table({"joint", "position", "velocity", "effort"}, rows);
+  for (std::size_t p = 0; (p = table.find('\n', p)) != std::string::npos && p + 1 < table.size(); p += indent.size() + 3)
+    table.insert(p + 1, indent + "  ");
+  std::cout << indent << "  " << table;
+  if (j["has_force"].get<bool>())
+    std::cout << fmt::format("{}  force columns: x {:.3g}..{:.3g}, y {:.3g}..{:.3g}, z {:.3g}..{:.3g} N\n", indent,
+                             j["force_range"][0][0].get<double>(), j["force_range"][0][1].get<double>(),
+                             j["force_range"][1][0].get<double>(), j["force_range"][1][1].get<double>(),
+                             j["force_range"][2][0].get<double>(), j["force_range"][2][1].get<double>());
+  else
+    std::cout << indent << "  force columns: none\n";
+}
+
+void run(const Options& o) {
+  rcm::RecordingReadOptions read;
+  read.dedupe = o.dedupe;
+  if (o.rate_hz > 0) read.assumed_rate_hz = o.rate_hz;
+  const bool is_json = o.file.size() > 5 && o.file.substr(o.file.size() - 5) == ".json";
+  if (!is_json) {
+    const nlohmann::json j = summary_json(rcm::load_recording(o.file, read));
+    if (o.json) rcm::cli::print_json(j);
+    else print_recording(j, "");
+    return;
+  }
+  const rcm::Session s = rcm::load_session(o.file);
+  nlohmann::json out = {{"file", o.file}, {"format", "rcm-session/1"}, {"robot", s.robot},
+                        {"q0", rcm::cli::to_json(s.q0)}};
+  auto load = [&](const std::filesystem::path& p) { return summary_json(rcm::load_recording(p, read)); };
+  out["free_space"] = nlohmann::json::array();
+  for (const auto& p : s.free_space) out["free_space"].push_back(load(p));
+  if (s.baseline) out["baseline"] = load(*s.baseline);
+  if (s.calibration) {
+    out["calibration"] = load(s.calibration->recording);
+    out["calibration"]["coaxial_offset_m"] = s.calibration->coaxial_offset_m;
+  }
+  out["trials"] = nlohmann::json::array();
+  for (const auto& t : s.trials) {
+    nlohmann::json jt = {{"name", t.name}, {"recording", load(t.recording)}};
+    if (t.static_recording) jt["static"] = load(*t.static_recording);
+    if (t.truth_misalignment_m) jt["truth_misalignment_m"] = rcm::cli::to_json(*t.truth_misalignment_m);
+    out["trials"].push_back(jt);
+  }
+  if (o.json) {
+    rcm::cli::print_json(out);
+    return;
+  }
+  std::cout << fmt::format("session {} (robot {}, q0 [{:.4f}, {:.4f}, {:.4f}]): every file read and valid\n", o.file,
+                           s.robot, s.q0[0], s.q0[1], s.q0[2]);
+  std::cout << "free space:\n";
+  for (const auto& j : out["free_space"]) print_recording(j, "  ");
+  if (s.baseline) {
+    std::cout << "baseline:\n";
+    print_recording(out["baseline"], "  ");
+  }
+  if (s.calibration) {
+    std::cout << fmt::format("calibration (D* = {:.1f} mm):\n", 1e3 * s.calibration->coaxial_offset_m);
+    print_recording(out["calibration"], "  ");
+  }
+  std::cout << fmt::format("trials: {}\n", s.trials.size());
+  for (const auto& jt : out["trials"]) {
+    std::string truth = jt.contains("truth_misalignment_m")
+                            ? fmt::format(" truth [{:.1f}, {:.1f}, {:.1f}] mm", 1e3 * jt["truth_misalignment_m"][0].get<double>(),
+                                          1e3 * jt["truth_misalignment_m"][1].get<double>(),
+                                          1e3 * jt["truth_misalignment_m"][2].get<double>())
+                            : "";
+    std::cout << fmt::format("  {}{}\n", jt["name"].get<std::string>(), truth);
+    print_recording(jt["recording"], "    ");
+    if (jt.contains("static")) print_recording(jt["static"], "    ");
+  }
+}
+
+const bool registered = rcm::cli::register_command({"inspect", 10, [](CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand("inspect", "Validate and summarize a recording (.csv) or a session (.json)");
+  cmd->add_option("FILE", o->file, "recording CSV (rcm or rostopic echo -p layout) or session manifest")->required();
+  cmd->add_flag("--json", o->json, "print one JSON object");
+  cmd->add_flag("--dedupe", o->dedupe, "drop rows that repeat the previous sample exactly");
+  cmd->add_option("--rate", o->rate_hz, "sampling rate (Hz) to assume for files without a time column");
+  cmd->callback([o] { run(*o); });
+}});
+
+}  // namespace

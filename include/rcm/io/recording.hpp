@@ -1,0 +1,95 @@
+#pragma once
+// One recording of the rcm-session/1 contract: time-stamped joint positions,
+// velocities and efforts of N >= 3 joints, optionally the ground-truth force.
+//
+// Two layouts are read: the contract's own CSV (time, position_i, velocity_i,
+// effort_i, force_x..z) and what `rostopic echo -p /PSM1/measured_js` writes
+// (%time in ns, field.position0.., field.velocity0.., field.effort0..).
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace rcm {
+
+enum class RecordingLayout { rcm_csv, rostopic_csv, in_memory };
+
+struct Recording {
+  std::string source;             // file path (for messages) or a description
+  RecordingLayout layout = RecordingLayout::in_memory;
+
+  Eigen::VectorXd time;           // s, strictly increasing, size T
+  Eigen::MatrixXd position;       // T x N: rad, rad, m, rad...
+  Eigen::MatrixXd velocity;       // T x N: rad/s, rad/s, m/s, rad/s...
+  Eigen::MatrixXd effort;         // T x N: N m, N m, N, N m...
+  std::optional<Eigen::MatrixXd> force;  // T x 3, N, base frame; ground truth only
+
+  // 1-based source line of every sample, so that later stages can point the
+  // user at the file (empty for in-memory recordings).
+  std::vector<std::size_t> line;
+
+  // Rows whose joint data repeat the previous row exactly (the logger ran
+  // faster than the topic). Counted always; removed only when asked.
+  std::size_t repeated_rows = 0;
+  bool repeated_rows_removed = false;
+  // True when the file had no time column and time was built from a rate the
+  // user gave explicitly.
+  bool time_from_rate = false;
+
+  std::size_t num_samples() const { return static_cast<std::size_t>(time.size()); }
+  int num_joints() const { return static_cast<int>(position.cols()); }
+  bool has_force() const { return force.has_value(); }
+};
+
+struct RecordingReadOptions {
+  // Drop rows whose position, velocity and effort equal the previous row's.
+  bool dedupe = false;
+  // When the file has no time column: the sampling rate to assume (Hz). Without
+  // it such a file is an error; time is never invented silently.
+  std::optional<double> assumed_rate_hz;
+  // Minimum number of joints the caller needs.
+  int min_joints = 3;
+};
+
+// Reads and validates a recording. Throws InputError naming file, line and
+// column for every defect: missing column, non-numeric cell, NaN/inf,
+// non-increasing time, too few joints, empty file.
+Recording load_recording(const std::filesystem::path& path,
+                         const RecordingReadOptions& options = {});
+
+// Same, from text already in memory; `source` names it in messages.
+Recording parse_recording(const std::string& text, const std::string& source,
+                          const RecordingReadOptions& options = {});
+
+// Writes the contract's CSV layout atomically (temporary file + rename), with
+// shortest round-trip number formatting so that reading it back is exact.
+void save_recording(const std::filesystem::path& path, const Recording& recording);
+
+// Checks the invariants of an in-memory recording (sizes agree, time strictly
+// increasing, every value finite); throws InputError naming `recording.source`.
+void validate_recording(const Recording& recording);
+
+// What `rcm inspect` shows of a recording.
+struct RecordingSummary {
+  std::size_t samples = 0;
+  int joints = 0;
+  double duration_s = 0.0;
+  double rate_hz = 0.0;            // 1 / median sampling interval
+  double dt_median_s = 0.0;
+  double dt_min_s = 0.0, dt_max_s = 0.0;
+  double jitter_s = 0.0;           // standard deviation of the sampling interval
+  std::size_t repeated_rows = 0;
+  bool repeated_rows_removed = false;
+  bool has_force = false;
+  bool time_from_rate = false;
+  struct Range { double min = 0, max = 0; };
+  std::vector<Range> position, velocity, effort;  // per joint
+  std::vector<Range> force;                       // x, y, z when present
+};
+
+RecordingSummary summarize_recording(const Recording& recording);
+
+}  // namespace rcm

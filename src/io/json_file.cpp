@@ -1,0 +1,94 @@
+#include "rcm/io/json_file.hpp"
+
+#include <cstdio>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <system_error>
+
+#include "rcm/common/error.hpp"
+
+namespace rcm {
+
+std::string read_text_file(const std::filesystem::path& path) {
+  InputLocation where;
+  where.file = path.string();
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw InputError(where, "file not found");
+  if (std::filesystem::is_directory(path, ec)) throw InputError(where, "is a directory, expected a file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(where, "cannot be opened for reading");
+  std::ostringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+nlohmann::json load_json_file(const std::filesystem::path& path) {
+  const std::string text = read_text_file(path);
+  try {
+    return nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    // nlohmann reports a byte offset; users need line and column.
+    InputLocation where;
+    where.file = path.string();
+    const std::size_t byte = std::min<std::size_t>(e.byte == 0 ? 0 : e.byte - 1, text.size());
+    std::size_t line = 1, col = 1;
+    for (std::size_t i = 0; i < byte; ++i) {
+      if (text[i] == '\n') {
+        ++line;
+        col = 1;
+      } else {
+        ++col;
+      }
+    }
+    where.line = line;
+    where.column = col;
+    std::string msg = e.what();
+    // Drop nlohmann's "[json.exception.parse_error.101] parse error at line 1, column 2: " prefix.
+    const auto pos = msg.find(": ");
+    if (pos != std::string::npos) msg = msg.substr(pos + 2);
+    if (msg.size() > 160) msg = msg.substr(0, 160) + "...";
+    throw InputError(where, "invalid JSON: " + msg);
+  } catch (const nlohmann::json::exception& e) {
+    // e.g. out_of_range.406 for a number such as 1e999
+    InputLocation where;
+    where.file = path.string();
+    std::string msg = e.what();
+    const auto pos = msg.find("] ");
+    if (pos != std::string::npos) msg = msg.substr(pos + 2);
+    if (msg.size() > 160) msg = msg.substr(0, 160) + "...";
+    throw InputError(where, "invalid JSON: " + msg);
+  }
+}
+
+void write_file_atomic(const std::filesystem::path& path, const std::string& text) {
+  const std::filesystem::path dir = path.has_parent_path() ? path.parent_path() : ".";
+  std::random_device rd;
+  const std::filesystem::path tmp =
+      dir / ("." + path.filename().string() + ".tmp" + std::to_string(rd() % 1000000));
+  InputLocation where;
+  where.file = path.string();
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw InputError(where, "cannot be written (directory missing or not writable)");
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.flush();
+    if (!out) {
+      std::error_code ec;
+      std::filesystem::remove(tmp, ec);
+      throw InputError(where, "write failed (disk full?)");
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw InputError(where, "cannot replace the file: " + ec.message());
+  }
+}
+
+void save_json_file(const std::filesystem::path& path, const nlohmann::json& value) {
+  write_file_atomic(path, value.dump(2) + "\n");
+}
+
+}  // namespace rcm
