@@ -1,0 +1,141 @@
+#pragma once
+// Three-step RCM misalignment estimation, paper III-C and Algorithm 1.
+//
+//   step 1  q0 and the torques of the aligned docking hold (baseline);
+//   step 2  the tissue law g from a calibration at a known pure coaxial offset
+//           (rcm/tissue, not here);
+//   step 3  per trial: (a) total force f_e(D) = J_D^{-T}(tau_h - tau_fs,h), (b) radial
+//           force f_r(D) = J_D(q0)^{-T} dtau_r from the static hold at q0, (c) coaxial
+//           force f_c = f_e - f_r and D~ = argmin 1/2 sum psi^2 with
+//           psi = g(D tan theta) - |f_c(D)|, D in [D_min, D_max], (d) radial offset
+//           dp_r = -g^{-1}(|f_r|) f_r / |f_r| in the incision frame.
+//
+// Because the columns of J_D are orthogonal, J_D^{-T} dtau = u / D + w with
+// u = cos(theta) (a1 dtau_1 / cos^2 q2 + a2 dtau_2) and w = z3 dtau_3 (a1, a2 the
+// derivatives of z3): every force is affine in 1/D, so psi and dpsi/dD are exact
+// and cheap for the solver.
+//
+// Sign (derived from the geometry and checked against the simulator): the
+// contract's force is the force the instrument applies to the tissue. The tissue
+// is anchored at the incision; the instrument drags it away from there, so the
+// radial force points from the incision towards the shaft, i.e. against the
+// radial offset: dp_r = -g^{-1}(|f_r|) f_r / |f_r|.
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "rcm/io/recording.hpp"
+#include "rcm/kinematics/incision.hpp"
+#include "rcm/tissue/tissue_law.hpp"
+
+namespace rcm {
+
+struct RestDetectionOptions {
+  double max_angular_speed = 0.01;  // rad/s, joints 1-2
+  double max_linear_speed = 0.002;  // m/s, joint 3
+  double max_angle_from_q0 = 0.005;  // rad, joints 1-2
+  double max_insertion_from_q0 = 0.002;  // m, joint 3
+  double min_duration_s = 0.25;
+};
+
+// The last contiguous run of samples at rest at q0: [begin, end).
+struct RestSegment {
+  Eigen::Index begin = 0, end = 0;
+  double duration_s = 0.0;
+};
+
+// Throws InputError naming the recording when it never rests at q0 for
+// min_duration_s (e.g. the static file of another q0, or a robot still moving).
+RestSegment find_rest_segment(const Recording& recording, const Eigen::Vector3d& q0,
+                              const RestDetectionOptions& options = {});
+
+// Step 3b's torque residual at the hold: mean over the rest segment.
+struct StaticHold {
+  RestSegment segment;
+  Eigen::Vector3d tau_measured = Eigen::Vector3d::Zero();  // mean measured effort
+  Eigen::Vector3d tau_free_space = Eigen::Vector3d::Zero();  // mean predicted tau_fs
+  Eigen::Vector3d get_dtau() const { return tau_measured - tau_free_space; }
+};
+
+// tau_fs: T x (>=3) free-space prediction for the whole static file, computed
+// with the model's state carried through the return motion.
+StaticHold compute_static_hold(const Recording& recording, const Eigen::MatrixXd& tau_fs,
+                               const Eigen::Vector3d& q0, const RestDetectionOptions& options = {});
+
+// f = J_D^{-T} dtau at q written as u / D + w (see the file comment). Exact for
+// every D != 0; the caller checks conditioning at the D it uses.
+struct InverseDecomposition {
+  Eigen::Vector3d u = Eigen::Vector3d::Zero();
+  Eigen::Vector3d w = Eigen::Vector3d::Zero();
+  Eigen::Vector3d evaluate(double D) const { return u / D + w; }
+};
+InverseDecomposition compute_inverse_decomposition(const IncisionFrame& incision, const Eigen::Vector3d& q,
+                                                   const Eigen::Vector3d& dtau);
+
+// The coaxial least-squares problem of one trial (Eq. 16-17), reduced to
+// per-sample coefficients.
+struct CoaxialProblem {
+  std::vector<InverseDecomposition> total;  // f_e of each used sample
+  std::vector<double> tan_theta;
+  InverseDecomposition radial;              // f_r at q0
+  std::vector<Eigen::Index> sample_index;   // which recording samples are used
+};
+
+struct CoaxialProblemOptions {
+  // Samples whose pivot exceeds this carry a J_D that amplifies noise without
+  // bound (theta -> 90 deg); teleoperation stays far below.
+  double max_theta_rad = 80.0 * M_PI / 180.0;
+};
+
+CoaxialProblem make_coaxial_problem(const IncisionFrame& incision, const Recording& trial,
+                                    const Eigen::MatrixXd& tau_fs, const Eigen::Vector3d& dtau_radial,
+                                    const CoaxialProblemOptions& options = {});
+
+// psi_t(D) for every sample, and dpsi_t/dD when `jacobian` is not null. Returns
+// false where the problem is undefined (D == 0).
+bool compute_coaxial_residuals(const CoaxialProblem& problem, const TissueLaw& g, double D,
+                               double* residuals, double* jacobian);
+
+struct SolverReport {
+  bool converged = false;
+  std::string termination;  // Ceres termination type
+  std::string message;
+  int iterations = 0;
+  double initial_cost = 0.0, final_cost = 0.0;
+  std::string brief_report() const;
+};
+
+struct ThreeStepOptions {
+  double D_min = -0.020, D_max = 0.070;  // m (paper Eq. 16)
+  std::optional<double> D_initial;        // default: middle of the bounds
+  double function_tolerance = 1e-6;       // relative change of cost (paper IV-D)
+  int max_iterations = 200;
+  CoaxialProblemOptions coaxial;
+  // Throws std::invalid_argument naming the first bad option.
+  void check() const;
+};
+
+struct ThreeStepResult {
+  Eigen::Vector3d misalignment_m = Eigen::Vector3d::Zero();  // [dr_x, dr_y, D], incision frame
+  SolverReport solver;
+  std::size_t samples_used = 0;
+  // Radial step at D~: the hold's force in the incision frame, its in-plane
+  // magnitude, and how g was inverted.
+  Eigen::Vector3d f_radial_inc = Eigen::Vector3d::Zero();
+  double f_radial_in_plane = 0.0;
+  TissueInverseStatus radial_inverse = TissueInverseStatus::ok;
+  bool radial_extrapolated = false;  // |f_r| outside g's fitted range; g extended
+  std::string radial_message;
+};
+
+// Steps 3c and 3d for one trial. tau_fs_trial: the free-space prediction for the
+// trial recording (T x >= 3); dtau_radial: StaticHold::get_dtau() of its hold
+// (zero when the trial has no static file: then the radial offset is not
+// estimated and stays 0).
+ThreeStepResult estimate_three_step(const IncisionFrame& incision, const TissueLaw& g,
+                                    const Recording& trial, const Eigen::MatrixXd& tau_fs_trial,
+                                    const Eigen::Vector3d& dtau_radial, const ThreeStepOptions& options = {});
+
+}  // namespace rcm

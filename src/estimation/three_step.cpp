@@ -1,0 +1,210 @@
+#include "rcm/estimation/three_step.hpp"
+
+#include <ceres/ceres.h>
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include "rcm/common/error.hpp"
+
+namespace rcm {
+
+RestSegment find_rest_segment(const Recording& r, const Eigen::Vector3d& q0, const RestDetectionOptions& o) {
+  const Eigen::Index T = r.time.size();
+  auto at_rest = [&](Eigen::Index t) {
+    for (int j = 0; j < 2; ++j)
+      if (std::abs(r.velocity(t, j)) > o.max_angular_speed || std::abs(r.position(t, j) - q0[j]) > o.max_angle_from_q0)
+        return false;
+    return std::abs(r.velocity(t, 2)) <= o.max_linear_speed && std::abs(r.position(t, 2) - q0[2]) <= o.max_insertion_from_q0;
+  };
+  // The last run long enough: the hold comes after the return motion.
+  Eigen::Index end = T;
+  while (end > 0) {
+    while (end > 0 && !at_rest(end - 1)) --end;
+    Eigen::Index begin = end;
+    while (begin > 0 && at_rest(begin - 1)) --begin;
+    if (end > begin && r.time[end - 1] - r.time[begin] >= o.min_duration_s)
+      return {begin, end, r.time[end - 1] - r.time[begin]};
+    end = begin;
+  }
+  InputLocation where;
+  where.file = r.source;
+  std::ostringstream msg;
+  msg << "no hold at q0 = [" << q0.transpose() << "] of at least " << o.min_duration_s
+      << " s (at rest: |qdot| <= " << o.max_angular_speed << " rad/s and " << o.max_linear_speed
+      << " m/s, |q - q0| <= " << o.max_angle_from_q0 << " rad and " << o.max_insertion_from_q0 << " m)";
+  throw InputError(where, msg.str());
+}
+
+StaticHold compute_static_hold(const Recording& r, const Eigen::MatrixXd& tau_fs, const Eigen::Vector3d& q0,
+                               const RestDetectionOptions& o) {
+  if (tau_fs.rows() != r.time.size() || tau_fs.cols() < 3) {
+    InputLocation where;
+    where.file = r.source;
+    throw InputError(where, "free-space torque prediction does not match the recording's samples");
+  }
+  StaticHold hold;
+  hold.segment = find_rest_segment(r, q0, o);
+  const Eigen::Index n = hold.segment.end - hold.segment.begin;
+  hold.tau_measured = r.effort.block(hold.segment.begin, 0, n, 3).colwise().mean().transpose();
+  hold.tau_free_space = tau_fs.block(hold.segment.begin, 0, n, 3).colwise().mean().transpose();
+  return hold;
+}
+
+InverseDecomposition compute_inverse_decomposition(const IncisionFrame& incision, const Eigen::Vector3d& q,
+                                                   const Eigen::Vector3d& dtau) {
+  const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), s2 = std::sin(q[1]), c2 = std::cos(q[1]);
+  const Eigen::Vector3d a1(c1 * c2, 0.0, s1 * c2);    // dz3/dq1, norm c2
+  const Eigen::Vector3d a2(-s1 * s2, -c2, c1 * s2);   // dz3/dq2, norm 1
+  const Eigen::Vector3d z3(s1 * c2, -s2, -c1 * c2);
+  const double cos_theta = incision.z_inc_base().dot(z3);  // s = D / cos(theta)
+  InverseDecomposition out;
+  out.u = cos_theta * (a1 * (dtau[0] / (c2 * c2)) + a2 * dtau[1]);
+  out.w = z3 * dtau[2];
+  return out;
+}
+
+CoaxialProblem make_coaxial_problem(const IncisionFrame& incision, const Recording& trial,
+                                    const Eigen::MatrixXd& tau_fs, const Eigen::Vector3d& dtau_radial,
+                                    const CoaxialProblemOptions& options) {
+  const Eigen::Index T = trial.time.size();
+  if (tau_fs.rows() != T || tau_fs.cols() < 3) {
+    InputLocation where;
+    where.file = trial.source;
+    throw InputError(where, "free-space torque prediction does not match the recording's samples");
+  }
+  CoaxialProblem p;
+  p.radial = compute_inverse_decomposition(incision, incision.q0, dtau_radial);
+  for (Eigen::Index t = 0; t < T; ++t) {
+    const Eigen::Vector3d q = trial.position.row(t).head<3>().transpose();
+    const double theta = compute_pivot_angle(incision, q);
+    if (!(theta <= options.max_theta_rad)) continue;
+    const Eigen::Vector3d dtau = (trial.effort.row(t).head<3>() - tau_fs.row(t).head<3>()).transpose();
+    p.total.push_back(compute_inverse_decomposition(incision, q, dtau));
+    p.tan_theta.push_back(std::tan(theta));
+    p.sample_index.push_back(t);
+  }
+  if (p.total.empty()) {
+    InputLocation where;
+    where.file = trial.source;
+    throw InputError(where, "no sample with a usable pivot angle for the coaxial estimate");
+  }
+  return p;
+}
+
+bool compute_coaxial_residuals(const CoaxialProblem& p, const TissueLaw& g, double D, double* residuals,
+                               double* jacobian) {
+  if (!(std::abs(D) > 1e-9) || !std::isfinite(D)) return false;
+  const Eigen::Vector3d du = -p.radial.u, dw = -p.radial.w;
+  const double inv_D = 1.0 / D;
+  for (std::size_t t = 0; t < p.total.size(); ++t) {
+    const Eigen::Vector3d u = p.total[t].u + du;
+    const Eigen::Vector3d fc = u * inv_D + (p.total[t].w + dw);
+    const double n = fc.norm();
+    const double x = D * p.tan_theta[t];
+    residuals[t] = g.evaluate(x) - n;
+    if (jacobian) {
+      // d|f_c|/dD = f_c . (-u / D^2) / |f_c|
+      const double dn = n > 0.0 ? fc.dot(-u * inv_D * inv_D) / n : 0.0;
+      jacobian[t] = g.derivative(x) * p.tan_theta[t] - dn;
+    }
+    if (!std::isfinite(residuals[t])) return false;
+  }
+  return true;
+}
+
+namespace {
+
+class CoaxialCost final : public ceres::CostFunction {
+ public:
+  CoaxialCost(const CoaxialProblem& problem, const TissueLaw& g) : problem_(problem), g_(g) {
+    set_num_residuals(static_cast<int>(problem.total.size()));
+    mutable_parameter_block_sizes()->push_back(1);
+  }
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    return compute_coaxial_residuals(problem_, g_, parameters[0][0], residuals,
+                                     jacobians && jacobians[0] ? jacobians[0] : nullptr);
+  }
+
+ private:
+  const CoaxialProblem& problem_;
+  const TissueLaw& g_;
+};
+
+}  // namespace
+
+std::string SolverReport::brief_report() const {
+  std::ostringstream s;
+  s << termination << ", " << iterations << " iterations, cost " << initial_cost << " -> " << final_cost;
+  return s.str();
+}
+
+void ThreeStepOptions::check() const {
+  if (!(D_min < D_max) || !std::isfinite(D_min) || !std::isfinite(D_max))
+    throw std::invalid_argument("ThreeStepOptions: D_min must be below D_max");
+  if (D_initial && !(*D_initial >= D_min && *D_initial <= D_max))
+    throw std::invalid_argument("ThreeStepOptions: D_initial must lie within [D_min, D_max]");
+  if (!(function_tolerance > 0.0)) throw std::invalid_argument("ThreeStepOptions: function_tolerance must be > 0");
+  if (max_iterations < 1) throw std::invalid_argument("ThreeStepOptions: max_iterations must be >= 1");
+}
+
+ThreeStepResult estimate_three_step(const IncisionFrame& incision, const TissueLaw& g, const Recording& trial,
+                                    const Eigen::MatrixXd& tau_fs_trial, const Eigen::Vector3d& dtau_radial,
+                                    const ThreeStepOptions& options) {
+  options.check();
+  const CoaxialProblem problem = make_coaxial_problem(incision, trial, tau_fs_trial, dtau_radial, options.coaxial);
+
+  // Step 3c: bounded trust region on D (the paper: lsqnonlin, trust-region-reflective).
+  double D = options.D_initial.value_or(0.5 * (options.D_min + options.D_max));
+  if (std::abs(D) < 1e-6) D = 1e-3;  // psi is undefined at D = 0
+  ceres::Problem ceres_problem;
+  ceres_problem.AddResidualBlock(new CoaxialCost(problem, g), nullptr, &D);
+  ceres_problem.SetParameterLowerBound(&D, 0, options.D_min);
+  ceres_problem.SetParameterUpperBound(&D, 0, options.D_max);
+  ceres::Solver::Options solver_options;
+  solver_options.minimizer_type = ceres::TRUST_REGION;
+  solver_options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  solver_options.linear_solver_type = ceres::DENSE_QR;
+  solver_options.function_tolerance = options.function_tolerance;
+  solver_options.gradient_tolerance = 1e-14;
+  solver_options.parameter_tolerance = 1e-12;
+  solver_options.max_num_iterations = options.max_iterations;
+  solver_options.logging_type = ceres::SILENT;
+  solver_options.num_threads = 1;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver_options, &ceres_problem, &summary);
+
+  ThreeStepResult result;
+  result.samples_used = problem.total.size();
+  result.solver.converged = summary.termination_type == ceres::CONVERGENCE;
+  result.solver.termination = ceres::TerminationTypeToString(summary.termination_type);
+  result.solver.message = summary.message;
+  result.solver.iterations = static_cast<int>(summary.iterations.size()) - 1;
+  result.solver.initial_cost = summary.initial_cost;
+  result.solver.final_cost = summary.final_cost;
+
+  // Step 3d: the radial offset from the hold's force at D~, in the pad plane.
+  const Eigen::Vector3d f_r_base = problem.radial.evaluate(D);
+  result.f_radial_inc = incision.R_base_inc.transpose() * f_r_base;
+  const Eigen::Vector2d f_plane = result.f_radial_inc.head<2>();
+  result.f_radial_in_plane = f_plane.norm();
+  Eigen::Vector2d radial = Eigen::Vector2d::Zero();
+  if (result.f_radial_in_plane > 0.0) {
+    TissueInverseResult inv = g.compute_inverse(result.f_radial_in_plane);
+    if (inv.status == TissueInverseStatus::out_of_range && g.monotonicity() != Monotonicity::not_monotone) {
+      // The radial force may exceed what the calibration swept (or lie below its
+      // smallest pivot): extend g's domain rather than clip, and say so.
+      const TissueLaw extended(g.expression(), std::min(0.0, g.x_min()), 3.0 * g.x_max());
+      inv = extended.compute_inverse(result.f_radial_in_plane);
+      result.radial_extrapolated = true;
+    }
+    result.radial_inverse = inv.status;
+    result.radial_message = inv.message;
+    if (inv.status == TissueInverseStatus::ok) radial = -inv.x * f_plane / result.f_radial_in_plane;
+  }
+  result.misalignment_m << radial[0], radial[1], D;
+  return result;
+}
+
+}  // namespace rcm

@@ -1,0 +1,172 @@
+// Three-step estimation (Algorithm 1) on problems with known answers.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "rcm/common/error.hpp"
+#include "rcm/estimation/three_step.hpp"
+#include "rcm/force/incision_force.hpp"
+
+namespace {
+
+rcm::TissueLaw linear_law(double k, double x_max = 0.05) {
+  rcm::TissueExpression e;
+  e.terms.push_back({rcm::TissueTermKind::x, k, 1.0});
+  return rcm::TissueLaw(e, 0.0, x_max);
+}
+
+rcm::TissueLaw cubic_law(double a, double b) {
+  rcm::TissueExpression e;
+  e.terms.push_back({rcm::TissueTermKind::x, a, 1.0});
+  e.terms.push_back({rcm::TissueTermKind::cube, b, 1.0});
+  return rcm::TissueLaw(e, 0.0, 0.06);
+}
+
+// The force the instrument applies to the tissue: the shaft's crossing of the
+// pad plane against the anchored incision, through g (the simulator's model
+// without dynamics).
+Eigen::Vector3d tissue_force(const rcm::IncisionFrame& inc, const rcm::TissueLaw& g, const Eigen::Vector3d& q,
+                             const Eigen::Vector3d& dp_inc) {
+  const double s = rcm::compute_shaft_distance(inc, q, dp_inc[2]);
+  const Eigen::Vector3d stretch = s * rcm::compute_z3_base(q) - inc.R_base_inc * dp_inc;
+  const double n = stretch.norm();
+  return n > 0 ? Eigen::Vector3d(g.evaluate(n) * stretch / n) : Eigen::Vector3d::Zero();
+}
+
+struct Synthetic {
+  rcm::Recording trial, hold;
+  Eigen::MatrixXd tau_fs_trial, tau_fs_hold;
+};
+
+Synthetic make_synthetic(const rcm::IncisionFrame& inc, const rcm::TissueLaw& g, const Eigen::Vector3d& dp,
+                         double noise, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0.0, 1.0);
+  Synthetic s;
+  const int T = 2000;
+  rcm::Recording& r = s.trial;
+  r.source = "trial";
+  r.time = Eigen::VectorXd::LinSpaced(T, 0.0, (T - 1) * 0.005);
+  r.position.resize(T, 3);
+  r.velocity = Eigen::MatrixXd::Zero(T, 3);
+  r.effort.resize(T, 3);
+  for (int t = 0; t < T; ++t) {
+    const double tt = r.time[t];
+    const Eigen::Vector3d q = inc.q0 + Eigen::Vector3d(0.55 * std::sin(0.7 * tt) * std::cos(0.13 * tt),
+                                                       0.45 * std::sin(0.51 * tt + 1.0), 0.03 * std::sin(0.3 * tt));
+    r.position.row(t) = q.transpose();
+    const double sd = rcm::compute_shaft_distance(inc, q, dp[2]);
+    const Eigen::Vector3d tau = rcm::compute_incision_jacobian(q, sd).transpose() * tissue_force(inc, g, q, dp);
+    r.effort.row(t) = tau.transpose() + noise * Eigen::RowVector3d(n(rng), n(rng), 10 * n(rng));
+  }
+  s.tau_fs_trial = Eigen::MatrixXd::Zero(T, 3);
+  // The hold: 0.5 s of return motion, then 2 s at q0.
+  const int H = 500;
+  rcm::Recording& h = s.hold;
+  h.source = "hold";
+  h.time = Eigen::VectorXd::LinSpaced(H, 0.0, (H - 1) * 0.005);
+  h.position.resize(H, 3);
+  h.velocity = Eigen::MatrixXd::Zero(H, 3);
+  h.effort.resize(H, 3);
+  for (int t = 0; t < H; ++t) {
+    const double a = t < 100 ? 0.2 * (1.0 - t / 100.0) : 0.0;
+    const Eigen::Vector3d q = inc.q0 + Eigen::Vector3d(a, -a, 0.0);
+    if (t < 100) h.velocity(t, 0) = -0.2 / 0.5;
+    h.position.row(t) = q.transpose();
+    const double sd = rcm::compute_shaft_distance(inc, q, dp[2]);
+    const Eigen::Vector3d tau = rcm::compute_incision_jacobian(q, sd).transpose() * tissue_force(inc, g, q, dp);
+    h.effort.row(t) = tau.transpose() + noise * Eigen::RowVector3d(n(rng), n(rng), 10 * n(rng));
+  }
+  s.tau_fs_hold = Eigen::MatrixXd::Zero(H, 3);
+  return s;
+}
+
+TEST(ThreeStep, InverseDecompositionEqualsJacobianInverse) {
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0.1, -0.05, 0.12));
+  for (int k = 0; k < 100; ++k) {
+    const Eigen::Vector3d q(0.7 * u(rng), 0.6 * u(rng), 0.1);
+    const Eigen::Vector3d dtau(u(rng), u(rng), 3 * u(rng));
+    const double D = 0.04 + 0.03 * u(rng);
+    const rcm::InverseDecomposition dec = rcm::compute_inverse_decomposition(inc, q, dtau);
+    const Eigen::Vector3d f = rcm::compute_incision_force(inc, q, D, dtau).f_inc_base;
+    EXPECT_LT((dec.evaluate(D) - f).norm(), 1e-10 * (1 + f.norm()));
+  }
+}
+
+TEST(ThreeStep, ResidualJacobianMatchesFiniteDifferences) {
+  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0, 0, 0.12));
+  const rcm::TissueLaw g = cubic_law(600.0, 2.0e6);
+  const Synthetic s = make_synthetic(inc, g, Eigen::Vector3d(0.008, -0.012, 0.035), 0.02, 2);
+  const rcm::StaticHold hold = rcm::compute_static_hold(s.hold, s.tau_fs_hold, inc.q0);
+  const rcm::CoaxialProblem p = rcm::make_coaxial_problem(inc, s.trial, s.tau_fs_trial, hold.get_dtau());
+  const std::size_t n = p.total.size();
+  std::vector<double> r(n), rp(n), rm(n), J(n);
+  for (double D : {-0.015, 0.012, 0.03, 0.065}) {
+    ASSERT_TRUE(rcm::compute_coaxial_residuals(p, g, D, r.data(), J.data()));
+    // Central differences with h = 1e-7 m: truncation ~ h^2 psi''' ~ 1e-14 * 1e6,
+    // rounding ~ eps |psi| / h ~ 1e-9 * |psi|.
+    const double h = 1e-7;
+    ASSERT_TRUE(rcm::compute_coaxial_residuals(p, g, D + h, rp.data(), nullptr));
+    ASSERT_TRUE(rcm::compute_coaxial_residuals(p, g, D - h, rm.data(), nullptr));
+    for (std::size_t t = 0; t < n; ++t) {
+      const double fd = (rp[t] - rm[t]) / (2 * h);
+      EXPECT_NEAR(J[t], fd, 1e-5 * (1.0 + std::abs(fd))) << "D = " << D << " t = " << t;
+    }
+  }
+  EXPECT_FALSE(rcm::compute_coaxial_residuals(p, g, 0.0, r.data(), nullptr));
+}
+
+TEST(ThreeStep, RecoversExactMisalignmentWithLinearTissue) {
+  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0, 0, 0.12));
+  const rcm::TissueLaw g = linear_law(788.0);
+  for (const Eigen::Vector3d dp : {Eigen::Vector3d(0, 0, 0.030), Eigen::Vector3d(0.010, 0.015, 0.030),
+                                   Eigen::Vector3d(0.010, 0.015, 0.010), Eigen::Vector3d(-0.004, 0.007, 0.050)}) {
+    const Synthetic s = make_synthetic(inc, g, dp, 0.0, 3);
+    const rcm::StaticHold hold = rcm::compute_static_hold(s.hold, s.tau_fs_hold, inc.q0);
+    EXPECT_NEAR(hold.segment.duration_s, 399 * 0.005, 1e-9);
+    const rcm::ThreeStepResult r = rcm::estimate_three_step(inc, g, s.trial, s.tau_fs_trial, hold.get_dtau());
+    EXPECT_TRUE(r.solver.converged) << r.solver.brief_report() << " " << r.solver.message;
+    EXPECT_LT((r.misalignment_m - dp).norm(), 1e-6) << r.misalignment_m.transpose() << " vs " << dp.transpose();
+    EXPECT_LT(r.solver.final_cost, 1e-12);
+  }
+}
+
+TEST(ThreeStep, ToleratesTorqueNoise) {
+  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0, 0, 0.12));
+  const rcm::TissueLaw g = linear_law(788.0);
+  const Eigen::Vector3d dp(0.010, 0.015, 0.040);
+  const Synthetic s = make_synthetic(inc, g, dp, 0.018, 4);  // the dVRK's effort noise
+  const rcm::StaticHold hold = rcm::compute_static_hold(s.hold, s.tau_fs_hold, inc.q0);
+  const rcm::ThreeStepResult r = rcm::estimate_three_step(inc, g, s.trial, s.tau_fs_trial, hold.get_dtau());
+  EXPECT_LT((r.misalignment_m - dp).norm(), 1e-3) << r.misalignment_m.transpose();
+}
+
+TEST(ThreeStep, RespectsBoundsAndChecksOptions) {
+  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0, 0, 0.12));
+  const rcm::TissueLaw g = linear_law(788.0);
+  const Synthetic s = make_synthetic(inc, g, Eigen::Vector3d(0, 0, 0.060), 0.0, 5);
+  rcm::ThreeStepOptions o;
+  o.D_max = 0.045;
+  const rcm::ThreeStepResult r = rcm::estimate_three_step(inc, g, s.trial, s.tau_fs_trial, Eigen::Vector3d::Zero(), o);
+  EXPECT_LE(r.misalignment_m[2], 0.045 + 1e-12);
+  EXPECT_NEAR(r.misalignment_m[2], 0.045, 1e-6);
+  o.D_initial = 0.5;
+  EXPECT_THROW(rcm::estimate_three_step(inc, g, s.trial, s.tau_fs_trial, Eigen::Vector3d::Zero(), o),
+               std::invalid_argument);
+}
+
+TEST(ThreeStep, NoHoldAtQ0IsALocatedError) {
+  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0, 0, 0.12));
+  const Synthetic s = make_synthetic(inc, linear_law(788.0), Eigen::Vector3d(0, 0, 0.03), 0.0, 6);
+  try {
+    rcm::compute_static_hold(s.trial, s.tau_fs_trial, inc.q0);  // the trial never rests
+    FAIL();
+  } catch (const rcm::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("trial: no hold at q0"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
