@@ -1,0 +1,160 @@
+// `rcm dynamics fit|eval`: learn tau_fs from free-space recordings and score a
+// model as in the paper's Table II.
+
+#include <fmt/format.h>
+
+#include <iostream>
+#include <memory>
+
+#include "cli_util.hpp"
+#include "command_registry.hpp"
+#include "rcm/common/error.hpp"
+#include "rcm/dynamics/fit.hpp"
+#include "rcm/dynamics/linear_model.hpp"
+#include "rcm/dynamics/metrics.hpp"
+#include "rcm/dynamics/torque_model.hpp"
+#if defined(RCM_HAVE_TORCH)
+#include "rcm/dynamics/training.hpp"
+#endif
+
+namespace {
+
+struct DynamicsArgs {
+  std::string model_kind = "lstm";
+  std::string out;
+  std::vector<std::string> recordings;
+  unsigned seed = 1;
+  bool dedupe = false;
+  bool json = false;
+  std::string model_path;
+  double max_minutes = 10.0;
+  int hidden = 0, layers = 0, max_epochs = 300, threads = 2;
+  std::string torchscript_out, torchscript_in;
+};
+
+std::vector<rcm::Recording> load_all(const std::vector<std::string>& paths, bool dedupe) {
+  rcm::RecordingReadOptions ro;
+  ro.dedupe = dedupe;
+  std::vector<rcm::Recording> recs;
+  for (const auto& p : paths) recs.push_back(rcm::load_recording(p, ro));
+  return recs;
+}
+
+void run_fit(const DynamicsArgs& a) {
+  using namespace rcm::dynamics;
+  const auto kind = parse_torque_model_kind(a.model_kind, "--model");
+  rcm::dynamics::FitOptions o;
+  o.seed = a.seed;
+  o.max_minutes = a.max_minutes;
+  o.hidden_size = a.hidden;
+  o.num_layers = a.layers;
+  o.max_epochs = a.max_epochs;
+  o.threads = a.threads;
+  const auto recs = load_all(a.recordings, a.dedupe);
+  FitResult fit;
+#if defined(RCM_HAVE_TORCH)
+  fit = fit_torque_model(kind, recs, o);
+  if (!a.torchscript_out.empty()) {
+    if (kind != TorqueModelKind::lstm) {
+      rcm::InputLocation where;
+      where.field = "--torchscript";
+      throw rcm::InputError(where, "TorchScript export is for --model lstm only");
+    }
+    export_torchscript(static_cast<const LstmTorqueModel&>(*fit.model), a.torchscript_out);
+  }
+#else
+  if (kind != TorqueModelKind::linear) {
+    rcm::InputLocation where;
+    where.field = "--model";
+    throw rcm::InputError(where, "this rcm was built without LibTorch (RCM_WITH_TORCH=OFF); only --model linear "
+                                 "can be fitted");
+  }
+  fit = fit_linear_torque_model(recs, o);
+#endif
+  save_torque_model(a.out, *fit.model);
+  if (a.json) {
+    auto j = fit.summary.to_json();
+    j["model"] = a.out;
+    rcm::cli::print_json(j);
+  } else {
+    std::cout << fit.summary.brief_report() << "model written to " << a.out << "\n";
+  }
+}
+
+void run_eval(const DynamicsArgs& a) {
+  using namespace rcm::dynamics;
+  std::unique_ptr<TorqueModel> model = load_torque_model(a.model_path);
+  const auto recs = load_all(a.recordings, a.dedupe);
+  std::vector<std::string> warnings;
+  for (const auto& r : recs) {
+    if (r.num_joints() < model->num_joints()) {
+      rcm::InputLocation where;
+      where.file = r.source;
+      throw rcm::InputError(where, fmt::format("the model reads {} joints, the recording has {}",
+                                               model->num_joints(), r.num_joints()));
+    }
+    if (auto w = check_sample_period(*model, r); !w.empty()) warnings.push_back(w);
+  }
+  for (const auto& w : warnings) std::cerr << "warning: " << w << "\n";
+  const auto errors = evaluate_torque_model(*model, recs);
+  if (a.json) {
+    auto j = to_json(errors);
+    j["model"] = {{"kind", to_string(model->kind())}, {"path", a.model_path}};
+    j["warnings"] = warnings;
+    rcm::cli::print_json(j);
+    return;
+  }
+  std::vector<std::vector<std::string>> rows;
+  for (const auto& e : errors)
+    rows.push_back({std::to_string(e.index), fmt::format("{:.4g}", e.rmse), fmt::format("{:.2f}", e.nrmse_percent),
+                    fmt::format("{:.4g}", e.range)});
+  std::cout << "model: " << to_string(model->kind()) << " (" << a.model_path << ")\n"
+            << rcm::cli::format_table({"joint", "RMSE", "NRMSE %", "range"}, rows);
+}
+
+#if defined(RCM_HAVE_TORCH)
+void run_import(const DynamicsArgs& a) {
+  auto model = rcm::dynamics::import_torchscript(a.torchscript_in);
+  rcm::dynamics::save_torque_model(a.out, *model);
+  std::cerr << "imported " << a.torchscript_in << " -> " << a.out << "\n";
+}
+#endif
+
+const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App& app) {
+  auto args = std::make_shared<DynamicsArgs>();
+  auto* dyn = app.add_subcommand("dynamics", "Free-space torque models tau_fs = f(q, qdot, history)");
+  dyn->require_subcommand(1);
+
+  auto* fit = dyn->add_subcommand("fit", "Learn tau_fs from free-space recordings (70/20/10 split in time order)");
+  fit->add_option("--model", args->model_kind, "lstm | mlp | linear | hybrid")->required();
+  fit->add_option("--out", args->out, "model file to write (rcm-torque-model/1 JSON)")->required();
+  fit->add_option("recordings", args->recordings, "free-space recordings (CSV)")->required();
+  fit->add_option("--seed", args->seed, "random seed (network initialization and batching)");
+  fit->add_option("--max-minutes", args->max_minutes, "wall-clock budget of the training (default 10)");
+  fit->add_option("--hidden", args->hidden, "LSTM hidden size (default: 128, or 32 on < 5 min of data)");
+  fit->add_option("--layers", args->layers, "LSTM layers (default 1)");
+  fit->add_option("--threads", args->threads, "LibTorch intra-op threads (default 2)");
+  fit->add_option("--max-epochs", args->max_epochs, "epoch limit (early stopping usually ends sooner)");
+#if defined(RCM_HAVE_TORCH)
+  fit->add_option("--torchscript", args->torchscript_out, "also export the LSTM as TorchScript to this file");
+#endif
+  fit->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
+  fit->add_flag("--json", args->json, "print the fit summary as one JSON object");
+  fit->callback([args] { run_fit(*args); });
+
+  auto* ev = dyn->add_subcommand("eval", "Per-joint RMSE and NRMSE (%) of a model on recordings (Table II)");
+  ev->add_option("model", args->model_path, "model file")->required();
+  ev->add_option("recordings", args->recordings, "recordings (CSV)")->required();
+  ev->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
+  ev->add_flag("--json", args->json, "print {\"joints\": [{\"index\", \"rmse\", \"nrmse_percent\"}]}");
+  ev->callback([args] { run_eval(*args); });
+
+#if defined(RCM_HAVE_TORCH)
+  auto* im = dyn->add_subcommand("import", "Convert a TorchScript LSTM trained in PyTorch (layout: docs/dynamics.md)");
+  im->add_option("torchscript", args->torchscript_in, "TorchScript file")->required();
+  im->add_option("--out", args->out, "model file to write")->required();
+  im->callback([args] { run_import(*args); });
+#endif
+}});
+
+}  // namespace

@@ -1,0 +1,208 @@
+// `rcm simulate`: the simulated phantom bench (docs/simulator.md).
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <iostream>
+#include <memory>
+
+#include "cli_util.hpp"
+#include "command_registry.hpp"
+#include "rcm/common/error.hpp"
+#include "rcm/io/json_file.hpp"
+#include "rcm/sim/bench.hpp"
+#include "rcm/sim/sim_config.hpp"
+
+namespace {
+
+struct SimulateOptions {
+  std::string out;
+  std::string experiment = "session";
+  std::string tissue;
+  std::string config_file;
+  std::uint64_t seed = 0;
+  bool seed_given = false;
+  bool quick = false;
+  bool json = false;
+  bool print_config = false;
+  bool no_truth = false;
+  bool no_plot = false;
+  bool exact_sensors = false;
+  double free_space_s = -1, trial_s = -1, calibration_s = -1;
+  int threads = 0;
+};
+
+std::string config_help() {
+  const rcm::sim::SimConfig defaults = rcm::sim::make_default_config();
+  std::string text =
+      "\nConfiguration (--config FILE: a JSON object; nested keys as below, any subset;\n"
+      "unknown keys and wrong types are errors). Defaults:\n";
+  for (const auto& f : rcm::sim::describe_config(defaults))
+    text += fmt::format("  {:<46} {:<24} {}\n", f.path, f.value, f.help);
+  text += "\nOrder of precedence: defaults < --tissue < --config < command-line flags.\n";
+  return text;
+}
+
+nlohmann::json vec_json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
+
+void run_simulate(const SimulateOptions& o) {
+  using namespace rcm::sim;
+  SimConfig config = make_default_config();
+  if (!o.tissue.empty()) {
+    try {
+      apply_tissue_preset(config.tissue, o.tissue);
+    } catch (const rcm::InputError& e) {
+      rcm::InputLocation loc;
+      loc.file = "--tissue";
+      throw rcm::InputError(loc, e.reason());
+    }
+  }
+  if (!o.config_file.empty())
+    apply_config_json(config, rcm::load_json_file(o.config_file), o.config_file);
+  if (o.seed_given) config.seed = o.seed;
+  if (o.quick) {
+    config.protocol.free_space_s = 120.0;
+    config.protocol.calibration_s = 30.0;
+    config.protocol.trial_s = 30.0;
+    config.protocol.static_hold_s = 5.0;
+  }
+  if (o.free_space_s > 0) config.protocol.free_space_s = o.free_space_s;
+  if (o.trial_s > 0) config.protocol.trial_s = o.trial_s;
+  if (o.calibration_s > 0) config.protocol.calibration_s = o.calibration_s;
+  if (o.threads > 0) config.threads = o.threads;
+  if (o.no_truth) config.protocol.write_truth = false;
+  if (o.no_plot) config.force_angle.plot = false;
+  if (o.exact_sensors) config.sensors.noise = false;
+  validate_config(config, o.config_file.empty() ? "command line" : o.config_file);
+
+  if (o.print_config) {
+    rcm::cli::print_json(config_to_json(config));
+    return;
+  }
+  if (o.out.empty()) {
+    rcm::InputLocation loc;
+    loc.file = "--out";
+    throw rcm::InputError(loc, "an output directory is required");
+  }
+  const std::filesystem::path out_dir = o.out;
+
+  if (o.experiment == "session") {
+    auto progress = [&](const std::string& msg) { std::cerr << "simulate: " << msg << "\n"; };
+    std::cerr << fmt::format("simulate: session, seed {}, tissue {}, {:.0f} s free space + {} trials\n",
+                             config.seed, config.tissue.preset, config.protocol.free_space_s,
+                             config.protocol.coaxial_offsets_m.size() * config.protocol.radial_offsets_m.size());
+    const SessionWriteSummary s = simulate_session(config, out_dir, progress);
+    if (o.json) {
+      nlohmann::json recs = nlohmann::json::array();
+      for (const auto& r : s.recordings)
+        recs.push_back({{"name", r.name},
+                        {"file", r.file.string()},
+                        {"truth_file", r.truth_file.string()},
+                        {"samples", r.samples},
+                        {"duration_s", r.duration_s},
+                        {"effort_min", vec_json(r.effort_min)},
+                        {"effort_max", vec_json(r.effort_max)},
+                        {"effort_noise_hf", vec_json(r.effort_noise_hf)},
+                        {"force_max_n", r.force_max_n},
+                        {"theta_max_rad", r.theta_max_rad}});
+      rcm::cli::print_json({{"experiment", "session"},
+                            {"session", s.manifest.string()},
+                            {"seed", config.seed},
+                            {"tissue", config.tissue.preset},
+                            {"elapsed_s", s.elapsed_s},
+                            {"recordings", recs}});
+      return;
+    }
+    std::vector<std::vector<std::string>> rows;
+    for (const auto& r : s.recordings)
+      rows.push_back({r.name, std::to_string(r.samples), fmt::format("{:.1f}", r.duration_s),
+                      fmt::format("{:.2f}..{:.2f}", r.effort_min[0], r.effort_max[0]),
+                      fmt::format("{:.2f}..{:.2f}", r.effort_min[1], r.effort_max[1]),
+                      fmt::format("{:.2f}..{:.2f}", r.effort_min[2], r.effort_max[2]),
+                      fmt::format("{:.1f}", r.theta_max_rad * 180.0 / M_PI),
+                      fmt::format("{:.1f}", r.force_max_n)});
+    std::cout << rcm::cli::format_table({"recording", "samples", "s", "effort_1 N m", "effort_2 N m",
+                                         "effort_3 N", "theta max deg", "|f| max N"},
+                                        rows);
+    std::cout << fmt::format("\nsession: {}\nwritten in {:.1f} s\n", s.manifest.string(), s.elapsed_s);
+  } else if (o.experiment == "force-angle") {
+    const auto start = std::chrono::steady_clock::now();
+    std::cerr << fmt::format("simulate: force-angle sweep, seed {}, tissue {}\n", config.seed,
+                             config.tissue.preset);
+    const ForceAngleResult r = run_force_angle_experiment(config);
+    std::filesystem::create_directories(out_dir);
+    const auto csv = out_dir / "force_angle.csv";
+    save_force_angle_csv(csv, r);
+    rcm::save_json_file(out_dir / "sim_config.json", config_to_json(config));
+    rcm::PlotFiles plot;
+    if (config.force_angle.plot) plot = save_force_angle_plot(out_dir / "force_angle", r);
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (o.json) {
+      nlohmann::json pts = nlohmann::json::array();
+      for (const auto& p : r.points)
+        pts.push_back({{"offset_m", p.offset_m},
+                       {"theta_rad", p.theta_rad},
+                       {"force_n", p.force_n},
+                       {"force_std_n", p.force_std_n},
+                       {"force_true_n", p.force_true_n},
+                       {"force_law_n", p.force_law_n}});
+      rcm::cli::print_json({{"experiment", "force-angle"},
+                            {"csv", csv.string()},
+                            {"png", plot.png.string()},
+                            {"svg", plot.svg.string()},
+                            {"seed", config.seed},
+                            {"tissue", config.tissue.preset},
+                            {"elapsed_s", elapsed},
+                            {"points", pts}});
+      return;
+    }
+    // Table: one row per offset, one column per angle (mean |f| in N).
+    std::vector<std::string> header{"D mm"};
+    for (double a : config.force_angle.angles_deg) header.push_back(fmt::format("{:g} deg", a));
+    std::vector<std::vector<std::string>> rows;
+    const std::size_t na = config.force_angle.angles_deg.size();
+    for (std::size_t d = 0; d < config.force_angle.offsets_m.size(); ++d) {
+      std::vector<std::string> row{fmt::format("{:g}", config.force_angle.offsets_m[d] * 1000)};
+      for (std::size_t i = 0; i < na; ++i) row.push_back(fmt::format("{:.1f}", r.points[d * na + i].force_n));
+      rows.push_back(row);
+    }
+    std::cout << "|f| at the incision (N), ATI mean over the hold:\n"
+              << rcm::cli::format_table(header, rows);
+    std::cout << fmt::format("\nwrote {}", csv.string());
+    if (config.force_angle.plot) std::cout << fmt::format(", {}, {}", plot.png.string(), plot.svg.string());
+    std::cout << fmt::format(" in {:.1f} s\n", elapsed);
+  } else {
+    rcm::InputLocation loc;
+    loc.file = "--experiment";
+    throw rcm::InputError(loc, "unknown experiment '" + o.experiment + "'; known: session, force-angle");
+  }
+}
+
+const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App& app) {
+  auto opts = std::make_shared<SimulateOptions>();
+  auto* cmd = app.add_subcommand(
+      "simulate",
+      "Simulated phantom bench (closed-loop dVRK Classic PSM, LuGre friction, tissue pad, "
+      "sensors): write a session (rcm-session/1, with ground truth) or the Fig. 3 sweep");
+  cmd->add_option("--out", opts->out, "output directory");
+  cmd->add_option("--seed", opts->seed, "random seed (default 1, or the config's)")
+      ->each([opts](const std::string&) { opts->seed_given = true; });
+  cmd->add_option("--experiment", opts->experiment, "session (default) | force-angle");
+  cmd->add_option("--tissue", opts->tissue, "tissue preset: linear (default), stiffening, viscoelastic, sliding");
+  cmd->add_option("--config", opts->config_file, "JSON file overriding any parameter (keys below)");
+  cmd->add_flag("--quick", opts->quick, "short session: 120 s free space, 30 s calibration and trials");
+  cmd->add_option("--free-space-s", opts->free_space_s, "free-space duration, s (default 900)");
+  cmd->add_option("--trial-s", opts->trial_s, "duration of each trial, s (default 60)");
+  cmd->add_option("--calibration-s", opts->calibration_s, "calibration duration, s (default 60)");
+  cmd->add_option("--threads", opts->threads, "worker threads (default 2)");
+  cmd->add_flag("--no-truth", opts->no_truth, "do not write *_truth.csv");
+  cmd->add_flag("--no-plot", opts->no_plot, "force-angle: skip the gnuplot figure");
+  cmd->add_flag("--exact-sensors", opts->exact_sensors, "no sensor noise or quantization");
+  cmd->add_flag("--print-config", opts->print_config, "print the resolved configuration as JSON and exit");
+  cmd->add_flag("--json", opts->json, "print the summary as one JSON object");
+  cmd->footer(config_help());
+  cmd->callback([opts] { run_simulate(*opts); });
+}});
+
+}  // namespace

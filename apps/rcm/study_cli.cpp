@@ -1,0 +1,35 @@
+#include "study_cli.hpp"
+
+#include "rcm/common/error.hpp"
+#include "rcm/dynamics/linear_model.hpp"
+#if RCM_HAVE_TORCH
+#include "rcm/dynamics/training.hpp"
+#endif
+
+namespace rcm::cli {
+
+TorqueModelFitter get_torque_model_fitter() {
+  return [](dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings,
+            const dynamics::FitOptions& options) {
+#if RCM_HAVE_TORCH
+    return dynamics::fit_torque_model(kind, recordings, options);
+#else
+    if (kind != dynamics::TorqueModelKind::linear) {
+      InputLocation where;
+      where.file = "--model";
+      throw InputError(where, "this build has no LibTorch (RCM_WITH_TORCH=OFF): only the linear model can be fitted");
+    }
+    return dynamics::fit_linear_torque_model(recordings, options);
+#endif
+  };
+}
+
+dynamics::TorqueModelKind get_default_model_kind() {
+#if RCM_HAVE_TORCH
+  return dynamics::TorqueModelKind::lstm;
+#else
+  return dynamics::TorqueModelKind::linear;
+#endif
+}
+
+}  // namespace rcm::cli

@@ -1,0 +1,15 @@
+#pragma once
+// What `rcm run` and `rcm demo` share: the free-space fitter available in this
+// build and the study's progress/summary printing.
+
+#include "rcm/estimation/study.hpp"
+
+namespace rcm::cli {
+
+// fit_torque_model of rcm::torch when built with LibTorch; otherwise only the
+// linear model (the others raise a clear error).
+TorqueModelFitter get_torque_model_fitter();
+// The default kind: lstm with LibTorch, linear without.
+dynamics::TorqueModelKind get_default_model_kind();
+
+}  // namespace rcm::cli

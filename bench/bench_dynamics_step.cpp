@@ -1,0 +1,95 @@
+// Per-sample cost of the torque models' streaming step (Eigen/float kernels,
+// no allocation): the default 2 x 128 LSTM on 6 joints, the per-joint MLP and
+// the model-based linear model with its friction state.
+
+#include <benchmark/benchmark.h>
+
+#include <random>
+
+#include "rcm/dynamics/linear_model.hpp"
+#include "rcm/dynamics/networks.hpp"
+
+using namespace rcm::dynamics;
+
+namespace {
+Eigen::MatrixXf rnd(int r, int c, std::mt19937& rng) {
+  std::normal_distribution<float> g(0.0f, 0.2f);
+  Eigen::MatrixXf m(r, c);
+  for (int i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
+  return m;
+}
+LstmNetwork lstm(int in, int H, int L, int out) {
+  std::mt19937 rng(1);
+  LstmNetwork n;
+  for (int k = 0; k < L; ++k)
+    n.layers.push_back({rnd(4 * H, k ? H : in, rng), rnd(4 * H, H, rng), rnd(4 * H, 1, rng).col(0),
+                        rnd(4 * H, 1, rng).col(0)});
+  n.head.layers.push_back({rnd(64, H, rng), rnd(64, 1, rng).col(0), Activation::tanh});
+  n.head.layers.push_back({rnd(out, 64, rng), rnd(out, 1, rng).col(0), Activation::identity});
+  return n;
+}
+TorqueModelInfo info6() {
+  TorqueModelInfo i;
+  i.num_joints = 6;
+  i.num_outputs = 6;
+  i.sample_period_s = 0.005;
+  return i;
+}
+Normalization norm6() {
+  return {Eigen::VectorXf::Zero(12), Eigen::VectorXf::Ones(12), Eigen::VectorXf::Zero(6), Eigen::VectorXf::Ones(6)};
+}
+void run(benchmark::State& state, const TorqueModel& m) {
+  auto ws = m.create_workspace();
+  double q[6] = {0.1, 0.2, 0.12, 0, 0, 0}, qd[6] = {0.3, -0.2, 0.01, 0.1, 0, 0}, tau[6];
+  double t = 0;
+  for (auto _ : state) {
+    q[0] += 1e-4;
+    t += 0.005;
+    m.compute_step(*ws, t, q, qd, tau);
+    benchmark::DoNotOptimize(tau);
+  }
+}
+}  // namespace
+
+static void BM_LstmKernelStep(benchmark::State& state) {
+  const int H = static_cast<int>(state.range(0)), L = static_cast<int>(state.range(1));
+  LstmKernel k(lstm(12, H, L, 6));
+  auto s = k.create_state();
+  Eigen::VectorXf x = Eigen::VectorXf::Constant(12, 0.1f), y(6);
+  for (auto _ : state) {
+    x[0] += 1e-4f;
+    k.step(s, x.data(), y.data());
+    benchmark::DoNotOptimize(y.data());
+  }
+}
+BENCHMARK(BM_LstmKernelStep)->Args({128, 2})->Args({256, 2})->Args({32, 1});
+
+static void BM_LstmModelStep(benchmark::State& state) {
+  LstmTorqueModel m(info6(), lstm(12, 128, 2, 6), norm6());
+  run(state, m);
+}
+BENCHMARK(BM_LstmModelStep);
+
+static void BM_MlpModelStep(benchmark::State& state) {
+  std::mt19937 rng(2);
+  std::vector<DenseStack> stacks;
+  for (int j = 0; j < 6; ++j) {
+    DenseStack s;
+    s.layers.push_back({rnd(100, 12, rng), rnd(100, 1, rng).col(0), Activation::tanh});
+    s.layers.push_back({rnd(1, 100, rng), rnd(1, 1, rng).col(0), Activation::identity});
+    stacks.push_back(s);
+  }
+  MlpTorqueModel m(info6(), stacks, norm6());
+  run(state, m);
+}
+BENCHMARK(BM_MlpModelStep);
+
+static void BM_LinearModelStep(benchmark::State& state) {
+  LinearTorqueParameters p{Eigen::VectorXd::Ones(17), Eigen::VectorXd::Ones(6), Eigen::VectorXd::Ones(6),
+                           Eigen::VectorXd::Ones(6), Eigen::VectorXd::Ones(6), Eigen::VectorXd::Constant(6, 1e-3)};
+  LinearTorqueModel m(info6(), p);
+  run(state, m);
+}
+BENCHMARK(BM_LinearModelStep);
+
+BENCHMARK_MAIN();

@@ -1,0 +1,95 @@
+#pragma once
+// What every fit_* of a torque model takes and reports, and the time-ordered
+// 70/20/10 split they share.
+
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "rcm/dynamics/metrics.hpp"
+#include "rcm/dynamics/torque_model.hpp"
+
+namespace rcm::dynamics {
+
+struct FitOptions {
+  unsigned seed = 1;
+  int threads = 2;
+  bool verbose = true;              // progress to stderr
+  double train_fraction = 0.7;      // time order: train, then validation, then test
+  double validation_fraction = 0.2;
+  int num_outputs = 0;              // joints to predict (1..M); 0 = every recorded joint
+
+  // Networks (0 = chosen from the amount of data, see docs/dynamics.md).
+  int hidden_size = 0;
+  int num_layers = 0;
+  int head_hidden = 64;
+  int window = 0;                   // truncated-BPTT chunk, samples
+  int streams = 0;                  // parallel contiguous streams per batch
+  int burn_in = 200;                // samples run before a validation stream is scored
+  int mlp_hidden = 100;
+  int max_epochs = 300;
+  double learning_rate = 2e-3;
+  double weight_decay = 0.0;        // 0 = chosen from the amount of data
+  int patience = 20;                // epochs without validation improvement before stopping
+  int plateau_patience = 6;         // epochs before the learning rate is halved
+  double min_learning_rate = 1e-5;
+  double max_minutes = 10.0;        // wall-clock budget of one fit
+  bool prefer_cuda = true;
+
+  // Throws InputError when a value is out of range.
+  void check() const;
+};
+
+struct FitSummary {
+  TorqueModelKind kind = TorqueModelKind::linear;
+  std::size_t train_samples = 0, validation_samples = 0, test_samples = 0;
+  int epochs = 0, best_epoch = 0;
+  double best_validation_loss = 0.0;  // normalized MSE (networks) or RMSE-weighted (linear)
+  double seconds = 0.0;
+  std::string device = "cpu";
+  std::vector<JointTorqueError> test_errors;  // on the held-out last 10 %
+  std::vector<std::string> warnings;          // e.g. data too few to trust
+  nlohmann::json to_json() const;
+  std::string brief_report() const;
+};
+
+struct FitResult {
+  std::unique_ptr<TorqueModel> model;
+  FitSummary summary;
+};
+
+// A contiguous run [begin, end) of samples of one recording.
+struct SampleSegment {
+  int recording = 0;
+  Eigen::Index begin = 0, end = 0;
+  Eigen::Index size() const { return end - begin; }
+};
+struct TimeSplit {
+  std::vector<SampleSegment> train, validation, test;
+};
+// Splits the recordings, taken one after the other, by time: the first
+// train_fraction of all samples, then validation_fraction, then the rest.
+// Segments never straddle two recordings or two splits.
+TimeSplit split_in_time(const std::vector<Recording>& recordings, double train_fraction,
+                        double validation_fraction);
+
+// Checks that the recordings can be fitted together (same joint count, enough
+// samples, >= 3 joints); throws InputError naming the file otherwise.
+void check_fit_recordings(const std::vector<Recording>& recordings, int min_samples = 50);
+
+// Median sampling period over all recordings.
+double median_sample_period(const std::vector<Recording>& recordings);
+
+// Number of outputs a fit predicts: options.num_outputs if set, else all joints.
+int resolve_num_outputs(const std::vector<Recording>& recordings, const FitOptions& options);
+
+}  // namespace rcm::dynamics
+
+namespace rcm::dynamics {
+// Runs the model over each recording that a segment touches (state carried from
+// the recording's start, so memory is honoured) and scores only the segments' samples.
+std::vector<JointTorqueError> evaluate_on_segments(const TorqueModel& model,
+                                                   const std::vector<Recording>& recordings,
+                                                   const std::vector<SampleSegment>& segments);
+}  // namespace rcm::dynamics

@@ -1,0 +1,58 @@
+#pragma once
+// Model-based free-space torque (after Wang et al. [21]): rigid-body terms linear
+// in parameters plus per-joint friction with a state, fitted by least squares.
+//
+// Gravity: for a yaw (q1) / pitch (q2) / insertion (q3) arm whose first two axes
+// carry every link, the potential energy of any mass distribution and any base
+// tilt lies in span{a(q1) b(q2) c(q3)}, a in {1, sin, cos}, b in {1, sin, cos},
+// c in {1, q3}; torque_j = dU/dq_j. The 17 coefficients are shared by joints 1-3,
+// which is what makes the fit physically consistent across joints.
+// Inertia: a constant armature per joint times qddot (backward difference).
+// Friction per joint: viscous v, an offset, and Coulomb/stiction through a Dahl
+// state z in [-1, 1] that moves toward sign(dq) over a characteristic
+// displacement x_c and stays put at rest, so the holding torque remembers the
+// direction of the last motion (a LuGre model without Stribeck):
+//   z <- sign(dq) + (z - sign(dq)) exp(-|dq| / x_c).
+// Viscous and Coulomb coefficients are kept >= 0 (active set).
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "rcm/dynamics/fit.hpp"
+#include "rcm/dynamics/torque_model.hpp"
+
+namespace rcm::dynamics {
+
+struct LinearTorqueParameters {
+  Eigen::VectorXd gravity;            // 17 shared potential coefficients (joints 1-3)
+  Eigen::VectorXd armature;           // per output joint
+  Eigen::VectorXd viscous;            // per output joint
+  Eigen::VectorXd coulomb;            // per output joint, multiplies the Dahl state
+  Eigen::VectorXd offset;             // per output joint
+  Eigen::VectorXd dahl_displacement;  // x_c per output joint (rad or m), > 0
+};
+
+class LinearTorqueModel final : public TorqueModel {
+ public:
+  static constexpr int kGravityTerms = 17;
+  LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameters parameters);
+  TorqueModelKind kind() const override { return TorqueModelKind::linear; }
+  std::unique_ptr<TorqueModelWorkspace> create_workspace() const override;
+  void reset_state(TorqueModelWorkspace& workspace) const override;
+  void compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
+                    double* tau) const override;
+  nlohmann::json save_parameters() const override;
+  const LinearTorqueParameters& parameters() const { return parameters_; }
+
+  // dU/dq_j of the 17 gravity basis functions at q (joints 1-3), j = 0..2.
+  static void compute_gravity_regressor(const double* q, Eigen::Matrix<double, 3, kGravityTerms>& Y);
+
+ private:
+  LinearTorqueParameters parameters_;
+};
+
+// Least squares on the training split; x_c chosen per joint on the validation
+// split from a grid; final coefficients from train + validation.
+FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, const FitOptions& options);
+
+}  // namespace rcm::dynamics

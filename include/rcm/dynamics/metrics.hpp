@@ -1,0 +1,35 @@
+#pragma once
+// Table II of the paper: per-joint RMSE and NRMSE = RMSE / (max - min of the
+// measured torque on the evaluated data) x 100.
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "rcm/io/recording.hpp"
+
+namespace rcm::dynamics {
+
+class TorqueModel;
+
+struct JointTorqueError {
+  int index = 0;               // 1-based joint number
+  double rmse = 0.0;           // N m (N for the insertion joint)
+  double nrmse_percent = 0.0;  // RMSE / (max - min) x 100
+  double range = 0.0;          // max - min of the measured torque
+};
+
+// measured and predicted: T x M with the same shape; throws std::invalid_argument otherwise.
+std::vector<JointTorqueError> compute_torque_errors(const Eigen::MatrixXd& measured,
+                                                    const Eigen::MatrixXd& predicted);
+
+// Runs the model over every recording (state reset at each start) and pools the
+// samples of all recordings, from `first_fraction` of each recording on (0 = all).
+std::vector<JointTorqueError> evaluate_torque_model(const TorqueModel& model,
+                                                    const std::vector<Recording>& recordings,
+                                                    double first_fraction = 0.0);
+
+// {"joints": [{"index": 1, "rmse": r, "nrmse_percent": p}, ...]} (cli.md).
+nlohmann::json to_json(const std::vector<JointTorqueError>& errors);
+
+}  // namespace rcm::dynamics

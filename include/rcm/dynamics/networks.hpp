@@ -1,0 +1,134 @@
+#pragma once
+// Neural torque models run by hand-written float kernels (no LibTorch): an LSTM
+// step (gate order i, f, g, o and weight layout of torch.nn.LSTM), dense stacks,
+// and the three network-based TorqueModels (lstm, mlp, hybrid).
+
+#include <Eigen/Core>
+#include <memory>
+#include <vector>
+
+#include "rcm/dynamics/linear_model.hpp"
+#include "rcm/dynamics/torque_model.hpp"
+
+namespace rcm::dynamics {
+
+enum class Activation { identity, tanh, relu };
+
+struct DenseLayer {
+  Eigen::MatrixXf weight;  // out x in (torch.nn.Linear.weight)
+  Eigen::VectorXf bias;    // out
+  Activation activation = Activation::identity;
+};
+
+struct DenseStack {
+  std::vector<DenseLayer> layers;
+  int input_size() const { return layers.empty() ? 0 : static_cast<int>(layers.front().weight.cols()); }
+  int output_size() const { return layers.empty() ? 0 : static_cast<int>(layers.back().weight.rows()); }
+  int max_width() const;
+};
+
+struct LstmLayer {  // torch.nn.LSTM weight_ih_l{k}, weight_hh_l{k}, bias_ih_l{k}, bias_hh_l{k}
+  Eigen::MatrixXf weight_ih;  // 4H x in
+  Eigen::MatrixXf weight_hh;  // 4H x H
+  Eigen::VectorXf bias_ih;    // 4H
+  Eigen::VectorXf bias_hh;    // 4H
+};
+
+struct LstmNetwork {
+  std::vector<LstmLayer> layers;
+  DenseStack head;  // hidden -> outputs
+  int input_size() const { return layers.empty() ? 0 : static_cast<int>(layers.front().weight_ih.cols()); }
+  int hidden_size() const { return layers.empty() ? 0 : static_cast<int>(layers.front().weight_hh.cols()); }
+  int output_size() const { return head.output_size(); }
+  // Throws std::invalid_argument when the shapes do not chain.
+  void check() const;
+};
+
+// x_normalized = (x - mean) / scale; y = y_normalized * scale + mean.
+struct Normalization {
+  Eigen::VectorXf input_mean, input_scale;    // 2 num_joints: [q, qdot]
+  Eigen::VectorXf output_mean, output_scale;  // num_outputs
+};
+
+// Streaming LSTM with its state (h, c per layer) and every buffer preallocated.
+// The kernel fuses [W_ih W_hh] column-major and runs an axpy-form GEMV that the
+// compiler vectorizes (AVX2/FMA clone chosen at load time when the CPU has it).
+class LstmKernel {
+ public:
+  explicit LstmKernel(const LstmNetwork& network);
+  struct State {
+    std::vector<Eigen::VectorXf> h, c;
+    Eigen::VectorXf xh, gates, head_a, head_b;
+  };
+  State create_state() const;
+  static void reset(State& state);
+  // x: input_size values (already normalized); y: output_size values. No allocation.
+  void step(State& state, const float* x, float* y) const;
+  const LstmNetwork& network() const { return network_; }
+
+ private:
+  LstmNetwork network_;
+  std::vector<Eigen::MatrixXf> fused_;  // 4H x (in + H), column-major
+  std::vector<Eigen::VectorXf> bias_;   // b_ih + b_hh
+};
+
+// Dense stack forward in float; a and b are scratch of max_width() each. No allocation.
+void compute_dense_forward(const DenseStack& stack, const float* x, float* y, float* a, float* b);
+
+class LstmTorqueModel final : public TorqueModel {
+ public:
+  LstmTorqueModel(TorqueModelInfo info, LstmNetwork network, Normalization normalization);
+  TorqueModelKind kind() const override { return TorqueModelKind::lstm; }
+  std::unique_ptr<TorqueModelWorkspace> create_workspace() const override;
+  void reset_state(TorqueModelWorkspace& workspace) const override;
+  void compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
+                    double* tau) const override;
+  nlohmann::json save_parameters() const override;
+  const LstmNetwork& network() const { return kernel_.network(); }
+  const Normalization& normalization() const { return normalization_; }
+
+ private:
+  LstmKernel kernel_;
+  Normalization normalization_;
+};
+
+// Yilmaz et al.: one dense network per joint on [q, qdot] of all joints (memoryless).
+class MlpTorqueModel final : public TorqueModel {
+ public:
+  MlpTorqueModel(TorqueModelInfo info, std::vector<DenseStack> per_joint, Normalization normalization);
+  TorqueModelKind kind() const override { return TorqueModelKind::mlp; }
+  std::unique_ptr<TorqueModelWorkspace> create_workspace() const override;
+  void reset_state(TorqueModelWorkspace& workspace) const override;
+  void compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
+                    double* tau) const override;
+  nlohmann::json save_parameters() const override;
+  const std::vector<DenseStack>& networks() const { return per_joint_; }
+  const Normalization& normalization() const { return normalization_; }
+
+ private:
+  std::vector<DenseStack> per_joint_;
+  Normalization normalization_;
+};
+
+// Yang et al.: model-based prediction plus an LSTM on its residual.
+class HybridTorqueModel final : public TorqueModel {
+ public:
+  HybridTorqueModel(TorqueModelInfo info, std::shared_ptr<const LinearTorqueModel> base,
+                    LstmNetwork residual, Normalization residual_normalization);
+  TorqueModelKind kind() const override { return TorqueModelKind::hybrid; }
+  std::unique_ptr<TorqueModelWorkspace> create_workspace() const override;
+  void reset_state(TorqueModelWorkspace& workspace) const override;
+  void compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
+                    double* tau) const override;
+  nlohmann::json save_parameters() const override;
+  const LinearTorqueModel& base() const { return *base_; }
+  const LstmNetwork& residual_network() const { return kernel_.network(); }
+  const Normalization& normalization() const { return normalization_; }
+
+ private:
+  std::shared_ptr<const LinearTorqueModel> base_;
+  LstmKernel kernel_;
+  Normalization normalization_;
+};
+
+}  // namespace rcm::dynamics

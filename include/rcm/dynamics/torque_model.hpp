@@ -1,0 +1,94 @@
+#pragma once
+// Free-space joint torque models tau_fs = f(q, qdot, history) (paper III-B).
+//
+// Every kind (lstm, mlp, linear, hybrid) is an immutable TorqueModel plus a
+// workspace that holds its state and buffers (STYLE 1). compute_step() advances
+// the state by one sample and never allocates, so a model can run inside a 1.5 kHz
+// loop; predict_torque() runs it over a whole recording with the state carried,
+// which is how friction memory (the holding torque set by the last direction of
+// motion) reaches the estimate at rest.
+//
+// Nothing here includes LibTorch: loading and running a trained model needs only
+// rcm::core. Training of the networks lives in rcm::torch (training.hpp).
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "rcm/io/recording.hpp"
+
+namespace rcm::dynamics {
+
+enum class TorqueModelKind { lstm, mlp, linear, hybrid };
+
+std::string to_string(TorqueModelKind kind);
+// "lstm" | "mlp" | "linear" | "hybrid"; throws InputError naming `what` otherwise.
+TorqueModelKind parse_torque_model_kind(const std::string& text, const std::string& what = "--model");
+
+// What every model shares: which joints it reads and predicts and the sampling
+// period it was trained at (recurrent models learn per-sample dynamics).
+struct TorqueModelInfo {
+  int num_joints = 0;        // joints read: q and qdot of joints 1..num_joints
+  int num_outputs = 0;       // joints predicted: 1..num_outputs (<= num_joints)
+  double sample_period_s = 0.0;
+  nlohmann::json training = nlohmann::json::object();  // fit summary, informative only
+};
+
+// State and buffers of one running model. Create with model.create_workspace().
+class TorqueModelWorkspace {
+ public:
+  virtual ~TorqueModelWorkspace() = default;
+};
+
+class TorqueModel {
+ public:
+  explicit TorqueModel(TorqueModelInfo info) : info_(std::move(info)) {}
+  virtual ~TorqueModel() = default;
+  TorqueModel(const TorqueModel&) = delete;
+  TorqueModel& operator=(const TorqueModel&) = delete;
+
+  virtual TorqueModelKind kind() const = 0;
+  const TorqueModelInfo& info() const { return info_; }
+  int num_joints() const { return info_.num_joints; }
+  int num_outputs() const { return info_.num_outputs; }
+
+  // A workspace sized for this model, in the reset state.
+  virtual std::unique_ptr<TorqueModelWorkspace> create_workspace() const = 0;
+  // Forget the history (state as at the start of a recording).
+  virtual void reset_state(TorqueModelWorkspace& workspace) const = 0;
+  // Advance by one sample taken at time `t` (s) and write the predicted torque of
+  // joints 1..num_outputs into `tau`. q and qd hold at least num_joints values.
+  // No allocation. The workspace must come from this model's create_workspace().
+  virtual void compute_step(TorqueModelWorkspace& workspace, double t, const double* q,
+                            const double* qd, double* tau) const = 0;
+
+  // Body of the model file (see docs/dynamics.md); `info` is written by the caller.
+  virtual nlohmann::json save_parameters() const = 0;
+
+ private:
+  TorqueModelInfo info_;
+};
+
+// Runs the model over a whole recording from the reset state: T x num_outputs.
+// Throws InputError if the recording has fewer joints than the model reads.
+Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording);
+Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& time,
+                               const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);
+
+// Model files: one JSON document, "format": "rcm-torque-model/1"; weights as
+// base64 little-endian arrays so that save -> load is bit-exact.
+nlohmann::json torque_model_to_json(const TorqueModel& model);
+std::unique_ptr<TorqueModel> torque_model_from_json(const nlohmann::json& document,
+                                                    const std::string& source);
+void save_torque_model(const std::filesystem::path& path, const TorqueModel& model);
+std::unique_ptr<TorqueModel> load_torque_model(const std::filesystem::path& path);
+
+// When the recording's median sampling period differs from the one the model was
+// trained at by more than 10 %, a sentence saying so (recurrent kinds only);
+// empty otherwise.
+std::string check_sample_period(const TorqueModel& model, const Recording& recording);
+
+}  // namespace rcm::dynamics

@@ -1,0 +1,98 @@
+#pragma once
+// The whole study on one session (paper IV-V): fit or load the free-space model,
+// identify the tissue law on the calibration, estimate every trial, and gather
+// what the paper's tables and figures show. The free-space fitter is passed in so
+// that rcm::core stays free of LibTorch (the CLI passes the LibTorch-backed one).
+
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "rcm/dynamics/fit.hpp"
+#include "rcm/estimation/three_step.hpp"
+#include "rcm/io/recording.hpp"
+#include "rcm/io/session.hpp"
+#include "rcm/tissue/tissue_fit.hpp"
+
+namespace rcm {
+
+using TorqueModelFitter = std::function<dynamics::FitResult(
+    dynamics::TorqueModelKind, const std::vector<Recording>&, const dynamics::FitOptions&)>;
+
+struct StudyOptions {
+  dynamics::TorqueModelKind model_kind = dynamics::TorqueModelKind::lstm;
+  std::optional<std::filesystem::path> model_file;  // use a saved model, skip fitting
+  dynamics::FitOptions fit;
+  TissueFitOptions tissue;
+  TissuePairOptions tissue_pairs;
+  double tissue_sensitivity_delta_m = 0.003;  // paper V-D: D* +- 3 mm
+  ThreeStepOptions three_step;
+  RestDetectionOptions rest;
+  RecordingReadOptions read;
+  // The paper's f(q0, 0): the model stepped on (q0, 0) from its reset state for
+  // this long, then read.
+  double paper_settle_s = 2.0;
+  bool verbose = true;  // progress to stderr
+};
+
+struct TrialOutcome {
+  std::string name;
+  std::optional<Eigen::Vector3d> truth_m;
+  ThreeStepResult estimate;                     // tau_fs of the hold with state carried
+  std::optional<ThreeStepResult> paper_variant;  // tau_fs of the hold = f(q0, 0)
+  std::optional<StaticHold> hold;
+  // Force at the incision through J_D at the true D (or D~ without truth), vs the
+  // sensor columns when present: time, estimate and sensor, T x 3 each.
+  Eigen::VectorXd time;
+  Eigen::MatrixXd f_estimated, f_sensor;
+  Eigen::MatrixXd f_coaxial_decoupled;  // f_e - f_r at the same D
+  double force_offset_used_m = 0.0;
+  std::optional<Eigen::Vector3d> force_rmse;  // per axis, N
+  std::size_t ill_conditioned_samples = 0;
+  double seconds = 0.0;
+
+  std::optional<double> get_error_m() const;
+};
+
+struct StudyResult {
+  std::filesystem::path session_manifest;
+  std::string method = "three-step";
+  dynamics::TorqueModelKind model_kind = dynamics::TorqueModelKind::lstm;
+  std::shared_ptr<const dynamics::TorqueModel> model;
+  std::optional<dynamics::FitSummary> fit;        // when fitted here
+  std::vector<dynamics::JointTorqueError> free_space_errors;  // Table II (held-out test split)
+  TissueFitResult tissue;
+  TissuePairsReport tissue_pairs_report;
+  TissuePairs tissue_pairs;
+  std::optional<TissueSensitivity> tissue_sensitivity;
+  double calibration_offset_m = 0.0;
+  std::vector<TrialOutcome> trials;
+  double seconds = 0.0;
+
+  // The rcm-results/1 object of session-format.md, with extra fields.
+  nlohmann::json to_json() const;
+};
+
+// Throws InputError for any defect of the session's files; the study needs a
+// calibration and at least one trial.
+StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter);
+
+// The paper's f(q0, 0) for a stateful model: stepped on (q0, 0) from reset.
+Eigen::Vector3d compute_settled_free_space_torque(const dynamics::TorqueModel& model, const Eigen::Vector3d& q0,
+                                                  double settle_s);
+
+// results.json, report.md (Tables II-IV, solver summaries) and figures/ (Fig. 3
+// when the session has a force-angle sweep, Fig. 4). Figures need gnuplot; without
+// it the report says so. Returns the report path.
+std::filesystem::path write_study_report(const StudyResult& result, const Session& session,
+                                         const std::filesystem::path& out_dir);
+
+// Table IV as text (truth, estimate, e in mm), as `rcm run` and `rcm demo` print it.
+std::string format_table_iv(const StudyResult& result);
+
+}  // namespace rcm

@@ -1,0 +1,172 @@
+#pragma once
+// Configuration of the simulated phantom bench (docs/simulator.md).
+//
+// Every number the simulator uses lives here, with its default, so that a JSON
+// config file can override any of them and `rcm simulate --help` can list them.
+// The same field table drives load, save and the help text (visit_config_fields),
+// so the three cannot drift apart.
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace rcm::sim {
+
+// A rigid body of the arm. `com` and `inertia_diag` are expressed in the body's
+// own frame (see ArmDynamics for which frame each body is attached to); the
+// inertia is about the centre of mass, along the frame's axes.
+struct RigidBodyParams {
+  double mass_kg = 0.0;
+  Eigen::Vector3d com_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d inertia_diag_kg_m2 = Eigen::Vector3d::Zero();
+};
+
+struct ArmParams {
+  // Rotates with joint 1 only (yaw about the RCM). Frame: the base frame rotated
+  // by q1 about the yaw axis.
+  RigidBodyParams yaw_link;
+  // Rotates with joints 1 and 2 (the pitch parallelogram, lumped). Frame: DH frame 3
+  // orientation [x3 y3 z3], origin at the RCM.
+  RigidBodyParams pitch_link;
+  // The insertion carriage and instrument: rotates with joints 1-2 and slides
+  // with q3 along z3. Its centre of mass is at com + q3 * e_z in frame-3 axes.
+  RigidBodyParams insertion_stage;
+  Eigen::Vector3d gravity_base_m_s2 = Eigen::Vector3d(0.0, 0.0, -9.81);
+  // Constant force of the insertion stage's counterbalance spring along -z3 (N).
+  double insertion_counterbalance_n = 0.0;
+};
+
+// LuGre friction of one joint (Canudas de Wit et al. 1995), with direction-
+// dependent Coulomb and stiction levels. Units: N m and rad for revolute joints,
+// N and m for the prismatic one.
+struct JointFrictionParams {
+  double coulomb_pos = 0.0;   // Coulomb level when moving in +q
+  double coulomb_neg = 0.0;   // Coulomb level when moving in -q (magnitude)
+  double stiction_ratio = 1.3;  // F_s / F_c (Stribeck peak)
+  double stribeck_velocity = 0.01;
+  double viscous = 0.0;       // sigma_2
+  double bristle_stiffness = 0.0;  // sigma_0
+  double bristle_damping = 0.0;    // sigma_1
+  double offset = 0.0;        // direction-independent bias (cable preload), added always
+};
+
+struct ControllerParams {
+  double physics_rate_hz = 2000.0;  // fixed integration step = control period
+  Eigen::Vector3d kp = Eigen::Vector3d(400.0, 400.0, 4000.0);
+  Eigen::Vector3d kd = Eigen::Vector3d(6.0, 7.0, 40.0);
+  // Feed the rigid-body inverse dynamics of the reference forward (no friction
+  // model, as a perfectly identified dynamic model would).
+  bool feedforward = true;
+  double velocity_filter_hz = 40.0;  // first-order filter on differentiated encoders
+  double settle_s = 0.5;             // simulated before the first logged sample
+};
+
+struct SensorParams {
+  double log_rate_hz = 200.0;
+  Eigen::Vector3d effort_noise = Eigen::Vector3d(0.007, 0.007, 0.195);  // std, N m / N
+  Eigen::Vector3d position_quantum = Eigen::Vector3d(2.0e-5, 2.0e-5, 2.0e-6);  // rad / m
+  double force_noise_n = 0.08;       // ATI std per axis, N
+  double repeat_row_probability = 0.0;  // a logged row repeats the previous one
+  bool noise = true;                 // false: every sensor exact (tests)
+};
+
+struct TrajectoryParams {
+  // Amplitudes of the excursion around q0 (rad, rad, m); the motion never leaves
+  // q0 +- amplitude (smooth saturation).
+  Eigen::Vector3d amplitude = Eigen::Vector3d(0.60, 0.50, 0.035);
+  double min_frequency_hz = 0.04;
+  double max_frequency_hz = 0.45;
+  int harmonics = 5;
+  double pause_fraction = 0.15;       // share of time spent in pauses
+  double pause_min_s = 0.4;
+  double pause_max_s = 2.5;
+  double max_theta_rad = 0.95;        // refuse a path whose pivot angle exceeds this
+};
+
+struct TissueParams {
+  std::string preset = "linear";      // linear | stiffening | viscoelastic | sliding
+  double stiffness_n_per_m = 875.0;   // k1 of g(x) = k1 x + k3 x^3
+  double cubic_n_per_m3 = 0.0;        // k3
+  double damping_n_s_per_m = 0.0;     // Kelvin-Voigt damping of the stretch rate
+  double axial_friction_n = 0.0;      // Coulomb level of the shaft sliding through the incision
+  double axial_bristle_n_per_m = 2.0e4;
+  double axial_bristle_damping_n_s_per_m = 20.0;
+  double min_pad_cosine = 0.25;       // cos(theta) below which the shaft is too flat
+};
+
+struct ProtocolParams {
+  Eigen::Vector3d q0 = Eigen::Vector3d(0.0, 0.0, 0.12);
+  double free_space_s = 900.0;
+  int free_space_files = 1;
+  double baseline_approach_s = 2.5;
+  double baseline_hold_s = 10.0;
+  Eigen::Vector3d baseline_start_offset = Eigen::Vector3d(0.15, -0.10, 0.01);
+  double calibration_offset_m = 0.030;
+  double calibration_s = 60.0;
+  double trial_s = 60.0;
+  double static_return_s = 3.0;
+  double static_hold_s = 10.0;
+  std::vector<double> coaxial_offsets_m{0.010, 0.020, 0.030, 0.040, 0.050};
+  std::vector<Eigen::Vector2d> radial_offsets_m{Eigen::Vector2d(0.0, 0.0),
+                                                Eigen::Vector2d(0.010, 0.015)};
+  bool write_truth = true;  // *_truth.csv next to every recording
+};
+
+struct ForceAngleParams {
+  std::vector<double> offsets_m{0.0, 0.010, 0.020, 0.030, 0.040};
+  std::vector<double> angles_deg{-45, -30, -15, 0, 15, 30, 45};
+  int pivot_joint = 1;       // 1: yaw, 2: pitch
+  double move_s = 1.5;
+  double hold_s = 1.5;
+  double average_s = 1.0;    // averaged at the end of each hold
+  bool plot = true;
+};
+
+struct SimConfig {
+  std::uint64_t seed = 1;
+  std::string robot = "dvrk-psm-classic";
+  int threads = 2;  // recordings are independent; results do not depend on this
+  ArmParams arm;
+  std::array<JointFrictionParams, 3> friction;
+  ControllerParams controller;
+  SensorParams sensors;
+  TrajectoryParams trajectory;
+  TissueParams tissue;
+  ProtocolParams protocol;
+  ForceAngleParams force_angle;
+};
+
+// The defaults documented in docs/simulator.md (a Classic PSM on the phantom bench).
+SimConfig make_default_config();
+
+// Names accepted by --tissue / tissue.preset.
+std::vector<std::string> get_tissue_preset_names();
+// Sets every tissue field to the named preset; throws InputError for an unknown name.
+void apply_tissue_preset(TissueParams& tissue, const std::string& name);
+
+// Throws InputError naming `source` and the field for every inconsistent value.
+void validate_config(const SimConfig& config, const std::string& source = "config");
+
+// Overrides fields of `config` from JSON. Unknown keys and wrong types throw
+// InputError naming `source` and the JSON path. `tissue.preset`, when present,
+// is applied first so that explicit tissue fields override the preset.
+void apply_config_json(SimConfig& config, const nlohmann::json& json, const std::string& source);
+SimConfig load_config(const std::filesystem::path& path);  // defaults + file, validated
+nlohmann::json config_to_json(const SimConfig& config);
+void save_config(const std::filesystem::path& path, const SimConfig& config);
+
+// One row per configurable field: JSON path, current value as text, help.
+struct ConfigFieldDoc {
+  std::string path;
+  std::string value;
+  std::string help;
+};
+std::vector<ConfigFieldDoc> describe_config(const SimConfig& config);
+
+}  // namespace rcm::sim

@@ -1,0 +1,69 @@
+#pragma once
+// Reference motions of the simulated bench: teleoperation-like paths (smooth,
+// band-limited, with pauses), quintic point-to-point moves and holds, chained
+// into one piecewise reference that the position controller tracks.
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "rcm/sim/sim_config.hpp"
+
+namespace rcm::sim {
+
+struct ReferenceSample {
+  Eigen::Vector3d q = Eigen::Vector3d::Zero();
+  Eigen::Vector3d qd = Eigen::Vector3d::Zero();
+  Eigen::Vector3d qdd = Eigen::Vector3d::Zero();
+};
+
+// q_j(t) = q0_j + A_j tanh(u_j(tau(t))), u_j a sum of sinusoids with random
+// frequencies in [min, max] Hz and u_j(0) = 0; tau(t) is a time warp whose rate
+// falls smoothly to zero in pauses, so the robot stops wherever it is. Starts at
+// q0 at rest. Smooth (C2) everywhere; never leaves q0 +- A.
+class TeleopPath {
+ public:
+  TeleopPath(const TrajectoryParams& params, const Eigen::Vector3d& q0, std::uint64_t seed,
+             double duration_s);
+  ReferenceSample evaluate(double t) const;
+
+ private:
+  struct Pause { double a, b, r; double lost_before; };
+  double warp(double t, double* rate, double* rate_dot) const;
+  Eigen::Vector3d q0_, amplitude_;
+  std::vector<std::array<double, 3>> harmonics_[3];  // amplitude, omega, phase
+  std::vector<Pause> pauses_;
+};
+
+// Fifth-order polynomial from (q, qd, qdd) to (q1, 0, 0) over T seconds.
+struct QuinticMove {
+  double t0 = 0.0, duration = 1.0;
+  Eigen::Matrix<double, 3, 6> coeff = Eigen::Matrix<double, 3, 6>::Zero();
+  static QuinticMove make(double t0, double duration, const ReferenceSample& from,
+                          const Eigen::Vector3d& to);
+  ReferenceSample evaluate(double t) const;
+};
+
+// Pieces in time order; each covers [t_start, next t_start). A teleop piece is
+// evaluated at (t - t_start); before the first piece the first one is held.
+class ReferenceTrajectory {
+ public:
+  void add_teleop(double t_start, std::shared_ptr<const TeleopPath> path);
+  void add_move(double t_start, double duration, const Eigen::Vector3d& to);  // from the reference at t_start
+  void add_hold(double t_start, const Eigen::Vector3d& q);
+  ReferenceSample evaluate(double t) const;
+
+ private:
+  struct Piece {
+    double t_start;
+    int kind;  // 0 teleop, 1 move, 2 hold
+    std::shared_ptr<const TeleopPath> teleop;
+    QuinticMove move;
+    Eigen::Vector3d hold;
+  };
+  std::vector<Piece> pieces_;
+};
+
+}  // namespace rcm::sim

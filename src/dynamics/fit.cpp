@@ -1,0 +1,150 @@
+#include "rcm/dynamics/fit.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "rcm/common/error.hpp"
+
+namespace rcm::dynamics {
+
+namespace {
+[[noreturn]] void bad_option(const std::string& field, const std::string& what) {
+  InputLocation where;
+  where.field = field;
+  throw InputError(where, what);
+}
+}  // namespace
+
+void FitOptions::check() const {
+  if (!(train_fraction > 0 && validation_fraction > 0 && train_fraction + validation_fraction < 1))
+    bad_option("train_fraction/validation_fraction", "expected two positive fractions summing to less than 1");
+  if (threads < 1) bad_option("threads", "expected >= 1");
+  if (num_outputs < 0) bad_option("num_outputs", "expected >= 0");
+  if (hidden_size < 0 || num_layers < 0 || window < 0 || streams < 0 || burn_in < 0 || head_hidden < 1 ||
+      mlp_hidden < 1)
+    bad_option("network size", "expected non-negative sizes");
+  if (max_epochs < 1) bad_option("max_epochs", "expected >= 1");
+  if (!(learning_rate > 0) || !(weight_decay >= 0) || !(max_minutes > 0))
+    bad_option("learning_rate/weight_decay/max_minutes", "expected positive values");
+}
+
+TimeSplit split_in_time(const std::vector<Recording>& recordings, double train_fraction,
+                        double validation_fraction) {
+  Eigen::Index total = 0;
+  for (const auto& r : recordings) total += static_cast<Eigen::Index>(r.num_samples());
+  const auto train_end = static_cast<Eigen::Index>(std::llround(train_fraction * static_cast<double>(total)));
+  const auto val_end =
+      static_cast<Eigen::Index>(std::llround((train_fraction + validation_fraction) * static_cast<double>(total)));
+  TimeSplit split;
+  Eigen::Index offset = 0;
+  for (std::size_t r = 0; r < recordings.size(); ++r) {
+    const auto T = static_cast<Eigen::Index>(recordings[r].num_samples());
+    auto add = [&](std::vector<SampleSegment>& to, Eigen::Index lo, Eigen::Index hi) {
+      const Eigen::Index b = std::max(lo, offset), e = std::min(hi, offset + T);
+      if (e > b) to.push_back({static_cast<int>(r), b - offset, e - offset});
+    };
+    add(split.train, 0, train_end);
+    add(split.validation, train_end, val_end);
+    add(split.test, val_end, total);
+    offset += T;
+  }
+  return split;
+}
+
+void check_fit_recordings(const std::vector<Recording>& recordings, int min_samples) {
+  if (recordings.empty()) bad_option("recordings", "at least one free-space recording is needed");
+  std::size_t total = 0;
+  for (const auto& r : recordings) {
+    if (r.num_joints() < 3) {
+      InputLocation where;
+      where.file = r.source;
+      throw InputError(where, fmt::format("expected at least 3 joints, got {}", r.num_joints()));
+    }
+    if (r.num_joints() != recordings.front().num_joints()) {
+      InputLocation where;
+      where.file = r.source;
+      throw InputError(where, fmt::format("has {} joints but {} has {}; fit recordings of one arm", r.num_joints(),
+                                          recordings.front().source, recordings.front().num_joints()));
+    }
+    total += r.num_samples();
+  }
+  if (total < static_cast<std::size_t>(min_samples)) {
+    InputLocation where;
+    where.file = recordings.front().source;
+    throw InputError(where, fmt::format("only {} samples in all recordings; at least {} are needed to fit", total,
+                                        min_samples));
+  }
+}
+
+double median_sample_period(const std::vector<Recording>& recordings) {
+  std::vector<double> dt;
+  for (const auto& r : recordings)
+    for (Eigen::Index i = 0; i + 1 < r.time.size(); ++i) dt.push_back(r.time(i + 1) - r.time(i));
+  if (dt.empty()) return 0.0;
+  std::nth_element(dt.begin(), dt.begin() + dt.size() / 2, dt.end());
+  return dt[dt.size() / 2];
+}
+
+int resolve_num_outputs(const std::vector<Recording>& recordings, const FitOptions& options) {
+  const int n = recordings.front().num_joints();
+  if (options.num_outputs == 0) return n;
+  if (options.num_outputs > n) bad_option("num_outputs", fmt::format("expected <= {} (joints recorded)", n));
+  return options.num_outputs;
+}
+
+nlohmann::json FitSummary::to_json() const {
+  nlohmann::json j;
+  j["kind"] = rcm::dynamics::to_string(kind);
+  j["train_samples"] = train_samples;
+  j["validation_samples"] = validation_samples;
+  j["test_samples"] = test_samples;
+  j["epochs"] = epochs;
+  j["best_epoch"] = best_epoch;
+  j["best_validation_loss"] = best_validation_loss;
+  j["seconds"] = seconds;
+  j["device"] = device;
+  j["test"] = rcm::dynamics::to_json(test_errors)["joints"];
+  j["warnings"] = warnings;
+  return j;
+}
+
+std::string FitSummary::brief_report() const {
+  std::string s = fmt::format("{} fit: {} train / {} validation / {} test samples, {:.1f} s on {}",
+                              rcm::dynamics::to_string(kind), train_samples, validation_samples, test_samples,
+                              seconds, device);
+  if (epochs > 0)
+    s += fmt::format(", {} epochs (best {}, validation loss {:.4g})", epochs, best_epoch, best_validation_loss);
+  s += "\n";
+  for (const auto& e : test_errors)
+    s += fmt::format("  test joint {}: RMSE {:.4g}, NRMSE {:.2f} %\n", e.index, e.rmse, e.nrmse_percent);
+  for (const auto& w : warnings) s += "  warning: " + w + "\n";
+  return s;
+}
+
+}  // namespace rcm::dynamics
+
+namespace rcm::dynamics {
+std::vector<JointTorqueError> evaluate_on_segments(const TorqueModel& model,
+                                                   const std::vector<Recording>& recordings,
+                                                   const std::vector<SampleSegment>& segments) {
+  Eigen::Index total = 0;
+  for (const auto& s : segments) total += s.size();
+  const int M = model.num_outputs();
+  Eigen::MatrixXd measured(total, M), predicted(total, M);
+  Eigen::Index row = 0;
+  int cached = -1;
+  Eigen::MatrixXd p;
+  for (const auto& s : segments) {
+    if (s.recording != cached) {
+      p = predict_torque(model, recordings[s.recording]);
+      cached = s.recording;
+    }
+    predicted.middleRows(row, s.size()) = p.middleRows(s.begin, s.size());
+    measured.middleRows(row, s.size()) = recordings[s.recording].effort.leftCols(M).middleRows(s.begin, s.size());
+    row += s.size();
+  }
+  return compute_torque_errors(measured, predicted);
+}
+}  // namespace rcm::dynamics

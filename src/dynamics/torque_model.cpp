@@ -1,0 +1,293 @@
+#include "rcm/dynamics/torque_model.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+
+#include "model_io.hpp"
+#include "rcm/common/error.hpp"
+#include "rcm/io/json_file.hpp"
+
+namespace rcm::dynamics {
+
+namespace {
+constexpr const char* kFormat = "rcm-torque-model/1";
+constexpr char kBase64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+
+std::string base64_encode(const unsigned char* data, std::size_t n) {
+  std::string out;
+  out.reserve((n + 2) / 3 * 4);
+  for (std::size_t i = 0; i < n; i += 3) {
+    const std::uint32_t b0 = data[i];
+    const std::uint32_t b1 = i + 1 < n ? data[i + 1] : 0;
+    const std::uint32_t b2 = i + 2 < n ? data[i + 2] : 0;
+    const std::uint32_t v = (b0 << 16) | (b1 << 8) | b2;
+    out += kBase64[(v >> 18) & 63];
+    out += kBase64[(v >> 12) & 63];
+    out += i + 1 < n ? kBase64[(v >> 6) & 63] : '=';
+    out += i + 2 < n ? kBase64[v & 63] : '=';
+  }
+  return out;
+}
+
+bool base64_decode(const std::string& text, std::vector<unsigned char>& out) {
+  if (text.size() % 4 != 0) return false;
+  auto value = [](char c) -> int {
+    if (c >= 'A' && c <= 'Z') return c - 'A';
+    if (c >= 'a' && c <= 'z') return c - 'a' + 26;
+    if (c >= '0' && c <= '9') return c - '0' + 52;
+    if (c == '+') return 62;
+    if (c == '/') return 63;
+    return -1;
+  };
+  out.clear();
+  out.reserve(text.size() / 4 * 3);
+  for (std::size_t i = 0; i < text.size(); i += 4) {
+    int v[4];
+    int pad = 0;
+    for (int k = 0; k < 4; ++k) {
+      const char c = text[i + k];
+      if (c == '=' && i + 4 == text.size() && k >= 2) {
+        v[k] = 0;
+        ++pad;
+      } else {
+        if (pad) return false;
+        v[k] = value(c);
+        if (v[k] < 0) return false;
+      }
+    }
+    const std::uint32_t w = (v[0] << 18) | (v[1] << 12) | (v[2] << 6) | v[3];
+    out.push_back(static_cast<unsigned char>((w >> 16) & 255));
+    if (pad < 2) out.push_back(static_cast<unsigned char>((w >> 8) & 255));
+    if (pad < 1) out.push_back(static_cast<unsigned char>(w & 255));
+  }
+  return true;
+}
+
+static_assert(sizeof(float) == 4 && sizeof(double) == 8, "IEEE sizes expected");
+
+bool host_is_little_endian() {
+  const std::uint16_t x = 1;
+  unsigned char b;
+  std::memcpy(&b, &x, 1);
+  return b == 1;
+}
+
+template <typename Scalar>
+nlohmann::json encode(const Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& m,
+                      bool is_vector) {
+  if (!host_is_little_endian()) throw std::runtime_error("model files need a little-endian host");
+  nlohmann::json j;
+  if (is_vector) {
+    j["shape"] = {m.size()};
+  } else {
+    j["shape"] = {m.rows(), m.cols()};
+  }
+  j["dtype"] = sizeof(Scalar) == 4 ? "f32" : "f64";
+  j["data"] = base64_encode(reinterpret_cast<const unsigned char*>(m.data()), sizeof(Scalar) * m.size());
+  return j;
+}
+
+template <typename Scalar>
+Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic> decode(const nlohmann::json& j, const std::string& source,
+                                                             const std::string& field, bool is_vector) {
+  using detail::fail;
+  if (!j.is_object()) fail(source, field, "expected an array object {shape, dtype, data}");
+  const auto& shape = detail::require(j, "shape", source, field);
+  const auto& dtype = detail::require(j, "dtype", source, field);
+  const auto& data = detail::require(j, "data", source, field);
+  const char* want = sizeof(Scalar) == 4 ? "f32" : "f64";
+  if (!dtype.is_string() || dtype.get<std::string>() != want)
+    fail(source, field + ".dtype", fmt::format("expected \"{}\"", want));
+  if (!shape.is_array() || shape.size() != (is_vector ? 1u : 2u))
+    fail(source, field + ".shape", is_vector ? "expected [n]" : "expected [rows, cols]");
+  for (const auto& s : shape)
+    if (!s.is_number_integer() || s.get<long long>() < 0 || s.get<long long>() > (1LL << 28))
+      fail(source, field + ".shape", "expected non-negative integers");
+  const Eigen::Index rows = is_vector ? shape[0].get<Eigen::Index>() : shape[0].get<Eigen::Index>();
+  const Eigen::Index cols = is_vector ? 1 : shape[1].get<Eigen::Index>();
+  if (!data.is_string()) fail(source, field + ".data", "expected a base64 string");
+  std::vector<unsigned char> bytes;
+  if (!base64_decode(data.get<std::string>(), bytes)) fail(source, field + ".data", "not valid base64");
+  if (bytes.size() != static_cast<std::size_t>(rows * cols) * sizeof(Scalar))
+    fail(source, field + ".data",
+         fmt::format("expected {} values for shape, got {} bytes", rows * cols, bytes.size()));
+  Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> m(rows, cols);
+  if (!bytes.empty()) std::memcpy(m.data(), bytes.data(), bytes.size());
+  if (!m.allFinite()) fail(source, field, "contains NaN or infinity");
+  return m;
+}
+}  // namespace
+
+namespace detail {
+
+void fail(const std::string& source, const std::string& field, const std::string& what) {
+  InputLocation where;
+  where.file = source;
+  where.field = field;
+  throw InputError(where, what);
+}
+
+const nlohmann::json& require(const nlohmann::json& j, const char* key, const std::string& source,
+                              const std::string& field) {
+  if (!j.is_object() || !j.contains(key))
+    fail(source, field.empty() ? key : field + "." + key, "missing");
+  return j.at(key);
+}
+
+nlohmann::json encode_array(const Eigen::MatrixXf& m) {
+  return encode<float>(m, false);
+}
+nlohmann::json encode_array(const Eigen::MatrixXd& m) {
+  return encode<double>(m, false);
+}
+nlohmann::json encode_vector(const Eigen::VectorXf& v) {
+  return encode<float>(v.transpose(), true);
+}
+nlohmann::json encode_vector(const Eigen::VectorXd& v) {
+  return encode<double>(v.transpose(), true);
+}
+Eigen::MatrixXf decode_array_f(const nlohmann::json& j, const std::string& source, const std::string& field) {
+  return decode<float>(j, source, field, false);
+}
+Eigen::MatrixXd decode_array_d(const nlohmann::json& j, const std::string& source, const std::string& field) {
+  return decode<double>(j, source, field, false);
+}
+Eigen::VectorXf decode_vector_f(const nlohmann::json& j, const std::string& source, const std::string& field,
+                                Eigen::Index expected_size) {
+  Eigen::VectorXf v = decode<float>(j, source, field, true).col(0);
+  if (expected_size >= 0 && v.size() != expected_size)
+    fail(source, field, fmt::format("expected {} values, got {}", expected_size, v.size()));
+  return v;
+}
+Eigen::VectorXd decode_vector_d(const nlohmann::json& j, const std::string& source, const std::string& field,
+                                Eigen::Index expected_size) {
+  Eigen::VectorXd v = decode<double>(j, source, field, true).col(0);
+  if (expected_size >= 0 && v.size() != expected_size)
+    fail(source, field, fmt::format("expected {} values, got {}", expected_size, v.size()));
+  return v;
+}
+
+}  // namespace detail
+
+std::string to_string(TorqueModelKind kind) {
+  switch (kind) {
+    case TorqueModelKind::lstm: return "lstm";
+    case TorqueModelKind::mlp: return "mlp";
+    case TorqueModelKind::linear: return "linear";
+    case TorqueModelKind::hybrid: return "hybrid";
+  }
+  return "unknown";
+}
+
+TorqueModelKind parse_torque_model_kind(const std::string& text, const std::string& what) {
+  for (auto k : {TorqueModelKind::lstm, TorqueModelKind::mlp, TorqueModelKind::linear, TorqueModelKind::hybrid})
+    if (text == to_string(k)) return k;
+  InputLocation where;
+  where.field = what;
+  throw InputError(where, "expected lstm, mlp, linear or hybrid, got " + quote_token(text));
+}
+
+Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& time,
+                               const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity) {
+  const Eigen::Index T = time.size();
+  if (position.rows() != T || velocity.rows() != T || position.cols() != velocity.cols())
+    throw std::invalid_argument("predict_torque: time, position and velocity sizes differ");
+  if (position.cols() < model.num_joints())
+    throw std::invalid_argument("predict_torque: fewer joints than the model reads");
+  auto ws = model.create_workspace();
+  const int N = model.num_joints();
+  Eigen::VectorXd q(N), qd(N), tau(model.num_outputs());
+  Eigen::MatrixXd out(T, model.num_outputs());
+  for (Eigen::Index t = 0; t < T; ++t) {
+    q = position.row(t).head(N).transpose();
+    qd = velocity.row(t).head(N).transpose();
+    model.compute_step(*ws, time(t), q.data(), qd.data(), tau.data());
+    out.row(t) = tau.transpose();
+  }
+  return out;
+}
+
+Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording) {
+  if (recording.num_joints() < model.num_joints()) {
+    InputLocation where;
+    where.file = recording.source;
+    throw InputError(where, fmt::format("the model reads {} joints, the recording has {}", model.num_joints(),
+                                        recording.num_joints()));
+  }
+  return predict_torque(model, recording.time, recording.position, recording.velocity);
+}
+
+std::string check_sample_period(const TorqueModel& model, const Recording& recording) {
+  if (model.kind() != TorqueModelKind::lstm && model.kind() != TorqueModelKind::hybrid) return {};
+  if (recording.num_samples() < 3 || model.info().sample_period_s <= 0) return {};
+  std::vector<double> dt(recording.num_samples() - 1);
+  for (std::size_t i = 0; i + 1 < recording.num_samples(); ++i)
+    dt[i] = recording.time(i + 1) - recording.time(i);
+  std::nth_element(dt.begin(), dt.begin() + dt.size() / 2, dt.end());
+  const double median = dt[dt.size() / 2];
+  const double ratio = median / model.info().sample_period_s;
+  if (std::abs(ratio - 1.0) <= 0.1) return {};
+  return fmt::format(
+      "{}: sampled at {:.1f} Hz but the {} model was trained at {:.1f} Hz; its state dynamics are "
+      "per sample, so resample the recording to the training rate",
+      recording.source, 1.0 / median, to_string(model.kind()), 1.0 / model.info().sample_period_s);
+}
+
+nlohmann::json torque_model_to_json(const TorqueModel& model) {
+  nlohmann::json j;
+  j["format"] = kFormat;
+  j["kind"] = to_string(model.kind());
+  j["num_joints"] = model.num_joints();
+  j["num_outputs"] = model.num_outputs();
+  j["sample_period_s"] = model.info().sample_period_s;
+  j["inputs"] = "[q_1..q_N, qdot_1..qdot_N] (rad, m; rad/s, m/s)";
+  j["training"] = model.info().training;
+  j["parameters"] = model.save_parameters();
+  return j;
+}
+
+std::unique_ptr<TorqueModel> torque_model_from_json(const nlohmann::json& document, const std::string& source) {
+  using detail::fail;
+  if (!document.is_object()) fail(source, "", "expected a JSON object (rcm torque model)");
+  const auto& format = detail::require(document, "format", source, "");
+  if (!format.is_string() || format.get<std::string>() != kFormat)
+    fail(source, "format", fmt::format("expected \"{}\"", kFormat));
+  const auto& kind_j = detail::require(document, "kind", source, "");
+  if (!kind_j.is_string()) fail(source, "kind", "expected a string");
+  TorqueModelKind kind;
+  try {
+    kind = parse_torque_model_kind(kind_j.get<std::string>(), "kind");
+  } catch (const InputError& e) {
+    fail(source, "kind", e.reason());
+  }
+  TorqueModelInfo info;
+  const auto& nj = detail::require(document, "num_joints", source, "");
+  const auto& no = detail::require(document, "num_outputs", source, "");
+  if (!nj.is_number_integer() || nj.get<int>() < 1 || nj.get<int>() > 64)
+    fail(source, "num_joints", "expected an integer in 1..64");
+  if (!no.is_number_integer() || no.get<int>() < 1 || no.get<int>() > nj.get<int>())
+    fail(source, "num_outputs", "expected an integer in 1..num_joints");
+  info.num_joints = nj.get<int>();
+  info.num_outputs = no.get<int>();
+  const auto& sp = detail::require(document, "sample_period_s", source, "");
+  if (!sp.is_number() || !(sp.get<double>() >= 0)) fail(source, "sample_period_s", "expected a number >= 0");
+  info.sample_period_s = sp.get<double>();
+  if (document.contains("training")) info.training = document.at("training");
+  const auto& p = detail::require(document, "parameters", source, "");
+  if (kind == TorqueModelKind::linear) return detail::load_linear_parameters(std::move(info), p, source);
+  return detail::load_network_parameters(std::move(info), static_cast<int>(kind), p, source);
+}
+
+void save_torque_model(const std::filesystem::path& path, const TorqueModel& model) {
+  save_json_file(path, torque_model_to_json(model));
+}
+
+std::unique_ptr<TorqueModel> load_torque_model(const std::filesystem::path& path) {
+  return torque_model_from_json(load_json_file(path), path.string());
+}
+
+}  // namespace rcm::dynamics

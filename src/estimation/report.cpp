@@ -1,0 +1,264 @@
+// results.json, report.md and figures/ of a study.
+#include <fmt/format.h>
+
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "rcm/common/error.hpp"
+#include "rcm/estimation/study.hpp"
+#include "rcm/io/json_file.hpp"
+#include "rcm/io/plot.hpp"
+
+namespace rcm {
+namespace {
+
+std::string mm3(const Eigen::Vector3d& v) {
+  return fmt::format("[{:.1f}, {:.1f}, {:.1f}]", 1e3 * v[0], 1e3 * v[1], 1e3 * v[2]);
+}
+
+// The trial whose truth is nearest to `target` (within 2 mm), if any.
+const TrialOutcome* find_trial(const StudyResult& r, const Eigen::Vector3d& target) {
+  const TrialOutcome* best = nullptr;
+  double best_d = 0.002;
+  for (const auto& t : r.trials)
+    if (t.truth_m && (*t.truth_m - target).norm() <= best_d) {
+      best_d = (*t.truth_m - target).norm();
+      best = &t;
+    }
+  return best;
+}
+
+PlotSpec force_plot(const std::string& title, const TrialOutcome& t, const Eigen::MatrixXd& estimate,
+                    const std::string& estimate_label, const Eigen::MatrixXd* reference,
+                    const std::string& reference_label) {
+  PlotSpec spec;
+  spec.title = title;
+  spec.x_label = "time (s)";
+  spec.y_label = "force at the incision (N, base frame)";
+  spec.legend = "outside right";
+  spec.width_px = 1100;
+  const char* axes[3] = {"x", "y", "z"};
+  const Eigen::Index stride = std::max<Eigen::Index>(1, t.time.size() / 3000);
+  for (int k = 0; k < 3; ++k) {
+    PlotSeries est, ref;
+    est.label = fmt::format("F{} {}", axes[k], estimate_label);
+    ref.label = fmt::format("F{} {}", axes[k], reference_label);
+    est.style = ref.style = PlotStyle::lines;
+    est.line_width = 1.0;
+    ref.line_width = 2.0;
+    for (Eigen::Index i = 0; i < t.time.size(); i += stride) {
+      const double x = t.time[i] - t.time[0];
+      est.x.push_back(x);
+      est.y.push_back(estimate(i, k));
+      if (reference && reference->rows() > i) {
+        ref.x.push_back(x);
+        ref.y.push_back((*reference)(i, k));
+      }
+    }
+    spec.series.push_back(est);
+    if (!ref.x.empty()) spec.series.push_back(ref);
+  }
+  return spec;
+}
+
+std::vector<std::string> make_figures(const StudyResult& r, const Session& session, const std::filesystem::path& dir,
+                                      std::string& note) {
+  std::vector<std::string> made;
+  if (!is_gnuplot_available()) {
+    note = "gnuplot was not found, so no figures were drawn (install gnuplot-nox).";
+    return made;
+  }
+  std::filesystem::create_directories(dir);
+  // Fig. 3: the static force-angle sweep, when the session ships one.
+  if (session.extra.contains("force_angle") && session.extra["force_angle"].is_string()) {
+    const std::filesystem::path csv = session.manifest.parent_path() / session.extra["force_angle"].get<std::string>();
+    const std::string text = read_text_file(csv);
+    std::map<double, PlotSeries> by_offset;
+    std::istringstream in(text);
+    std::string line;
+    std::getline(in, line);
+    std::vector<std::string> header;
+    {
+      std::stringstream hs(line);
+      std::string cell;
+      while (std::getline(hs, cell, ',')) header.push_back(cell);
+    }
+    auto col = [&](const std::string& name) {
+      for (std::size_t i = 0; i < header.size(); ++i)
+        if (header[i] == name) return static_cast<int>(i);
+      InputLocation where;
+      where.file = csv.string();
+      where.line = 1;
+      where.field = name;
+      throw InputError(where, "missing column");
+    };
+    const int c_off = col("offset_m"), c_theta = col("theta_rad"), c_force = col("force_n");
+    while (std::getline(in, line)) {
+      if (line.empty()) continue;
+      std::vector<double> v;
+      std::stringstream ls(line);
+      std::string cell;
+      while (std::getline(ls, cell, ',')) v.push_back(std::strtod(cell.c_str(), nullptr));
+      if (static_cast<int>(v.size()) <= std::max({c_off, c_theta, c_force})) continue;
+      PlotSeries& s = by_offset[v[static_cast<std::size_t>(c_off)]];
+      s.label = fmt::format("D = {:.0f} mm", 1e3 * v[static_cast<std::size_t>(c_off)]);
+      s.x.push_back(v[static_cast<std::size_t>(c_theta)] * 180.0 / M_PI);
+      s.y.push_back(v[static_cast<std::size_t>(c_force)]);
+    }
+    PlotSpec spec;
+    spec.title = "Static force-angle (Fig. 3)";
+    spec.x_label = "pivot angle theta (deg)";
+    spec.y_label = "|f| at the incision (N)";
+    for (auto& [offset, s] : by_offset) spec.series.push_back(s);
+    save_plot(spec, dir / "fig3_force_angle");
+    made.push_back("fig3_force_angle");
+  }
+  // Fig. 4: the D = 30 mm trials, pure coaxial and hybrid, as in the paper.
+  const TrialOutcome* pure = find_trial(r, Eigen::Vector3d(0, 0, 0.030));
+  const TrialOutcome* hybrid = find_trial(r, Eigen::Vector3d(0.010, 0.015, 0.030));
+  if (!pure && !r.trials.empty()) pure = &r.trials.front();
+  if (pure) {
+    save_plot(force_plot("(a) " + pure->name + ": estimated vs sensor", *pure, pure->f_estimated, "estimate",
+                         pure->f_sensor.rows() ? &pure->f_sensor : nullptr, "sensor"),
+              dir / "fig4a_force");
+    made.push_back("fig4a_force");
+  }
+  if (hybrid && hybrid != pure) {
+    save_plot(force_plot("(b) " + hybrid->name + ": estimated vs sensor", *hybrid, hybrid->f_estimated, "estimate",
+                         hybrid->f_sensor.rows() ? &hybrid->f_sensor : nullptr, "sensor"),
+              dir / "fig4b_force");
+    made.push_back("fig4b_force");
+    if (pure && pure->f_estimated.rows() == hybrid->f_coaxial_decoupled.rows()) {
+      save_plot(force_plot("(c) decoupled coaxial force of " + hybrid->name + " vs pure coaxial " + pure->name, *hybrid,
+                           hybrid->f_coaxial_decoupled, "decoupled", &pure->f_estimated, "pure coaxial"),
+                dir / "fig4c_decoupled");
+      made.push_back("fig4c_decoupled");
+    }
+  }
+  // Table IV as a picture: estimated vs true D and radial magnitude.
+  {
+    PlotSpec spec;
+    spec.title = "Estimated vs true misalignment";
+    spec.x_label = "true value (mm)";
+    spec.y_label = "estimate (mm)";
+    PlotSeries d, rad, ideal;
+    d.label = "D";
+    rad.label = "|radial|";
+    ideal.label = "ideal";
+    d.style = rad.style = PlotStyle::points;
+    ideal.style = PlotStyle::lines;
+    for (const auto& t : r.trials) {
+      if (!t.truth_m) continue;
+      d.x.push_back(1e3 * (*t.truth_m)[2]);
+      d.y.push_back(1e3 * t.estimate.misalignment_m[2]);
+      rad.x.push_back(1e3 * t.truth_m->head<2>().norm());
+      rad.y.push_back(1e3 * t.estimate.misalignment_m.head<2>().norm());
+    }
+    if (!d.x.empty()) {
+      ideal.x = {0.0, 60.0};
+      ideal.y = {0.0, 60.0};
+      spec.series = {d, rad, ideal};
+      save_plot(spec, dir / "table4_estimates");
+      made.push_back("table4_estimates");
+    }
+  }
+  return made;
+}
+
+}  // namespace
+
+std::string format_table_iv(const StudyResult& r) {
+  std::string out = fmt::format("{:<18} {:>24} {:>24} {:>8} {:>24} {:>8}\n", "trial", "truth [x, y, D] mm",
+                                "estimate [x, y, D] mm", "e mm", "paper f(q0,0) variant", "e mm");
+  for (const auto& t : r.trials) {
+    const std::string truth = t.truth_m ? mm3(*t.truth_m) : "-";
+    const std::string e = t.get_error_m() ? fmt::format("{:.1f}", 1e3 * *t.get_error_m()) : "-";
+    std::string pv = "-", pe = "-";
+    if (t.paper_variant) {
+      pv = mm3(t.paper_variant->misalignment_m);
+      if (t.truth_m) pe = fmt::format("{:.1f}", 1e3 * (t.paper_variant->misalignment_m - *t.truth_m).norm());
+    }
+    out += fmt::format("{:<18} {:>24} {:>24} {:>8} {:>24} {:>8}\n", t.name, truth, mm3(t.estimate.misalignment_m), e,
+                       pv, pe);
+  }
+  const nlohmann::json s = r.to_json()["summary"];
+  for (const auto& [key, label] : {std::pair<std::string, std::string>{"error_D_above_20mm", "D > 20 mm"},
+                                   {"error_D_up_to_20mm", "D <= 20 mm"}})
+    if (!s[key].is_null())
+      out += fmt::format("mean e for {}: {:.1f} +- {:.1f} mm over {} trials\n", label, 1e3 * s[key]["mean_m"].get<double>(),
+                         1e3 * s[key]["sd_m"].get<double>(), s[key]["trials"].get<int>());
+  return out;
+}
+
+std::filesystem::path write_study_report(const StudyResult& r, const Session& session,
+                                         const std::filesystem::path& out_dir) {
+  std::filesystem::create_directories(out_dir);
+  save_json_file(out_dir / "results.json", r.to_json());
+  std::string figure_note;
+  std::vector<std::string> figures;
+  try {
+    figures = make_figures(r, session, out_dir / "figures", figure_note);
+  } catch (const std::runtime_error& e) {
+    figure_note = std::string("figures could not be drawn: ") + e.what();
+  }
+
+  std::string md;
+  md += "# rcm study report\n\n";
+  md += fmt::format("Session `{}`, method **{}**, free-space model **{}**, {:.0f} s in all.\n\n",
+                    r.session_manifest.string(), r.method, dynamics::to_string(r.model_kind), r.seconds);
+  md += "## Free-space torque (Table II)\n\nHeld-out last 10 % of the free-space recordings, NRMSE = RMSE / (max - min) x 100.\n\n";
+  md += "| joint | RMSE | NRMSE (%) | paper PM (%) |\n|---|---|---|---|\n";
+  const char* paper_ii[3] = {"1.6", "1.5", "5.3"};
+  for (const auto& e : r.free_space_errors)
+    md += fmt::format("| {} | {:.4f} {} | {:.2f} | {} |\n", e.index, e.rmse, e.index == 3 ? "N" : "N m", e.nrmse_percent,
+                      e.index <= 3 ? paper_ii[e.index - 1] : "-");
+  if (r.fit) {
+    md += fmt::format("\nFit: {}\n", r.fit->brief_report());
+    for (const auto& w : r.fit->warnings) md += "- warning: " + w + "\n";
+  }
+
+  md += fmt::format("\n## Tissue law (step 2, D* = {:.1f} mm)\n\n", 1e3 * r.calibration_offset_m);
+  md += fmt::format("Chosen: **g(x) = {}** (x = D tan(theta) in m, g in N).\n\n",
+                    format_expression(r.tissue.best().expression, ExpressionFormat::plain, 6));
+  md += fmt::format("Pairs: {} of {} calibration samples kept ({} with theta < threshold, {} singular, {} ill-conditioned, {} not finite).\n\n",
+                    r.tissue_pairs_report.kept, r.tissue_pairs_report.samples, r.tissue_pairs_report.dropped_small_theta,
+                    r.tissue_pairs_report.dropped_singular, r.tissue_pairs_report.dropped_ill_conditioned,
+                    r.tissue_pairs_report.dropped_non_finite);
+  md += "| complexity | loss (N^2) | score | BIC | expression |\n|---|---|---|---|---|\n";
+  for (std::size_t i = 0; i < r.tissue.front.size(); ++i) {
+    const auto& e = r.tissue.front[i];
+    md += fmt::format("| {} | {:.4g} | {:.4g} | {:.1f} | `{}`{} |\n", e.complexity, e.loss, e.score, e.bic,
+                      format_expression(e.expression, ExpressionFormat::plain, 6), i == r.tissue.best_index ? " (best)" : "");
+  }
+  if (r.tissue_sensitivity)
+    md += fmt::format("\nSensitivity to D* +- 3 mm: leading coefficient {:.0f} .. {:.0f} ({}; the paper: 651 .. 972).\n",
+                      r.tissue_sensitivity->leading_min, r.tissue_sensitivity->leading_max,
+                      r.tissue_sensitivity->same_family ? "same family at every offset" : "the family changes");
+
+  md += "\n## Force at the incision (Table III)\n\nRMSE per axis of J_D^{-T}(tau - tau_fs) against the force columns, at the true D.\n\n";
+  md += "| trial | Fx (N) | Fy (N) | Fz (N) |\n|---|---|---|---|\n";
+  for (const auto& t : r.trials)
+    if (t.force_rmse)
+      md += fmt::format("| {} | {:.2f} | {:.2f} | {:.2f} |\n", t.name, (*t.force_rmse)[0], (*t.force_rmse)[1], (*t.force_rmse)[2]);
+  md += "| paper, [0, 0, 30] mm | 1.4 | 0.7 | 2.1 |\n| paper, [10, 15, 30] mm | 2.0 | 1.4 | 1.8 |\n";
+
+  md += "\n## Misalignment (Table IV)\n\nMain estimate: tau_fs of the static hold from the model run over the whole static file (friction memory carried). "
+        "Beside it, the paper's variant with tau_fs = f(q0, 0).\n\n```\n" + format_table_iv(r) + "```\n";
+  md += "\nPaper (Table IV): mean e 4.2 +- 2.1 mm for D > 20 mm; 10.8-17.2 mm for D <= 20 mm.\n";
+
+  md += "\n## Solver summaries\n\n| trial | coaxial solve | samples | radial inverse |\n|---|---|---|---|\n";
+  for (const auto& t : r.trials)
+    md += fmt::format("| {} | {} | {} | {}{} |\n", t.name, t.estimate.solver.brief_report(), t.estimate.samples_used,
+                      to_string(t.estimate.radial_inverse), t.estimate.radial_extrapolated ? " (g extrapolated)" : "");
+
+  md += "\n## Figures\n\n";
+  if (!figure_note.empty()) md += figure_note + "\n";
+  for (const auto& f : figures) md += fmt::format("![{0}](figures/{0}.png)\n\n", f);
+  const std::filesystem::path report = out_dir / "report.md";
+  write_file_atomic(report, md);
+  return report;
+}
+
+}  // namespace rcm

@@ -1,0 +1,264 @@
+#include "rcm/estimation/study.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <iostream>
+
+#include "rcm/common/error.hpp"
+#include "rcm/dynamics/metrics.hpp"
+#include "rcm/force/incision_force.hpp"
+
+namespace rcm {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void progress(bool verbose, const std::string& text) {
+  if (verbose) std::cerr << "[rcm] " << text << std::endl;
+}
+
+nlohmann::json vec_json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
+
+nlohmann::json solver_json(const SolverReport& s) {
+  return {{"converged", s.converged}, {"termination", s.termination}, {"message", s.message},
+          {"iterations", s.iterations}, {"initial_cost", s.initial_cost}, {"final_cost", s.final_cost}};
+}
+
+nlohmann::json estimate_json(const ThreeStepResult& r, const std::optional<Eigen::Vector3d>& truth) {
+  nlohmann::json j = {{"misalignment_m", vec_json(r.misalignment_m)},
+                      {"coaxial_solver", solver_json(r.solver)},
+                      {"samples_used", r.samples_used},
+                      {"radial", {{"force_inc_n", vec_json(r.f_radial_inc)},
+                                  {"force_in_plane_n", r.f_radial_in_plane},
+                                  {"inverse", to_string(r.radial_inverse)},
+                                  {"extrapolated", r.radial_extrapolated},
+                                  {"message", r.radial_message}}}};
+  if (truth) j["error_m"] = (r.misalignment_m - *truth).norm();
+  return j;
+}
+
+}  // namespace
+
+std::optional<double> TrialOutcome::get_error_m() const {
+  if (!truth_m) return std::nullopt;
+  return (estimate.misalignment_m - *truth_m).norm();
+}
+
+Eigen::Vector3d compute_settled_free_space_torque(const dynamics::TorqueModel& model, const Eigen::Vector3d& q0,
+                                                  double settle_s) {
+  const double dt = model.info().sample_period_s > 0 ? model.info().sample_period_s : 0.005;
+  const int steps = std::max(1, static_cast<int>(std::ceil(settle_s / dt)));
+  auto ws = model.create_workspace();
+  model.reset_state(*ws);
+  std::vector<double> q(static_cast<std::size_t>(model.num_joints()), 0.0), qd(q.size(), 0.0),
+      tau(static_cast<std::size_t>(model.num_outputs()), 0.0);
+  for (int i = 0; i < 3 && i < model.num_joints(); ++i) q[static_cast<std::size_t>(i)] = q0[i];
+  for (int k = 0; k < steps; ++k) model.compute_step(*ws, k * dt, q.data(), qd.data(), tau.data());
+  return {tau[0], tau[1], tau[2]};
+}
+
+StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
+  const auto start = std::chrono::steady_clock::now();
+  InputLocation manifest_where;
+  manifest_where.file = session.manifest.string();
+  manifest_where.kind = InputLocation::Kind::json_field;
+  if (!session.calibration) {
+    manifest_where.field = "calibration";
+    throw InputError(manifest_where, "missing: the three-step method needs a calibration at a known coaxial offset");
+  }
+  if (session.trials.empty()) {
+    manifest_where.field = "trials";
+    throw InputError(manifest_where, "no trials to estimate");
+  }
+  options.three_step.check();
+
+  StudyResult result;
+  result.session_manifest = session.manifest;
+  result.model_kind = options.model_kind;
+  const IncisionFrame incision = make_incision_frame(session.q0);
+
+  // Step 0: the free-space model.
+  std::vector<Recording> free_space;
+  for (const auto& p : session.free_space) free_space.push_back(load_recording(p, options.read));
+  if (options.model_file) {
+    progress(options.verbose, "loading free-space model " + options.model_file->string());
+    result.model = dynamics::load_torque_model(*options.model_file);
+    result.model_kind = result.model->kind();
+    const dynamics::TimeSplit split = dynamics::split_in_time(free_space, 0.7, 0.2);
+    result.free_space_errors = dynamics::evaluate_on_segments(*result.model, free_space, split.test);
+  } else {
+    progress(options.verbose, "fitting the " + dynamics::to_string(options.model_kind) + " free-space model on " +
+                                  std::to_string(free_space.size()) + " recording(s)");
+    dynamics::FitResult fit = fitter(options.model_kind, free_space, options.fit);
+    result.fit = fit.summary;
+    result.free_space_errors = fit.summary.test_errors;
+    result.model = std::move(fit.model);
+    progress(options.verbose, "free-space model: " + result.fit->brief_report());
+  }
+  const dynamics::TorqueModel& model = *result.model;
+  if (model.num_outputs() < 3) {
+    InputLocation where;
+    where.file = options.model_file ? options.model_file->string() : "free-space model";
+    throw InputError(where, "the model predicts " + std::to_string(model.num_outputs()) +
+                                " joints; the estimator needs joints 1-3");
+  }
+
+  // Step 2: the tissue law from the calibration at D*.
+  const Recording calibration = load_recording(session.calibration->recording, options.read);
+  result.calibration_offset_m = session.calibration->coaxial_offset_m;
+  progress(options.verbose, "identifying the tissue law on " + calibration.source);
+  const Eigen::MatrixXd tau_fs_cal = dynamics::predict_torque(model, calibration);
+  {
+    TissuePairsResult pairs = compute_tissue_pairs(calibration, tau_fs_cal, session.q0, result.calibration_offset_m,
+                                                   options.tissue_pairs);
+    result.tissue_pairs = pairs.pairs;
+    result.tissue_pairs_report = pairs.report;
+  }
+  result.tissue = fit_tissue_law(result.tissue_pairs, options.tissue);
+  if (!result.tissue.law) {
+    InputLocation where;
+    where.file = calibration.source;
+    throw InputError(where, "the identified tissue law is unusable: " + result.tissue.summary.brief_report());
+  }
+  const TissueLaw& g = *result.tissue.law;
+  progress(options.verbose, "tissue law g(x) = " + g.to_string(ExpressionFormat::plain, 6));
+  if (options.tissue_sensitivity_delta_m > 0) {
+    auto make_pairs = [&](double D) {
+      return compute_tissue_pairs(calibration, tau_fs_cal, session.q0, D, options.tissue_pairs).pairs;
+    };
+    result.tissue_sensitivity = fit_tissue_sensitivity(make_pairs, result.calibration_offset_m,
+                                                       options.tissue_sensitivity_delta_m, 3, options.tissue);
+  }
+
+  // Step 3: every trial.
+  const Eigen::Vector3d tau_fs_paper = compute_settled_free_space_torque(model, session.q0, options.paper_settle_s);
+  for (std::size_t i = 0; i < session.trials.size(); ++i) {
+    const TrialSpec& spec = session.trials[i];
+    const auto trial_start = std::chrono::steady_clock::now();
+    progress(options.verbose, "trial " + std::to_string(i + 1) + "/" + std::to_string(session.trials.size()) + ": " +
+                                  spec.name);
+    TrialOutcome out;
+    out.name = spec.name;
+    out.truth_m = spec.truth_misalignment_m;
+    const Recording trial = load_recording(spec.recording, options.read);
+    const Eigen::MatrixXd tau_fs = dynamics::predict_torque(model, trial);
+    Eigen::Vector3d dtau_radial = Eigen::Vector3d::Zero();
+    if (spec.static_recording) {
+      const Recording hold_rec = load_recording(*spec.static_recording, options.read);
+      const Eigen::MatrixXd tau_fs_hold = dynamics::predict_torque(model, hold_rec);
+      out.hold = compute_static_hold(hold_rec, tau_fs_hold, session.q0, options.rest);
+      dtau_radial = out.hold->get_dtau();
+    }
+    out.estimate = estimate_three_step(incision, g, trial, tau_fs, dtau_radial, options.three_step);
+    if (out.hold)
+      out.paper_variant = estimate_three_step(incision, g, trial, tau_fs, out.hold->tau_measured - tau_fs_paper,
+                                              options.three_step);
+
+    // Forces for Table III and Fig. 4: at the true D when known (the paper's
+    // force estimation experiment), else at D~.
+    out.force_offset_used_m = out.truth_m ? (*out.truth_m)[2] : out.estimate.misalignment_m[2];
+    const IncisionForceSeries series =
+        compute_incision_force_series(incision, trial, tau_fs, out.force_offset_used_m);
+    out.time = trial.time;
+    out.f_estimated = series.f_inc_base;
+    out.ill_conditioned_samples = series.num_ill_conditioned + series.num_singular;
+    const InverseDecomposition radial = compute_inverse_decomposition(incision, session.q0, dtau_radial);
+    out.f_coaxial_decoupled = out.f_estimated.rowwise() - radial.evaluate(out.force_offset_used_m).transpose();
+    if (trial.force) {
+      out.f_sensor = *trial.force;
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      Eigen::Index n = 0;
+      for (Eigen::Index t = 0; t < out.f_estimated.rows(); ++t) {
+        if (!out.f_estimated.row(t).allFinite()) continue;
+        sum += (out.f_estimated.row(t) - out.f_sensor.row(t)).array().square().matrix().transpose();
+        ++n;
+      }
+      if (n > 0) out.force_rmse = (sum / static_cast<double>(n)).cwiseSqrt();
+    }
+    out.seconds = seconds_since(trial_start);
+    if (options.verbose) {
+      const Eigen::Vector3d m = 1e3 * out.estimate.misalignment_m;
+      std::string line = "  estimate [" + std::to_string(m[0]).substr(0, 6) + ", " + std::to_string(m[1]).substr(0, 6) +
+                         ", " + std::to_string(m[2]).substr(0, 6) + "] mm";
+      if (auto e = out.get_error_m()) line += ", e = " + std::to_string(1e3 * *e).substr(0, 5) + " mm";
+      progress(true, line);
+    }
+    result.trials.push_back(std::move(out));
+  }
+  result.seconds = seconds_since(start);
+  return result;
+}
+
+nlohmann::json StudyResult::to_json() const {
+  nlohmann::json j;
+  j["format"] = "rcm-results/1";
+  j["method"] = method;
+  j["session"] = session_manifest.string();
+  const TissueFrontEntry& best = tissue.best();
+  j["tissue_model"] = {{"expression", format_expression(best.expression, ExpressionFormat::sympy)},
+                       {"complexity", best.complexity},
+                       {"loss", best.loss},
+                       {"score", best.score},
+                       {"bic", best.bic},
+                       {"latex", format_expression(best.expression, ExpressionFormat::latex, 6)},
+                       {"calibration_offset_m", calibration_offset_m},
+                       {"pairs", {{"samples", tissue_pairs_report.samples},
+                                  {"kept", tissue_pairs_report.kept},
+                                  {"dropped_small_theta", tissue_pairs_report.dropped_small_theta},
+                                  {"dropped_singular", tissue_pairs_report.dropped_singular},
+                                  {"dropped_ill_conditioned", tissue_pairs_report.dropped_ill_conditioned},
+                                  {"dropped_non_finite", tissue_pairs_report.dropped_non_finite}}}};
+  if (tissue.law) j["tissue_model"]["fitted_range_m"] = {tissue.law->x_min(), tissue.law->x_max()};
+  nlohmann::json front = nlohmann::json::array();
+  for (const auto& e : tissue.front)
+    front.push_back({{"complexity", e.complexity}, {"loss", e.loss}, {"score", e.score}, {"bic", e.bic},
+                     {"expression", format_expression(e.expression, ExpressionFormat::sympy)}});
+  j["tissue_model"]["front"] = front;
+  if (tissue_sensitivity) {
+    nlohmann::json s = {{"leading_coefficient_min", tissue_sensitivity->leading_min},
+                        {"leading_coefficient_max", tissue_sensitivity->leading_max},
+                        {"same_family", tissue_sensitivity->same_family}};
+    for (const auto& e : tissue_sensitivity->entries)
+      s["refits"].push_back({{"offset_m", e.offset_m}, {"leading_coefficient", e.leading_coefficient},
+                             {"expression", format_expression(e.best.expression, ExpressionFormat::sympy)}});
+    j["tissue_model"]["sensitivity"] = s;
+  }
+  j["free_space_model"] = {{"kind", dynamics::to_string(model_kind)}, {"test_errors", dynamics::to_json(free_space_errors)}};
+  if (fit) j["free_space_model"]["fit"] = fit->to_json();
+
+  nlohmann::json trials_json = nlohmann::json::array();
+  std::vector<double> e_far, e_near;
+  for (const auto& t : trials) {
+    nlohmann::json jt = estimate_json(t.estimate, t.truth_m);
+    jt["name"] = t.name;
+    if (t.truth_m) jt["truth_m"] = vec_json(*t.truth_m);
+    if (t.hold)
+      jt["static_hold"] = {{"duration_s", t.hold->segment.duration_s},
+                           {"samples", t.hold->segment.end - t.hold->segment.begin},
+                           {"tau_measured", vec_json(t.hold->tau_measured)},
+                           {"tau_free_space", vec_json(t.hold->tau_free_space)}};
+    if (t.paper_variant) jt["paper_f_q0_0_variant"] = estimate_json(*t.paper_variant, t.truth_m);
+    if (t.force_rmse) jt["force_rmse_n"] = vec_json(*t.force_rmse);
+    jt["force_offset_used_m"] = t.force_offset_used_m;
+    jt["ill_conditioned_samples"] = t.ill_conditioned_samples;
+    jt["seconds"] = t.seconds;
+    if (auto e = t.get_error_m()) ((*t.truth_m)[2] > 0.020 + 1e-9 ? e_far : e_near).push_back(*e);
+    trials_json.push_back(jt);
+  }
+  j["trials"] = trials_json;
+  auto stats = [](const std::vector<double>& v) -> nlohmann::json {
+    if (v.empty()) return nullptr;
+    double mean = 0, var = 0;
+    for (double x : v) mean += x;
+    mean /= static_cast<double>(v.size());
+    for (double x : v) var += (x - mean) * (x - mean);
+    const double sd = v.size() > 1 ? std::sqrt(var / static_cast<double>(v.size() - 1)) : 0.0;
+    return {{"mean_m", mean}, {"sd_m", sd}, {"trials", v.size()}};
+  };
+  j["summary"] = {{"error_D_above_20mm", stats(e_far)}, {"error_D_up_to_20mm", stats(e_near)}, {"seconds", seconds}};
+  return j;
+}
+
+}  // namespace rcm

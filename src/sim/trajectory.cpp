@@ -1,0 +1,194 @@
+#include "rcm/sim/trajectory.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+namespace rcm::sim {
+
+namespace {
+
+constexpr double kTwoPi = 6.283185307179586;
+// The start-up term that makes u(0) = 0 decays with this time constant (s of warped time).
+constexpr double kStartDecay = 3.0;
+
+double smoothstep(double x) { return x * x * (3.0 - 2.0 * x); }
+double smoothstep_dot(double x) { return 6.0 * x * (1.0 - x); }
+double smoothstep_int(double x) { return x * x * x - 0.5 * x * x * x * x; }  // int_0^x
+
+}  // namespace
+
+TeleopPath::TeleopPath(const TrajectoryParams& p, const Eigen::Vector3d& q0, std::uint64_t seed,
+                       double duration_s)
+    : q0_(q0), amplitude_(p.amplitude) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const double log_min = std::log(p.min_frequency_hz), log_max = std::log(p.max_frequency_hz);
+  for (int j = 0; j < 3; ++j) {
+    auto& h = harmonics_[j];
+    h.resize(static_cast<std::size_t>(p.harmonics));
+    double power = 0.0;
+    for (auto& k : h) {
+      const double f = std::exp(log_min + (log_max - log_min) * unit(rng));
+      // Pink-ish spectrum: slower components carry more amplitude, as in hand motion.
+      const double a = (0.5 + 0.5 * unit(rng)) / std::sqrt(f / p.min_frequency_hz);
+      k = {a, kTwoPi * f, kTwoPi * unit(rng)};
+      power += 0.5 * a * a;
+    }
+    // Unit RMS of u: tanh then uses most of the range without pinning at its ends.
+    const double scale = 1.0 / std::sqrt(power);
+    for (auto& k : h) k[0] *= scale;
+  }
+  // Pauses: the time warp's rate falls smoothly to 0 and back. The first window
+  // ends at t = 0.6 s, so the path starts at rest.
+  pauses_.push_back({-1.2, 0.6, 0.6, 0.0});
+  if (p.pause_fraction > 0.0) {
+    const double mean_pause = 0.5 * (p.pause_min_s + p.pause_max_s);
+    const double mean_move = mean_pause * (1.0 - p.pause_fraction) / p.pause_fraction;
+    std::exponential_distribution<double> move_len(1.0 / mean_move);
+    double t = 0.6;
+    while (t < duration_s + 10.0) {
+      const double a = t + std::max(0.8, move_len(rng));
+      const double len = p.pause_min_s + (p.pause_max_s - p.pause_min_s) * unit(rng);
+      const double r = std::min(0.35, len / 3.0);
+      pauses_.push_back({a, a + len, r, 0.0});
+      t = a + len;
+    }
+  }
+  double lost = 0.0;
+  for (auto& w : pauses_) {
+    w.lost_before = lost;
+    lost += w.b - w.a - w.r;
+  }
+}
+
+double TeleopPath::warp(double t, double* rate, double* rate_dot) const {
+  // Cumulative time lost in pauses up to t, L(t); tau(t) = t - (L(t) - L(0)).
+  auto lost_until = [this](double time, double* bump, double* bump_dot) {
+    *bump = 0.0;
+    *bump_dot = 0.0;
+    auto it = std::upper_bound(pauses_.begin(), pauses_.end(), time,
+                               [](double v, const Pause& w) { return v < w.a; });
+    if (it == pauses_.begin()) return 0.0;
+    const Pause& w = *(it - 1);
+    if (time >= w.b) return w.lost_before + (w.b - w.a - w.r);
+    const double e = time - w.a;
+    if (e < w.r) {
+      const double x = e / w.r;
+      *bump = smoothstep(x);
+      *bump_dot = smoothstep_dot(x) / w.r;
+      return w.lost_before + w.r * smoothstep_int(x);
+    }
+    const double fall_start = w.b - w.r;
+    if (time < fall_start) {
+      *bump = 1.0;
+      return w.lost_before + 0.5 * w.r + (e - w.r);
+    }
+    const double x = (time - fall_start) / w.r;
+    *bump = 1.0 - smoothstep(x);
+    *bump_dot = -smoothstep_dot(x) / w.r;
+    return w.lost_before + 0.5 * w.r + (fall_start - w.a - w.r) +
+           w.r * (x - smoothstep_int(x));
+  };
+  double b0, bd0, b, bd;
+  const double l0 = lost_until(0.0, &b0, &bd0);
+  const double l = lost_until(t, &b, &bd);
+  *rate = 1.0 - b;
+  *rate_dot = -bd;
+  return t - (l - l0);
+}
+
+ReferenceSample TeleopPath::evaluate(double t) const {
+  double rate, rate_dot;
+  const double tau = warp(t, &rate, &rate_dot);
+  const double decay = std::exp(-tau / kStartDecay);
+  ReferenceSample r;
+  for (int j = 0; j < 3; ++j) {
+    double u = 0.0, du = 0.0, ddu = 0.0;
+    for (const auto& k : harmonics_[j]) {
+      const double a = k[0], w = k[1], ph = k[2];
+      const double s = std::sin(w * tau + ph), c = std::cos(w * tau + ph);
+      const double s0 = a * std::sin(ph) * decay;
+      u += a * s - s0;
+      du += a * w * c + s0 / kStartDecay;
+      ddu += -a * w * w * s - s0 / (kStartDecay * kStartDecay);
+    }
+    const double th = std::tanh(u);
+    const double sech2 = 1.0 - th * th;
+    const double A = amplitude_[j];
+    const double u_dot = du * rate;
+    const double u_ddot = ddu * rate * rate + du * rate_dot;
+    r.q[j] = q0_[j] + A * th;
+    r.qd[j] = A * sech2 * u_dot;
+    r.qdd[j] = A * sech2 * (u_ddot - 2.0 * th * u_dot * u_dot);
+  }
+  return r;
+}
+
+QuinticMove QuinticMove::make(double t0, double T, const ReferenceSample& from,
+                              const Eigen::Vector3d& to) {
+  QuinticMove m;
+  m.t0 = t0;
+  m.duration = T;
+  for (int j = 0; j < 3; ++j) {
+    const double h = to[j] - from.q[j], v0 = from.qd[j], a0 = from.qdd[j];
+    m.coeff(j, 0) = from.q[j];
+    m.coeff(j, 1) = v0;
+    m.coeff(j, 2) = 0.5 * a0;
+    m.coeff(j, 3) = (20.0 * h - 12.0 * v0 * T - 3.0 * a0 * T * T) / (2.0 * T * T * T);
+    m.coeff(j, 4) = (-30.0 * h + 16.0 * v0 * T + 3.0 * a0 * T * T) / (2.0 * T * T * T * T);
+    m.coeff(j, 5) = (12.0 * h - 6.0 * v0 * T - a0 * T * T) / (2.0 * T * T * T * T * T);
+  }
+  return m;
+}
+
+ReferenceSample QuinticMove::evaluate(double t) const {
+  const double x = std::clamp(t - t0, 0.0, duration);
+  ReferenceSample r;
+  for (int j = 0; j < 3; ++j) {
+    const auto c = coeff.row(j);
+    r.q[j] = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
+    r.qd[j] = c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])));
+    r.qdd[j] = 2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]));
+  }
+  if (t - t0 >= duration) {
+    r.qd.setZero();
+    r.qdd.setZero();
+  }
+  return r;
+}
+
+void ReferenceTrajectory::add_teleop(double t_start, std::shared_ptr<const TeleopPath> path) {
+  Piece p{t_start, 0, std::move(path), {}, Eigen::Vector3d::Zero()};
+  pieces_.push_back(std::move(p));
+}
+
+void ReferenceTrajectory::add_move(double t_start, double duration, const Eigen::Vector3d& to) {
+  const ReferenceSample from = pieces_.empty() ? ReferenceSample{to, {}, {}} : evaluate(t_start);
+  Piece p{t_start, 1, nullptr, QuinticMove::make(t_start, duration, from, to), Eigen::Vector3d::Zero()};
+  pieces_.push_back(std::move(p));
+}
+
+void ReferenceTrajectory::add_hold(double t_start, const Eigen::Vector3d& q) {
+  Piece p{t_start, 2, nullptr, {}, q};
+  pieces_.push_back(std::move(p));
+}
+
+ReferenceSample ReferenceTrajectory::evaluate(double t) const {
+  if (pieces_.empty()) return {};
+  auto it = std::upper_bound(pieces_.begin(), pieces_.end(), t,
+                             [](double v, const Piece& p) { return v < p.t_start; });
+  const Piece& p = it == pieces_.begin() ? pieces_.front() : *(it - 1);
+  const double tt = std::max(t, p.t_start);
+  switch (p.kind) {
+    case 0: return p.teleop->evaluate(tt - p.t_start);
+    case 1: return p.move.evaluate(tt);
+    default: {
+      ReferenceSample r;
+      r.q = p.hold;
+      return r;
+    }
+  }
+}
+
+}  // namespace rcm::sim

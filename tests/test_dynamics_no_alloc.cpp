@@ -1,0 +1,91 @@
+// The per-sample path of every torque model must not allocate: this executable
+// replaces the global operator new with a counting one and steps each kind.
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <new>
+#include <random>
+
+#include "rcm/dynamics/linear_model.hpp"
+#include "rcm/dynamics/networks.hpp"
+
+namespace {
+std::atomic<long> g_allocations{0};
+}
+
+void* operator new(std::size_t n) {
+  ++g_allocations;
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n) { return operator new(n); }
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+
+using namespace rcm::dynamics;
+
+namespace {
+Eigen::MatrixXf rnd(int r, int c, std::mt19937& rng) {
+  std::normal_distribution<float> g(0.0f, 0.3f);
+  Eigen::MatrixXf m(r, c);
+  for (int i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
+  return m;
+}
+LstmNetwork lstm(int in, int H, int L, int out, std::mt19937& rng) {
+  LstmNetwork n;
+  for (int k = 0; k < L; ++k)
+    n.layers.push_back({rnd(4 * H, k ? H : in, rng), rnd(4 * H, H, rng), rnd(4 * H, 1, rng).col(0),
+                        rnd(4 * H, 1, rng).col(0)});
+  n.head.layers.push_back({rnd(16, H, rng), rnd(16, 1, rng).col(0), Activation::tanh});
+  n.head.layers.push_back({rnd(out, 16, rng), rnd(out, 1, rng).col(0), Activation::identity});
+  return n;
+}
+}  // namespace
+
+TEST(NoAllocation, CountingOperatorNewSeesAllocations) {
+  const long before = g_allocations;
+  auto* p = new std::vector<int>(10);
+  delete p;
+  EXPECT_GT(g_allocations - before, 0);  // the counter works, so the test below can fail
+}
+
+TEST(NoAllocation, ComputeStepOfEveryKind) {
+  std::mt19937 rng(1);
+  TorqueModelInfo info;
+  info.num_joints = 6;
+  info.num_outputs = 6;
+  info.sample_period_s = 0.005;
+  Normalization norm{Eigen::VectorXf::Zero(12), Eigen::VectorXf::Ones(12), Eigen::VectorXf::Zero(6),
+                     Eigen::VectorXf::Ones(6)};
+  LinearTorqueParameters lp{Eigen::VectorXd::Ones(17), Eigen::VectorXd::Ones(6), Eigen::VectorXd::Ones(6),
+                            Eigen::VectorXd::Ones(6), Eigen::VectorXd::Ones(6), Eigen::VectorXd::Constant(6, 1e-3)};
+  auto base = std::make_shared<const LinearTorqueModel>(info, lp);
+  std::vector<std::unique_ptr<TorqueModel>> models;
+  models.push_back(std::make_unique<LstmTorqueModel>(info, lstm(12, 128, 2, 6, rng), norm));
+  std::vector<DenseStack> stacks;
+  for (int j = 0; j < 6; ++j) {
+    DenseStack s;
+    s.layers.push_back({rnd(100, 12, rng), rnd(100, 1, rng).col(0), Activation::tanh});
+    s.layers.push_back({rnd(1, 100, rng), rnd(1, 1, rng).col(0), Activation::identity});
+    stacks.push_back(s);
+  }
+  models.push_back(std::make_unique<MlpTorqueModel>(info, stacks, norm));
+  models.push_back(std::make_unique<LinearTorqueModel>(info, lp));
+  models.push_back(std::make_unique<HybridTorqueModel>(info, base, lstm(12, 32, 1, 6, rng), norm));
+  for (const auto& m : models) {
+    auto ws = m->create_workspace();
+    double q[6] = {0.1, 0.2, 0.12, 0, 0, 0}, qd[6] = {0.3, -0.2, 0.01, 0, 0, 0}, tau[6];
+    const long before = g_allocations;
+    for (int t = 0; t < 500; ++t) {
+      q[0] += 1e-3;
+      m->compute_step(*ws, t * 0.005, q, qd, tau);
+    }
+    m->reset_state(*ws);
+    m->compute_step(*ws, 0.0, q, qd, tau);
+    EXPECT_EQ(g_allocations - before, 0) << to_string(m->kind());
+  }
+}

@@ -1,0 +1,214 @@
+// One battery for every torque-model kind (fit, predict, stream, save/load,
+// metrics), plus the LibTorch cross-checks: the Eigen LSTM kernel against
+// torch::nn::LSTM, and TorchScript export -> import.
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "rcm/common/error.hpp"
+#include "rcm/dynamics/training.hpp"
+#include "test_dynamics_synthetic.hpp"
+
+using namespace rcm::dynamics;
+
+namespace {
+
+FitOptions tiny_options() {
+  FitOptions o;
+  o.verbose = false;
+  // Tiny networks: a second intra-op thread only adds synchronization.
+  o.threads = 1;
+  o.hidden_size = 12;
+  o.num_layers = 1;
+  o.head_hidden = 8;
+  o.window = 25;
+  o.streams = 4;
+  o.burn_in = 50;
+  o.mlp_hidden = 16;
+  o.max_epochs = 12;
+  o.learning_rate = 1e-2;
+  return o;
+}
+
+const rcm::Recording& synthetic_minute() {
+  static const rcm::Recording rec = [] {
+    rcm::test::SyntheticArmOptions so;
+    so.duration_s = 60;
+    return rcm::test::make_synthetic_free_space(so);
+  }();
+  return rec;
+}
+
+class EveryModelKind : public ::testing::TestWithParam<TorqueModelKind> {};
+
+}  // namespace
+
+TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
+  const auto& rec = synthetic_minute();
+  const FitResult fit = fit_torque_model(GetParam(), {rec}, tiny_options());
+  ASSERT_TRUE(fit.model);
+  const auto& model = *fit.model;
+  EXPECT_EQ(model.kind(), GetParam());
+  EXPECT_EQ(model.num_joints(), 3);
+  EXPECT_EQ(model.num_outputs(), 3);
+  EXPECT_NEAR(model.info().sample_period_s, 0.005, 1e-12);
+
+  // Predict over the whole recording, and the test split scored as in the summary.
+  const Eigen::MatrixXd p = predict_torque(model, rec);
+  ASSERT_EQ(p.rows(), rec.time.size());
+  ASSERT_TRUE(p.allFinite());
+  ASSERT_EQ(fit.summary.test_errors.size(), 3u);
+  const auto split = split_in_time({rec}, 0.7, 0.2);
+  const auto again = evaluate_on_segments(model, {rec}, split.test);
+  // The model learned something: on the fitted part (train + validation) it
+  // beats predicting the mean by far. (Generalization from one synthetic minute
+  // is not asserted here; it is measured on the simulated bench, docs/dynamics.md.)
+  const Eigen::Index fitted = split.validation.back().end;
+  const Eigen::MatrixXd measured = rec.effort.topRows(fitted);
+  const Eigen::RowVectorXd mean = measured.colwise().mean();
+  const auto baseline = compute_torque_errors(measured, mean.replicate(fitted, 1));
+  const auto in_sample = compute_torque_errors(measured, p.topRows(fitted));
+  for (int j = 0; j < 3; ++j) {
+    EXPECT_DOUBLE_EQ(again[j].rmse, fit.summary.test_errors[j].rmse);
+    EXPECT_LT(in_sample[j].rmse, 0.75 * baseline[j].rmse) << to_string(GetParam()) << " joint " << j + 1;
+  }
+
+  // Streaming one sample at a time equals predict, also after a reset.
+  auto ws = model.create_workspace();
+  for (int pass = 0; pass < 2; ++pass) {
+    model.reset_state(*ws);
+    for (Eigen::Index t = 0; t < 300; ++t) {
+      Eigen::VectorXd q = rec.position.row(t).transpose(), qd = rec.velocity.row(t).transpose(), tau(3);
+      model.compute_step(*ws, rec.time(t), q.data(), qd.data(), tau.data());
+      ASSERT_EQ((tau.transpose() - p.row(t)).cwiseAbs().maxCoeff(), 0.0);
+    }
+  }
+
+  // Save and load: same document, bit-identical predictions.
+  const auto path = std::filesystem::temp_directory_path() / ("rcm_test_model_" + to_string(GetParam()) + ".json");
+  save_torque_model(path, model);
+  const auto loaded = load_torque_model(path);
+  EXPECT_EQ(torque_model_to_json(*loaded), torque_model_to_json(model));
+  EXPECT_EQ((predict_torque(*loaded, rec) - p).cwiseAbs().maxCoeff(), 0.0);
+  std::filesystem::remove(path);
+  EXPECT_FALSE(fit.summary.brief_report().empty());
+}
+
+INSTANTIATE_TEST_SUITE_P(Kinds, EveryModelKind,
+                         ::testing::Values(TorqueModelKind::lstm, TorqueModelKind::mlp, TorqueModelKind::linear,
+                                           TorqueModelKind::hybrid),
+                         [](const auto& info) { return to_string(info.param); });
+
+namespace {
+LstmNetwork random_network(int in, int H, int L, int out, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g(0.0f, 0.2f);
+  auto rnd = [&](int r, int c) {
+    Eigen::MatrixXf m(r, c);
+    for (int i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
+    return m;
+  };
+  LstmNetwork n;
+  for (int k = 0; k < L; ++k)
+    n.layers.push_back({rnd(4 * H, k ? H : in), rnd(4 * H, H), rnd(4 * H, 1).col(0), rnd(4 * H, 1).col(0)});
+  n.head.layers.push_back({rnd(64, H), rnd(64, 1).col(0), Activation::tanh});
+  n.head.layers.push_back({rnd(out, 64), rnd(out, 1).col(0), Activation::identity});
+  return n;
+}
+}  // namespace
+
+TEST(LstmKernel, AgreesWithLibTorchWithin1e5) {
+  const auto net = random_network(6, 128, 2, 3, 4);
+  std::mt19937 rng(2);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  Eigen::MatrixXf x(400, 6);
+  for (int i = 0; i < x.size(); ++i) x.data()[i] = g(rng);
+  const Eigen::MatrixXf ref = run_lstm_with_libtorch(net, x);
+  LstmKernel kernel(net);
+  auto state = kernel.create_state();
+  double worst = 0;
+  for (int t = 0; t < x.rows(); ++t) {
+    Eigen::VectorXf xt = x.row(t).transpose(), y(3);
+    kernel.step(state, xt.data(), y.data());
+    worst = std::max(worst, static_cast<double>((y.transpose() - ref.row(t)).cwiseAbs().maxCoeff()));
+  }
+  EXPECT_LE(worst, 1e-5);
+  // The stepping LibTorch closure used by the benchmark agrees too.
+  auto stepper = make_libtorch_lstm_stepper(net);
+  Eigen::VectorXf y(3);
+  for (int t = 0; t < 50; ++t) {
+    Eigen::VectorXf xt = x.row(t).transpose();
+    stepper(xt.data(), y.data());
+  }
+  EXPECT_LE((y.transpose() - ref.row(49)).cwiseAbs().maxCoeff(), 1e-5);
+}
+
+TEST(TorchScript, ExportThenImportGivesTheSameModel) {
+  TorqueModelInfo info;
+  info.num_joints = 3;
+  info.num_outputs = 3;
+  info.sample_period_s = 0.005;
+  Normalization norm{Eigen::VectorXf::LinSpaced(6, -0.1f, 0.1f), Eigen::VectorXf::Constant(6, 0.5f),
+                     Eigen::VectorXf::Constant(3, 0.2f), Eigen::VectorXf::Constant(3, 2.0f)};
+  LstmTorqueModel model(info, random_network(6, 16, 2, 3, 8), norm);
+  const auto path = std::filesystem::temp_directory_path() / "rcm_test_lstm.pt";
+  export_torchscript(model, path);
+  const auto imported = import_torchscript(path);  // checks the module's forward internally
+  const auto& rec = synthetic_minute();
+  const Eigen::MatrixXd a = predict_torque(model, rec).topRows(500), b = predict_torque(*imported, rec).topRows(500);
+  EXPECT_EQ((a - b).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_DOUBLE_EQ(imported->info().sample_period_s, 0.005);
+  std::filesystem::remove(path);
+  EXPECT_THROW(import_torchscript(std::filesystem::temp_directory_path() / "no_such_rcm_model.pt"), rcm::InputError);
+}
+
+TEST(FitWarnings, ShortDataSaysTooFewToTrust) {
+  rcm::test::SyntheticArmOptions so;
+  so.duration_s = 40;
+  const auto rec = rcm::test::make_synthetic_free_space(so);
+  auto o = tiny_options();
+  o.max_epochs = 2;
+  const auto fit = fit_lstm_torque_model({rec}, o);
+  bool found = false;
+  for (const auto& w : fit.summary.warnings) found |= w.find("too few to trust") != std::string::npos;
+  EXPECT_TRUE(found);
+}
+
+TEST(TorchScript, ImportsAModuleScriptedInPyTorch) {
+  // The documented PyTorch layout, scripted by Debian's python3-torch.
+  if (std::system("/usr/bin/python3 -c 'import torch' > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "/usr/bin/python3 with torch not available";
+  const auto path = std::filesystem::temp_directory_path() / "rcm_test_pytorch_lstm.pt";
+  const std::string script = R"PY(
+import sys, torch
+torch.manual_seed(3)
+class TorqueLstm(torch.nn.Module):
+    def __init__(self):
+        super().__init__()
+        self.lstm = torch.nn.LSTM(6, 20, 2, batch_first=True)
+        self.head = torch.nn.Sequential(torch.nn.Linear(20, 10), torch.nn.ReLU(), torch.nn.Linear(10, 3))
+        self.register_buffer("input_mean", torch.randn(6) * 0.1)
+        self.register_buffer("input_scale", torch.rand(6) + 0.5)
+        self.register_buffer("output_mean", torch.randn(3))
+        self.register_buffer("output_scale", torch.rand(3) + 0.5)
+        self.sample_period_s = 0.005
+    def forward(self, x):
+        out, _ = self.lstm((x - self.input_mean) / self.input_scale)
+        return self.head(out) * self.output_scale + self.output_mean
+torch.jit.script(TorqueLstm()).save(sys.argv[1])
+)PY";
+  const auto script_path = std::filesystem::temp_directory_path() / "rcm_test_make_pytorch_lstm.py";
+  { std::ofstream(script_path) << script; }
+  ASSERT_EQ(std::system(("/usr/bin/python3 " + script_path.string() + " " + path.string()).c_str()), 0);
+  const auto model = import_torchscript(path);  // throws if its forward disagrees with the kernel
+  EXPECT_EQ(model->num_joints(), 3);
+  EXPECT_EQ(model->network().layers.size(), 2u);
+  EXPECT_EQ(model->network().head.layers[0].activation, Activation::relu);
+  EXPECT_DOUBLE_EQ(model->info().sample_period_s, 0.005);
+  std::filesystem::remove(path);
+  std::filesystem::remove(script_path);
+}
