@@ -85,6 +85,8 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("trajectory.min_frequency_hz", &T.min_frequency_hz, "lowest component, Hz");
   add("trajectory.max_frequency_hz", &T.max_frequency_hz, "highest component (band limit), Hz");
   add("trajectory.harmonics", &T.harmonics, "sinusoids per joint");
+  add("trajectory.segment_s", &T.segment_s, "s, a new draw of the harmonics every segment (long recordings)");
+  add("trajectory.blend_s", &T.blend_s, "s, cross-fade between segments");
   add("trajectory.pause_fraction", &T.pause_fraction, "share of time in pauses, 0..0.8");
   add("trajectory.pause_min_s", &T.pause_min_s, "shortest pause, s");
   add("trajectory.pause_max_s", &T.pause_max_s, "longest pause, s");
@@ -428,6 +430,8 @@ void validate_config(const SimConfig& c, const std::string& source) {
   require(T.max_frequency_hz >= T.min_frequency_hz && T.max_frequency_hz <= 5.0,
           "trajectory.max_frequency_hz", "expected min_frequency_hz..5 Hz");
   require(T.harmonics >= 1 && T.harmonics <= 64, "trajectory.harmonics", "expected 1..64");
+  require(T.segment_s >= 5.0, "trajectory.segment_s", "expected >= 5 s");
+  require(T.blend_s > 0.0 && T.blend_s <= 0.5 * T.segment_s, "trajectory.blend_s", "expected 0 < blend_s <= segment_s / 2");
   require(T.pause_fraction >= 0 && T.pause_fraction <= 0.8, "trajectory.pause_fraction", "expected 0..0.8");
   require(T.pause_min_s > 0 && T.pause_max_s >= T.pause_min_s, "trajectory.pause_max_s",
           "expected 0 < pause_min_s <= pause_max_s");

@@ -20,24 +20,30 @@ double smoothstep_int(double x) { return x * x * x - 0.5 * x * x * x * x; }  // 
 
 TeleopPath::TeleopPath(const TrajectoryParams& p, const Eigen::Vector3d& q0, std::uint64_t seed,
                        double duration_s)
-    : q0_(q0), amplitude_(p.amplitude) {
+    : q0_(q0), amplitude_(p.amplitude), segment_s_(p.segment_s), blend_s_(p.blend_s) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   const double log_min = std::log(p.min_frequency_hz), log_max = std::log(p.max_frequency_hz);
-  for (int j = 0; j < 3; ++j) {
-    auto& h = harmonics_[j];
-    h.resize(static_cast<std::size_t>(p.harmonics));
-    double power = 0.0;
-    for (auto& k : h) {
-      const double f = std::exp(log_min + (log_max - log_min) * unit(rng));
-      // Pink-ish spectrum: slower components carry more amplitude, as in hand motion.
-      const double a = (0.5 + 0.5 * unit(rng)) / std::sqrt(f / p.min_frequency_hz);
-      k = {a, kTwoPi * f, kTwoPi * unit(rng)};
-      power += 0.5 * a * a;
+  // Warped time never exceeds real time, so duration / segment_s (+ the margin
+  // the pauses use) bounds the segments needed.
+  const std::size_t count = 1 + static_cast<std::size_t>(std::ceil((duration_s + 10.0) / segment_s_));
+  segments_.resize(count);
+  for (Harmonics& harmonics : segments_) {
+    for (int j = 0; j < 3; ++j) {
+      auto& h = harmonics[static_cast<std::size_t>(j)];
+      h.resize(static_cast<std::size_t>(p.harmonics));
+      double power = 0.0;
+      for (auto& k : h) {
+        const double f = std::exp(log_min + (log_max - log_min) * unit(rng));
+        // Pink-ish spectrum: slower components carry more amplitude, as in hand motion.
+        const double a = (0.5 + 0.5 * unit(rng)) / std::sqrt(f / p.min_frequency_hz);
+        k = {a, kTwoPi * f, kTwoPi * unit(rng)};
+        power += 0.5 * a * a;
+      }
+      // Unit RMS of u: tanh then uses most of the range without pinning at its ends.
+      const double scale = 1.0 / std::sqrt(power);
+      for (auto& k : h) k[0] *= scale;
     }
-    // Unit RMS of u: tanh then uses most of the range without pinning at its ends.
-    const double scale = 1.0 / std::sqrt(power);
-    for (auto& k : h) k[0] *= scale;
   }
   // Pauses: the time warp's rate falls smoothly to 0 and back. The first window
   // ends at t = 0.6 s, so the path starts at rest.
@@ -98,20 +104,44 @@ double TeleopPath::warp(double t, double* rate, double* rate_dot) const {
   return t - (l - l0);
 }
 
+void TeleopPath::evaluate_segment(std::size_t segment, int joint, double tau, double decay, double* u,
+                                  double* du, double* ddu) const {
+  *u = *du = *ddu = 0.0;
+  for (const auto& k : segments_[segment][static_cast<std::size_t>(joint)]) {
+    const double a = k[0], w = k[1], ph = k[2];
+    const double s = std::sin(w * tau + ph), c = std::cos(w * tau + ph);
+    const double s0 = a * std::sin(ph) * decay;  // starts the path at rest at q0
+    *u += a * s - s0;
+    *du += a * w * c + s0 / kStartDecay;
+    *ddu += -a * w * w * s - s0 / (kStartDecay * kStartDecay);
+  }
+}
+
 ReferenceSample TeleopPath::evaluate(double t) const {
   double rate, rate_dot;
   const double tau = warp(t, &rate, &rate_dot);
   const double decay = std::exp(-tau / kStartDecay);
+  // Segment k covers [k S, (k + 1) S) of warped time; the last blend_s of it
+  // cross-fades into segment k + 1 with a smoothstep weight beta.
+  const std::size_t k = std::min(segments_.size() - 1, static_cast<std::size_t>(std::max(0.0, tau) / segment_s_));
+  const double blend_start = (static_cast<double>(k) + 1.0) * segment_s_ - blend_s_;
+  const bool blending = tau > blend_start && k + 1 < segments_.size();
+  const double x = blending ? (tau - blend_start) / blend_s_ : 0.0;
+  // Quintic smootherstep: C2, so the reference acceleration stays continuous.
+  const double beta = blending ? x * x * x * (10.0 + x * (-15.0 + 6.0 * x)) : 0.0;
+  const double beta_d = blending ? 30.0 * x * x * (1.0 - x) * (1.0 - x) / blend_s_ : 0.0;
+  const double beta_dd = blending ? 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (blend_s_ * blend_s_) : 0.0;
   ReferenceSample r;
   for (int j = 0; j < 3; ++j) {
-    double u = 0.0, du = 0.0, ddu = 0.0;
-    for (const auto& k : harmonics_[j]) {
-      const double a = k[0], w = k[1], ph = k[2];
-      const double s = std::sin(w * tau + ph), c = std::cos(w * tau + ph);
-      const double s0 = a * std::sin(ph) * decay;
-      u += a * s - s0;
-      du += a * w * c + s0 / kStartDecay;
-      ddu += -a * w * w * s - s0 / (kStartDecay * kStartDecay);
+    double u, du, ddu;
+    evaluate_segment(k, j, tau, decay, &u, &du, &ddu);
+    if (blending) {
+      double u1, du1, ddu1;
+      evaluate_segment(k + 1, j, tau, decay, &u1, &du1, &ddu1);
+      const double diff = u1 - u, diff_d = du1 - du, diff_dd = ddu1 - ddu;
+      ddu = ddu + beta * diff_dd + 2.0 * beta_d * diff_d + beta_dd * diff;
+      du = du + beta * diff_d + beta_d * diff;
+      u = u + beta * diff;
     }
     const double th = std::tanh(u);
     const double sech2 = 1.0 - th * th;

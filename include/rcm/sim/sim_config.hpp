@@ -83,6 +83,12 @@ struct TrajectoryParams {
   double min_frequency_hz = 0.04;
   double max_frequency_hz = 0.45;
   int harmonics = 5;
+  // A long recording is a sequence of independent motions, like a surgeon's
+  // teleoperation over minutes: every segment_s a new draw of the harmonics,
+  // cross-faded over blend_s. Without it 15 min of free space would be one draw
+  // and could miss the speeds that a trial's draw reaches.
+  double segment_s = 60.0;
+  double blend_s = 4.0;
   double pause_fraction = 0.15;       // share of time spent in pauses
   double pause_min_s = 0.4;
   double pause_max_s = 2.5;

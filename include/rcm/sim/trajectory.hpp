@@ -32,8 +32,13 @@ class TeleopPath {
  private:
   struct Pause { double a, b, r; double lost_before; };
   double warp(double t, double* rate, double* rate_dot) const;
+  using Harmonics = std::array<std::vector<std::array<double, 3>>, 3>;  // per joint: amplitude, omega, phase
+  // u of one segment's draw and its first two derivatives in warped time.
+  void evaluate_segment(std::size_t segment, int joint, double tau, double decay, double* u, double* du,
+                        double* ddu) const;
   Eigen::Vector3d q0_, amplitude_;
-  std::vector<std::array<double, 3>> harmonics_[3];  // amplitude, omega, phase
+  std::vector<Harmonics> segments_;
+  double segment_s_ = 60.0, blend_s_ = 4.0;
   std::vector<Pause> pauses_;
 };
 
