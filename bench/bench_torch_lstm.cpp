@@ -12,6 +12,10 @@
 using namespace rcm::dynamics;
 
 namespace {
+void torch_threads_for_benchmark() { set_libtorch_threads(2); }
+}  // namespace
+
+namespace {
 LstmNetwork lstm(int in, int H, int L, int out) {
   std::mt19937 rng(1);
   std::normal_distribution<float> g(0.0f, 0.2f);
@@ -29,9 +33,10 @@ LstmNetwork lstm(int in, int H, int L, int out) {
 }
 }  // namespace
 
-// Sizes: 6 joints -> 12 inputs, 2 layers x 128 hidden, head 64, 6 outputs.
+// Sizes: 6 joints -> 12 inputs, H hidden x L layers (args), head 64, 6 outputs.
 static void BM_LibTorchLstmStep(benchmark::State& state) {
-  auto step = make_libtorch_lstm_stepper(lstm(12, 128, 2, 6));
+  set_libtorch_threads(1);  // one core, as the Eigen kernel
+  auto step = make_libtorch_lstm_stepper(lstm(12, static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), 6));
   float x[12] = {0.1f}, y[6];
   for (auto _ : state) {
     x[0] += 1e-4f;
@@ -39,10 +44,10 @@ static void BM_LibTorchLstmStep(benchmark::State& state) {
     benchmark::DoNotOptimize(y);
   }
 }
-BENCHMARK(BM_LibTorchLstmStep);
+BENCHMARK(BM_LibTorchLstmStep)->Args({128, 1})->Args({128, 2});
 
 static void BM_EigenLstmStep(benchmark::State& state) {
-  LstmKernel k(lstm(12, 128, 2, 6));
+  LstmKernel k(lstm(12, static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), 6));
   auto s = k.create_state();
   float x[12] = {0.1f}, y[6];
   for (auto _ : state) {
@@ -51,11 +56,13 @@ static void BM_EigenLstmStep(benchmark::State& state) {
     benchmark::DoNotOptimize(y);
   }
 }
-BENCHMARK(BM_EigenLstmStep);
+BENCHMARK(BM_EigenLstmStep)->Args({128, 1})->Args({128, 2});
 
-// One Adam update on a 16-stream x 100-sample window (2 threads, as in training).
+// One Adam update of the default 1 x 128 network on a 32-stream x 100-sample
+// window, 2 threads, as fit_lstm_torque_model runs it.
 static void BM_LibTorchTrainingStep(benchmark::State& state) {
-  auto step = make_libtorch_training_step(12, 128, 2, 64, 6, 16, 100);
+  torch_threads_for_benchmark();
+  auto step = make_libtorch_training_step(12, 128, 1, 64, 6, 32, 100);
   for (auto _ : state) step();
 }
 BENCHMARK(BM_LibTorchTrainingStep)->Unit(benchmark::kMillisecond);

@@ -4,9 +4,10 @@ training and Eigen streaming kernel, in one run. Run with /usr/bin/python3:
 
     /usr/bin/python3 bench/torch_compare.py BUILD_DIR [--write docs/benchmarks.md]
 
-Same shapes as bench/bench_torch_lstm.cpp: 12 inputs (6 joints), 2 x 128 LSTM,
-head 64 (tanh), 6 outputs; streaming = one sample with state carried; training =
-one Adam update on 16 streams x 100 samples, 2 threads. Also writes
+Same shapes as bench/bench_torch_lstm.cpp: 12 inputs (6 joints), 1 x 128 (the
+default) and 2 x 128 LSTM, head 64 (tanh), 6 outputs; streaming = one sample with
+state carried, one thread; training = one Adam update of the 1 x 128 network on
+32 streams x 100 samples, 2 threads. Also writes
 BUILD_DIR/pytorch_lstm.pt, a TorchScript module in the layout that
 `rcm dynamics import` reads (docs/dynamics.md).
 """
@@ -49,8 +50,9 @@ def time_it(fn, min_seconds=2.0):
     return (time.perf_counter() - t0) / n
 
 
-def python_step_us():
-    m = TorqueLstm().eval()
+def python_step_us(layers):
+    torch.set_num_threads(1)  # one core, as the Eigen kernel
+    m = TorqueLstm(layers=layers).eval()
     state = [None]
     x = torch.zeros(1, 1, 12)
 
@@ -59,13 +61,15 @@ def python_step_us():
             out, state[0] = m.lstm(x, state[0])
             m.head(out)
 
-    return 1e6 * time_it(step)
+    t = 1e6 * time_it(step)
+    torch.set_num_threads(2)
+    return t
 
 
 def python_train_ms():
-    m = TorqueLstm()
+    m = TorqueLstm(layers=1)
     opt = torch.optim.Adam(m.parameters(), 1e-3)
-    x, y = torch.randn(16, 100, 12), torch.randn(16, 100, 6)
+    x, y = torch.randn(32, 100, 12), torch.randn(32, 100, 6)
 
     def update():
         loss = torch.nn.functional.mse_loss(m.head(m.lstm(x)[0]), y)
@@ -96,14 +100,16 @@ def main():
     write = sys.argv[sys.argv.index("--write") + 1] if "--write" in sys.argv else None
     torch.jit.script(TorqueLstm()).save(os.path.join(build, "pytorch_lstm.pt"))
     cpp = cpp_results(build)
-    py_step, py_train = python_step_us(), python_train_ms()
-    eig, lt, lt_train = cpp["BM_EigenLstmStep"], cpp["BM_LibTorchLstmStep"], cpp["BM_LibTorchTrainingStep"] / 1e3
-    rows = [
-        ("LSTM streaming step (2x128, 1 sample, state carried)", f"{py_step:.1f} us", f"{lt:.1f} us",
-         f"{eig:.2f} us", f"PyTorch/Eigen {py_step / eig:.1f}x, LibTorch/Eigen {lt / eig:.1f}x"),
-        ("LSTM training update (16 x 100 window, Adam, 2 threads)", f"{py_train:.1f} ms", f"{lt_train:.1f} ms", "-",
-         f"PyTorch/LibTorch {py_train / lt_train:.2f}x"),
-    ]
+    rows = []
+    for layers in (1, 2):
+        py = python_step_us(layers)
+        eig, lt = cpp[f"BM_EigenLstmStep/128/{layers}"], cpp[f"BM_LibTorchLstmStep/128/{layers}"]
+        rows.append((f"LSTM streaming step, {layers} x 128, 1 sample, state carried, 1 thread", f"{py:.1f} us",
+                     f"{lt:.1f} us", f"{eig:.2f} us",
+                     f"PyTorch/Eigen {py / eig:.1f}x, LibTorch/Eigen {lt / eig:.1f}x"))
+    py_train, lt_train = python_train_ms(), cpp["BM_LibTorchTrainingStep"] / 1e3
+    rows.append(("LSTM training update, 1 x 128, 32 x 100 window, Adam, 2 threads", f"{py_train:.1f} ms",
+                 f"{lt_train:.1f} ms", "-", f"PyTorch/LibTorch {py_train / lt_train:.2f}x"))
     table = ["| what | PyTorch (python3-torch) | LibTorch (rcm::torch) | Eigen kernel (rcm::core) | ratio |",
              "|---|---|---|---|---|"] + ["| " + " | ".join(r) + " |" for r in rows]
     text = "\n".join(table)

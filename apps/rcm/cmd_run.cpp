@@ -11,7 +11,7 @@
 namespace {
 
 struct Options {
-  std::string session, out = "rcm-run", method = "three-step", model, model_file;
+  std::string session, out = "rcm-run", method = "three-step", model, model_file, export_problems;
   unsigned seed = 1;
   double D0 = std::numeric_limits<double>::quiet_NaN();
   double max_minutes = 10.0;
@@ -34,6 +34,7 @@ void run(const Options& o) {
   options.fit.max_minutes = o.max_minutes;
   options.read.dedupe = o.dedupe;
   if (!std::isnan(o.D0)) options.three_step.D_initial = o.D0;
+  if (!o.export_problems.empty()) options.export_problems_dir = o.export_problems;
   try {
     options.three_step.check();
   } catch (const std::invalid_argument& e) {
@@ -61,6 +62,8 @@ const bool registered = rcm::cli::register_command({"run", 60, [](CLI::App& app)
   cmd->add_option("--seed", o->seed, "seed of the model fit");
   cmd->add_option("--D0", o->D0, "initial guess of D in m (default: middle of [-0.020, 0.070])");
   cmd->add_option("--max-train-minutes", o->max_minutes, "wall-clock budget of the free-space fit (default 10)");
+  cmd->add_option("--export-problems", o->export_problems,
+                  "write every trial's coaxial least-squares problem as JSON into this folder (solver cross-checks)");
   cmd->add_flag("--dedupe", o->dedupe, "drop repeated rows of every recording");
   cmd->add_flag("--json", o->json, "print results.json on stdout");
   cmd->callback([o] { run(*o); });

@@ -1,5 +1,6 @@
 #include "rcm/estimation/study.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <iostream>
@@ -7,6 +8,7 @@
 #include "rcm/common/error.hpp"
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/force/incision_force.hpp"
+#include "rcm/io/json_file.hpp"
 
 namespace rcm {
 namespace {
@@ -155,6 +157,26 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
     if (out.hold)
       out.paper_variant = estimate_three_step(incision, g, trial, tau_fs, out.hold->tau_measured - tau_fs_paper,
                                               options.three_step);
+
+    if (options.export_problems_dir) {
+      std::filesystem::create_directories(*options.export_problems_dir);
+      const CoaxialProblem problem = make_coaxial_problem(incision, trial, tau_fs, dtau_radial, options.three_step.coaxial);
+      nlohmann::json j = coaxial_problem_to_json(problem, g, options.three_step);
+      ThreeStepOptions tight = options.three_step;
+      tight.function_tolerance = 1e-15;
+      j["D_paper_tolerance"] = out.estimate.misalignment_m[2];
+      j["D_tight"] = solve_coaxial_offset(problem, g, tight, nullptr);
+      std::vector<double> times;
+      for (int k = 0; k < 21; ++k) {
+        SolverReport report;
+        solve_coaxial_offset(problem, g, options.three_step, &report);
+        times.push_back(report.seconds);
+      }
+      std::nth_element(times.begin(), times.begin() + 10, times.end());
+      j["ceres_seconds_median"] = times[10];
+      j["trial"] = spec.name;
+      save_json_file(*options.export_problems_dir / (spec.name + ".json"), j);
+    }
 
     // Forces for Table III and Fig. 4: at the true D when known (the paper's
     // force estimation experiment), else at D~.

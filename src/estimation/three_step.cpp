@@ -2,6 +2,7 @@
 
 #include <ceres/ceres.h>
 
+#include <chrono>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -149,13 +150,11 @@ void ThreeStepOptions::check() const {
   if (max_iterations < 1) throw std::invalid_argument("ThreeStepOptions: max_iterations must be >= 1");
 }
 
-ThreeStepResult estimate_three_step(const IncisionFrame& incision, const TissueLaw& g, const Recording& trial,
-                                    const Eigen::MatrixXd& tau_fs_trial, const Eigen::Vector3d& dtau_radial,
-                                    const ThreeStepOptions& options) {
+double solve_coaxial_offset(const CoaxialProblem& problem, const TissueLaw& g, const ThreeStepOptions& options,
+                            SolverReport* report) {
   options.check();
-  const CoaxialProblem problem = make_coaxial_problem(incision, trial, tau_fs_trial, dtau_radial, options.coaxial);
-
-  // Step 3c: bounded trust region on D (the paper: lsqnonlin, trust-region-reflective).
+  const auto start = std::chrono::steady_clock::now();
+  // Bounded trust region on D (the paper: lsqnonlin, trust-region-reflective).
   double D = options.D_initial.value_or(0.5 * (options.D_min + options.D_max));
   if (std::abs(D) < 1e-6) D = 1e-3;  // psi is undefined at D = 0
   ceres::Problem ceres_problem;
@@ -174,15 +173,46 @@ ThreeStepResult estimate_three_step(const IncisionFrame& incision, const TissueL
   solver_options.num_threads = 1;
   ceres::Solver::Summary summary;
   ceres::Solve(solver_options, &ceres_problem, &summary);
+  if (report) {
+    report->converged = summary.termination_type == ceres::CONVERGENCE;
+    report->termination = ceres::TerminationTypeToString(summary.termination_type);
+    report->message = summary.message;
+    report->iterations = static_cast<int>(summary.iterations.size()) - 1;
+    report->initial_cost = summary.initial_cost;
+    report->final_cost = summary.final_cost;
+    report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  return D;
+}
 
+nlohmann::json coaxial_problem_to_json(const CoaxialProblem& p, const TissueLaw& g, const ThreeStepOptions& options) {
+  nlohmann::json u = nlohmann::json::array(), w = nlohmann::json::array();
+  for (const auto& d : p.total) {
+    u.push_back({d.u[0], d.u[1], d.u[2]});
+    w.push_back({d.w[0], d.w[1], d.w[2]});
+  }
+  return {{"format", "rcm-coaxial-problem/1"},
+          {"tan_theta", p.tan_theta},
+          {"u", u},
+          {"w", w},
+          {"radial_u", {p.radial.u[0], p.radial.u[1], p.radial.u[2]}},
+          {"radial_w", {p.radial.w[0], p.radial.w[1], p.radial.w[2]}},
+          {"g", to_json(g)},
+          {"g_sympy", g.to_string(ExpressionFormat::sympy)},
+          {"D_min", options.D_min},
+          {"D_max", options.D_max},
+          {"D_initial", options.D_initial.value_or(0.5 * (options.D_min + options.D_max))},
+          {"function_tolerance", options.function_tolerance}};
+}
+
+ThreeStepResult estimate_three_step(const IncisionFrame& incision, const TissueLaw& g, const Recording& trial,
+                                    const Eigen::MatrixXd& tau_fs_trial, const Eigen::Vector3d& dtau_radial,
+                                    const ThreeStepOptions& options) {
+  const CoaxialProblem problem = make_coaxial_problem(incision, trial, tau_fs_trial, dtau_radial, options.coaxial);
   ThreeStepResult result;
+
+  const double D = solve_coaxial_offset(problem, g, options, &result.solver);
   result.samples_used = problem.total.size();
-  result.solver.converged = summary.termination_type == ceres::CONVERGENCE;
-  result.solver.termination = ceres::TerminationTypeToString(summary.termination_type);
-  result.solver.message = summary.message;
-  result.solver.iterations = static_cast<int>(summary.iterations.size()) - 1;
-  result.solver.initial_cost = summary.initial_cost;
-  result.solver.final_cost = summary.final_cost;
 
   // Step 3d: the radial offset from the hold's force at D~, in the pad plane.
   const Eigen::Vector3d f_r_base = problem.radial.evaluate(D);

@@ -50,6 +50,7 @@ std::function<void(const float* x, float* y)> make_libtorch_lstm_stepper(const L
 // For benchmarks: one truncated-BPTT update (forward, backward, Adam step) of a
 // freshly initialized network of the given shape on a random batch of `batch`
 // streams x `window` samples, as fit_lstm_torque_model does per chunk.
+void set_libtorch_threads(int threads);
 std::function<void()> make_libtorch_training_step(int inputs, int hidden, int layers, int head_hidden, int outputs,
                                                   int batch, int window);
 }  // namespace rcm::dynamics

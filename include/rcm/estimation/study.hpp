@@ -38,6 +38,10 @@ struct StudyOptions {
   // this long, then read.
   double paper_settle_s = 2.0;
   bool verbose = true;  // progress to stderr
+  // When set, every trial's coaxial problem is written there as JSON with the
+  // optimum at the paper's tolerance and at 1e-15, and the median solve time
+  // (bench/scipy_crosscheck.py solves the same problems with scipy).
+  std::optional<std::filesystem::path> export_problems_dir;
 };
 
 struct TrialOutcome {

@@ -26,6 +26,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "rcm/io/recording.hpp"
 #include "rcm/kinematics/incision.hpp"
 #include "rcm/tissue/tissue_law.hpp"
@@ -104,6 +106,7 @@ struct SolverReport {
   std::string message;
   int iterations = 0;
   double initial_cost = 0.0, final_cost = 0.0;
+  double seconds = 0.0;  // wall time of the solve
   std::string brief_report() const;
 };
 
@@ -116,6 +119,17 @@ struct ThreeStepOptions {
   // Throws std::invalid_argument naming the first bad option.
   void check() const;
 };
+
+// Step 3c alone: D~ = argmin 1/2 sum psi^2 within [D_min, D_max] from
+// options.D_initial (or the middle of the bounds).
+double solve_coaxial_offset(const CoaxialProblem& problem, const TissueLaw& g, const ThreeStepOptions& options,
+                            SolverReport* report);
+
+// The problem as JSON ("rcm-coaxial-problem/1": per-sample tan(theta), u, w, the
+// radial u0, w0, g, bounds and start), for cross-checking the solver elsewhere
+// (bench/scipy_crosscheck.py).
+nlohmann::json coaxial_problem_to_json(const CoaxialProblem& problem, const TissueLaw& g,
+                                       const ThreeStepOptions& options);
 
 struct ThreeStepResult {
   Eigen::Vector3d misalignment_m = Eigen::Vector3d::Zero();  // [dr_x, dr_y, D], incision frame

@@ -743,6 +743,8 @@ std::function<void(const float*, float*)> make_libtorch_lstm_stepper(const LstmN
   };
 }
 
+void set_libtorch_threads(int threads) { torch::set_num_threads(threads); }
+
 std::function<void()> make_libtorch_training_step(int inputs, int hidden, int layers, int head_hidden, int outputs,
                                                   int batch, int window) {
   torch::manual_seed(0);

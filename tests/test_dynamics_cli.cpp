@@ -1,0 +1,53 @@
+// `rcm dynamics fit|eval` end to end on a small synthetic recording: the model
+// file is written, eval prints the cli.md JSON shape, bad input exits non-zero.
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "rcm/io/recording.hpp"
+#include "test_dynamics_synthetic.hpp"
+
+namespace {
+struct Run {
+  int status;
+  std::string out;
+};
+Run run(const std::string& args) {
+  const std::string cmd = std::string(RCM_CLI_PATH) + " " + args + " 2>/dev/null";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf;
+  while (std::fgets(buf.data(), buf.size(), p)) out += buf.data();
+  const int status = pclose(p);
+  return {status, out};
+}
+}  // namespace
+
+TEST(DynamicsCli, FitLinearThenEvalJson) {
+  const auto dir = std::filesystem::temp_directory_path() / "rcm_test_dynamics_cli";
+  std::filesystem::create_directories(dir);
+  rcm::test::SyntheticArmOptions so;
+  so.duration_s = 40;
+  rcm::save_recording(dir / "free.csv", rcm::test::make_synthetic_free_space(so));
+  const auto model = (dir / "model.json").string();
+  const auto fit = run("dynamics fit --model linear --out " + model + " " + (dir / "free.csv").string() + " --json");
+  ASSERT_EQ(fit.status, 0) << fit.out;
+  EXPECT_EQ(nlohmann::json::parse(fit.out)["kind"], "linear");
+  const auto ev = run("dynamics eval " + model + " " + (dir / "free.csv").string() + " --json");
+  ASSERT_EQ(ev.status, 0) << ev.out;
+  const auto j = nlohmann::json::parse(ev.out);
+  ASSERT_EQ(j["joints"].size(), 3u);
+  EXPECT_EQ(j["joints"][0]["index"], 1);
+  EXPECT_GT(j["joints"][2]["nrmse_percent"].get<double>(), 0.0);
+  EXPECT_LT(j["joints"][2]["nrmse_percent"].get<double>(), 10.0);
+  const auto table = run("dynamics eval " + model + " " + (dir / "free.csv").string());
+  EXPECT_NE(table.out.find("NRMSE"), std::string::npos);
+  EXPECT_NE(run("dynamics fit --model svm --out x.json " + (dir / "free.csv").string()).status, 0);
+  EXPECT_NE(run("dynamics eval " + model + " " + (dir / "missing.csv").string()).status, 0);
+  std::filesystem::remove_all(dir);
+}
