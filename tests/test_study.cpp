@@ -86,6 +86,32 @@ TEST(Study, RecoversSimulatedMisalignmentsWithTheRightSigns) {
   EXPECT_EQ(r.tissue.best().expression.get_skeleton(), "C*x");
 }
 
+// Beyond the paper: all three offsets in torque space, with intervals.
+TEST(Study, JointMethodRecoversOffsetsWithCoveringIntervals) {
+  rcm::StudyOptions o = linear_options();
+  o.method = "joint";
+  o.joint.bootstrap_replicates = 20;
+  o.joint.calibration_bootstrap_replicates = 10;
+  o.tissue_sensitivity_delta_m = 0.0;
+  const rcm::StudyResult r = rcm::run_study(bench().session, o, linear_fitter());
+  ASSERT_TRUE(r.joint_tissue);
+  EXPECT_EQ(r.joint_tissue->family, "linear");
+  int covered = 0;
+  for (const auto& t : r.trials) {
+    ASSERT_TRUE(t.joint && t.truth_m);
+    const Eigen::Vector3d e = t.joint->misalignment_m - *t.truth_m;
+    EXPECT_LT(e.norm(), 0.0015) << t.name << ": " << t.joint->misalignment_m.transpose();
+    EXPECT_LT(e.norm(), *t.get_three_step_error_m()) << t.name;  // beats the paper's method on the same data
+    EXPECT_TRUE((t.joint->ci_low.array() < t.joint->ci_high.array()).all());
+    covered += ((t.truth_m->array() >= t.joint->ci_low.array()) && (t.truth_m->array() <= t.joint->ci_high.array())).all();
+  }
+  EXPECT_GE(covered, 3);
+  const nlohmann::json j = r.to_json();
+  EXPECT_EQ(j["method"], "joint");
+  EXPECT_TRUE(j["trials"][0]["joint"]["ci95_low_m"].is_array());
+  EXPECT_TRUE(j["trials"][0]["three_step"]["misalignment_m"].is_array());
+}
+
 TEST(Study, ResultsFollowTheContract) {
   const nlohmann::json j = study().to_json();
   EXPECT_EQ(j["format"], "rcm-results/1");
@@ -131,7 +157,7 @@ int run_cli(const std::string& args, std::string* err = nullptr, bool stdout_onl
 TEST(StudyCli, LocatedErrors) {
   const fs::path manifest = bench().session.manifest;
   std::string err;
-  EXPECT_EQ(run_cli("run " + manifest.string() + " --method joint --out " + (bench().dir / "x").string(), &err), 2);
+  EXPECT_EQ(run_cli("run " + manifest.string() + " --method both --out " + (bench().dir / "x").string(), &err), 2);
   EXPECT_NE(err.find("--method"), std::string::npos) << err;
   // A session without a calibration cannot run the three-step method.
   rcm::Session s = bench().session;

@@ -13,6 +13,7 @@
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/dynamics/torque_model.hpp"
+#include "rcm/io/json_file.hpp"
 #if defined(RCM_HAVE_TORCH)
 #include "rcm/dynamics/training.hpp"
 #endif
@@ -28,8 +29,9 @@ struct DynamicsArgs {
   bool json = false;
   std::string model_path;
   double max_minutes = 10.0;
-  int hidden = 0, layers = 0, max_epochs = 300, threads = 2;
-  std::string torchscript_out, torchscript_in;
+  int hidden = 0, layers = 0, max_epochs = 300, threads = 2, window = 0, streams = 0;
+  double learning_rate = 2e-3;
+  std::string torchscript_out, torchscript_in, predictions;
 };
 
 std::vector<rcm::Recording> load_all(const std::vector<std::string>& paths, bool dedupe) {
@@ -50,6 +52,9 @@ void run_fit(const DynamicsArgs& a) {
   o.num_layers = a.layers;
   o.max_epochs = a.max_epochs;
   o.threads = a.threads;
+  o.window = a.window;
+  o.streams = a.streams;
+  o.learning_rate = a.learning_rate;
   const auto recs = load_all(a.recordings, a.dedupe);
   FitResult fit;
 #if defined(RCM_HAVE_TORCH)
@@ -97,6 +102,23 @@ void run_eval(const DynamicsArgs& a) {
   }
   for (const auto& w : warnings) std::cerr << "warning: " << w << "\n";
   const auto errors = evaluate_torque_model(*model, recs);
+  if (!a.predictions.empty()) {
+    // recording index, time, predicted and measured torque of every output joint.
+    std::string csv = "recording,time";
+    for (int j = 1; j <= model->num_outputs(); ++j) csv += fmt::format(",tau_fs_{}", j);
+    for (int j = 1; j <= model->num_outputs(); ++j) csv += fmt::format(",effort_{}", j);
+    csv += "\n";
+    for (std::size_t r = 0; r < recs.size(); ++r) {
+      const Eigen::MatrixXd p = predict_torque(*model, recs[r]);
+      for (Eigen::Index t = 0; t < p.rows(); ++t) {
+        csv += fmt::format("{},{}", r + 1, recs[r].time(t));
+        for (int j = 0; j < model->num_outputs(); ++j) csv += fmt::format(",{}", p(t, j));
+        for (int j = 0; j < model->num_outputs(); ++j) csv += fmt::format(",{}", recs[r].effort(t, j));
+        csv += "\n";
+      }
+    }
+    rcm::write_file_atomic(a.predictions, csv);
+  }
   if (a.json) {
     auto j = to_json(errors);
     j["model"] = {{"kind", to_string(model->kind())}, {"path", a.model_path}};
@@ -133,6 +155,9 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->add_option("--max-minutes", args->max_minutes, "wall-clock budget of the training (default 10)");
   fit->add_option("--hidden", args->hidden, "LSTM hidden size (default: 128, or 32 on < 5 min of data)");
   fit->add_option("--layers", args->layers, "LSTM layers (default 1)");
+  fit->add_option("--window", args->window, "truncated-BPTT window, samples (default 100, or 50 on < 5 min of data)");
+  fit->add_option("--streams", args->streams, "contiguous streams per batch (default 32)");
+  fit->add_option("--learning-rate", args->learning_rate, "initial Adam learning rate (default 2e-3)");
   fit->add_option("--threads", args->threads, "LibTorch intra-op threads (default 2)");
   fit->add_option("--max-epochs", args->max_epochs, "epoch limit (early stopping usually ends sooner)");
 #if defined(RCM_HAVE_TORCH)
@@ -145,6 +170,7 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   auto* ev = dyn->add_subcommand("eval", "Per-joint RMSE and NRMSE (%) of a model on recordings (Table II)");
   ev->add_option("model", args->model_path, "model file")->required();
   ev->add_option("recordings", args->recordings, "recordings (CSV)")->required();
+  ev->add_option("--predictions", args->predictions, "also write the predicted torque of every sample to this CSV");
   ev->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   ev->add_flag("--json", args->json, "print {\"joints\": [{\"index\", \"rmse\", \"nrmse_percent\"}]}");
   ev->callback([args] { run_eval(*args); });

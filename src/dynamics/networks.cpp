@@ -3,6 +3,10 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cstddef>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 #include <stdexcept>
 
 #include "model_io.hpp"
@@ -12,38 +16,32 @@ namespace rcm::dynamics {
 
 namespace {
 
-// The per-sample kernels are plain loops so that GCC vectorizes them; the
-// target_clones attribute adds an AVX2/FMA version picked at load time on CPUs
-// that have it, while the library stays runnable on any x86-64.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define RCM_KERNEL __attribute__((target_clones("arch=haswell", "default")))
-#else
-#define RCM_KERNEL
-#endif
+// The per-sample kernels. Weights of each LSTM layer are stored as "panels": for
+// every block of 64 gate rows, the 64 values of column 0, then column 1, ... so the
+// GEMV reads them strictly sequentially while up to 8 AVX registers accumulate.
+// An AVX2/FMA version is chosen at run time when the CPU has it; the generic
+// version is plain loops the compiler vectorizes for the baseline ISA.
+#define RCM_ALWAYS_INLINE inline __attribute__((always_inline))
+constexpr int kPanelRows = 64;
 
-// y[0:rows] += W x, W column-major rows x cols. Axpy form: vectorizes along rows
-// without reassociating any sum.
-RCM_KERNEL void gemv_accumulate(const float* __restrict W, int rows, int cols, const float* __restrict x,
-                                float* __restrict y) {
-  int j = 0;
-  for (; j + 4 <= cols; j += 4) {
-    const float x0 = x[j], x1 = x[j + 1], x2 = x[j + 2], x3 = x[j + 3];
-    const float* w0 = W + static_cast<std::size_t>(j) * rows;
-    const float* w1 = w0 + rows;
-    const float* w2 = w1 + rows;
-    const float* w3 = w2 + rows;
-    for (int i = 0; i < rows; ++i) y[i] += x0 * w0[i] + x1 * w1[i] + x2 * w2[i] + x3 * w3[i];
-  }
-  for (; j < cols; ++j) {
-    const float xj = x[j];
-    const float* w = W + static_cast<std::size_t>(j) * rows;
-    for (int i = 0; i < rows; ++i) y[i] += xj * w[i];
+RCM_ALWAYS_INLINE void panel_gemv_body(const float* __restrict p, int rows_padded, int cols,
+                                       const float* __restrict x, float* __restrict y) {
+  for (int rb = 0; rb < rows_padded; rb += kPanelRows) {
+    const int nb = std::min(kPanelRows, rows_padded - rb);
+    float acc[kPanelRows];
+    for (int i = 0; i < nb; ++i) acc[i] = y[rb + i];
+    for (int j = 0; j < cols; ++j) {
+      const float xj = x[j];
+      for (int i = 0; i < nb; ++i) acc[i] += p[i] * xj;
+      p += nb;
+    }
+    for (int i = 0; i < nb; ++i) y[rb + i] = acc[i];
   }
 }
 
 // tanh by the rational approximation Eigen uses for float (error a few ulp),
 // written as a branch-free loop.
-RCM_KERNEL void tanh_inplace(float* __restrict v, int n) {
+RCM_ALWAYS_INLINE void tanh_body(float* __restrict v, int n) {
   for (int i = 0; i < n; ++i) {
     const float a = v[i];
     const float x = std::min(7.90531110763549805f, std::max(-7.90531110763549805f, a));
@@ -66,7 +64,7 @@ RCM_KERNEL void tanh_inplace(float* __restrict v, int n) {
 }
 
 // sigmoid(x) = (tanh(x / 2) + 1) / 2 on the i, f, o blocks; tanh on g.
-RCM_KERNEL void lstm_gates_and_state(float* __restrict gates, float* __restrict c, float* __restrict h, int H) {
+RCM_ALWAYS_INLINE void gates_body(float* __restrict gates, float* __restrict c, float* __restrict h, int H) {
   float* gi = gates;
   float* gf = gates + H;
   float* go = gates + 3 * H;
@@ -75,7 +73,7 @@ RCM_KERNEL void lstm_gates_and_state(float* __restrict gates, float* __restrict 
     gf[k] *= 0.5f;
     go[k] *= 0.5f;
   }
-  tanh_inplace(gates, 4 * H);
+  tanh_body(gates, 4 * H);
   const float* gg = gates + 2 * H;
   for (int k = 0; k < H; ++k) {
     const float i = 0.5f * gi[k] + 0.5f;
@@ -83,8 +81,114 @@ RCM_KERNEL void lstm_gates_and_state(float* __restrict gates, float* __restrict 
     c[k] = f * c[k] + i * gg[k];
     h[k] = c[k];
   }
-  tanh_inplace(h, H);
+  tanh_body(h, H);
   for (int k = 0; k < H; ++k) h[k] *= 0.5f * go[k] + 0.5f;
+}
+
+// y[0:rows] += W x, W column-major rows x cols (dense heads; small).
+RCM_ALWAYS_INLINE void gemv_body(const float* __restrict W, int rows, int cols, const float* __restrict x,
+                                 float* __restrict y) {
+  for (int j = 0; j < cols; ++j) {
+    const float xj = x[j];
+    const float* w = W + static_cast<std::size_t>(j) * rows;
+    for (int i = 0; i < rows; ++i) y[i] += xj * w[i];
+  }
+}
+
+void panel_gemv_generic(const float* p, int rows_padded, int cols, const float* x, float* y) {
+  panel_gemv_body(p, rows_padded, cols, x, y);
+}
+void gates_generic(float* gates, float* c, float* h, int H) { gates_body(gates, c, h, H); }
+void tanh_generic(float* v, int n) { tanh_body(v, n); }
+void gemv_generic(const float* W, int rows, int cols, const float* x, float* y) { gemv_body(W, rows, cols, x, y); }
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#define RCM_HAVE_AVX2_PATH 1
+template <int V>
+__attribute__((target("avx2,fma"))) inline const float* panel_block_avx2(const float* p, int cols, const float* x,
+                                                                       float* y) {
+  __m256 acc[V];
+  for (int v = 0; v < V; ++v) acc[v] = _mm256_loadu_ps(y + 8 * v);
+  for (int j = 0; j < cols; ++j) {
+    const __m256 xj = _mm256_broadcast_ss(x + j);
+    for (int v = 0; v < V; ++v) acc[v] = _mm256_fmadd_ps(_mm256_loadu_ps(p + 8 * v), xj, acc[v]);
+    p += 8 * V;
+  }
+  for (int v = 0; v < V; ++v) _mm256_storeu_ps(y + 8 * v, acc[v]);
+  return p;
+}
+
+__attribute__((target("avx2,fma"))) void panel_gemv_avx2(const float* p, int rows_padded, int cols, const float* x,
+                                                        float* y) {
+  for (int rb = 0; rb < rows_padded; rb += kPanelRows) {
+    switch (std::min(kPanelRows, rows_padded - rb) / 8) {
+      case 8: p = panel_block_avx2<8>(p, cols, x, y + rb); break;
+      case 7: p = panel_block_avx2<7>(p, cols, x, y + rb); break;
+      case 6: p = panel_block_avx2<6>(p, cols, x, y + rb); break;
+      case 5: p = panel_block_avx2<5>(p, cols, x, y + rb); break;
+      case 4: p = panel_block_avx2<4>(p, cols, x, y + rb); break;
+      case 3: p = panel_block_avx2<3>(p, cols, x, y + rb); break;
+      case 2: p = panel_block_avx2<2>(p, cols, x, y + rb); break;
+      default: p = panel_block_avx2<1>(p, cols, x, y + rb); break;
+    }
+  }
+}
+__attribute__((target("avx2,fma"))) void gates_avx2(float* gates, float* c, float* h, int H) {
+  gates_body(gates, c, h, H);
+}
+__attribute__((target("avx2,fma"))) void tanh_avx2(float* v, int n) { tanh_body(v, n); }
+__attribute__((target("avx2,fma"))) void gemv_avx2(const float* W, int rows, int cols, const float* x, float* y) {
+  gemv_body(W, rows, cols, x, y);
+}
+#endif
+
+bool cpu_has_avx2_fma() {
+#if defined(RCM_HAVE_AVX2_PATH)
+  static const bool has = [] {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  }();
+  return has;
+#else
+  return false;
+#endif
+}
+
+void panel_gemv(const float* p, int rows_padded, int cols, const float* x, float* y) {
+#if defined(RCM_HAVE_AVX2_PATH)
+  if (cpu_has_avx2_fma()) return panel_gemv_avx2(p, rows_padded, cols, x, y);
+#endif
+  panel_gemv_generic(p, rows_padded, cols, x, y);
+}
+void lstm_gates_and_state(float* gates, float* c, float* h, int H) {
+#if defined(RCM_HAVE_AVX2_PATH)
+  if (cpu_has_avx2_fma()) return gates_avx2(gates, c, h, H);
+#endif
+  gates_generic(gates, c, h, H);
+}
+void tanh_inplace(float* v, int n) {
+#if defined(RCM_HAVE_AVX2_PATH)
+  if (cpu_has_avx2_fma()) return tanh_avx2(v, n);
+#endif
+  tanh_generic(v, n);
+}
+void gemv_accumulate(const float* W, int rows, int cols, const float* x, float* y) {
+#if defined(RCM_HAVE_AVX2_PATH)
+  if (cpu_has_avx2_fma()) return gemv_avx2(W, rows, cols, x, y);
+#endif
+  gemv_generic(W, rows, cols, x, y);
+}
+
+// Panel layout of an R x C matrix with rows padded to a multiple of 8 (zeros).
+Eigen::VectorXf make_panels(const Eigen::MatrixXf& W, int rows_padded) {
+  Eigen::VectorXf p(static_cast<Eigen::Index>(rows_padded) * W.cols());
+  Eigen::Index k = 0;
+  for (int rb = 0; rb < rows_padded; rb += kPanelRows) {
+    const int nb = std::min(kPanelRows, rows_padded - rb);
+    for (Eigen::Index j = 0; j < W.cols(); ++j)
+      for (int i = 0; i < nb; ++i) p[k++] = rb + i < W.rows() ? W(rb + i, j) : 0.0f;
+  }
+  return p;
 }
 
 void apply_activation(Activation a, float* v, int n) {
@@ -254,11 +358,15 @@ void LstmNetwork::check() const {
 
 LstmKernel::LstmKernel(const LstmNetwork& network) : network_(network) {
   network_.check();
+  const int H = network_.hidden_size();
+  rows_padded_ = (4 * H + 7) / 8 * 8;
   for (const auto& l : network_.layers) {
     Eigen::MatrixXf fused(l.weight_ih.rows(), l.weight_ih.cols() + l.weight_hh.cols());
     fused << l.weight_ih, l.weight_hh;
-    fused_.push_back(std::move(fused));
-    bias_.push_back(l.bias_ih + l.bias_hh);
+    fused_.push_back(make_panels(fused, rows_padded_));
+    Eigen::VectorXf b = Eigen::VectorXf::Zero(rows_padded_);
+    b.head(4 * H) = l.bias_ih + l.bias_hh;
+    bias_.push_back(std::move(b));
   }
 }
 
@@ -269,7 +377,8 @@ LstmKernel::State LstmKernel::create_state() const {
     s.h.push_back(Eigen::VectorXf::Zero(H));
     s.c.push_back(Eigen::VectorXf::Zero(H));
   }
-  s.gates = Eigen::VectorXf::Zero(4 * H);
+  s.gates = Eigen::VectorXf::Zero(rows_padded_);
+  s.xh = Eigen::VectorXf::Zero(std::max(network_.input_size(), H) + H);
   s.head_a = Eigen::VectorXf::Zero(network_.head.max_width());
   s.head_b = Eigen::VectorXf::Zero(network_.head.max_width());
   return s;
@@ -284,12 +393,14 @@ void LstmKernel::step(State& s, const float* x, float* y) const {
   const int H = network_.hidden_size();
   const float* in = x;
   int in_size = network_.input_size();
+  float* xh = s.xh.data();
   for (std::size_t k = 0; k < fused_.size(); ++k) {
     float* gates = s.gates.data();
-    std::copy(bias_[k].data(), bias_[k].data() + 4 * H, gates);
-    // [W_ih W_hh] [x; h]: the two column blocks of the fused matrix.
-    gemv_accumulate(fused_[k].data(), 4 * H, in_size, in, gates);
-    gemv_accumulate(fused_[k].data() + static_cast<std::size_t>(in_size) * 4 * H, 4 * H, H, s.h[k].data(), gates);
+    std::copy(bias_[k].data(), bias_[k].data() + rows_padded_, gates);
+    // [W_ih W_hh] [x; h] in one pass over the panels.
+    std::copy(in, in + in_size, xh);
+    std::copy(s.h[k].data(), s.h[k].data() + H, xh + in_size);
+    panel_gemv(fused_[k].data(), rows_padded_, in_size + H, xh, gates);
     lstm_gates_and_state(gates, s.c[k].data(), s.h[k].data(), H);
     in = s.h[k].data();
     in_size = H;

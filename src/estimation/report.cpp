@@ -152,9 +152,9 @@ std::vector<std::string> make_figures(const StudyResult& r, const Session& sessi
     for (const auto& t : r.trials) {
       if (!t.truth_m) continue;
       d.x.push_back(1e3 * (*t.truth_m)[2]);
-      d.y.push_back(1e3 * t.estimate.misalignment_m[2]);
+      d.y.push_back(1e3 * t.get_misalignment_m()[2]);
       rad.x.push_back(1e3 * t.truth_m->head<2>().norm());
-      rad.y.push_back(1e3 * t.estimate.misalignment_m.head<2>().norm());
+      rad.y.push_back(1e3 * t.get_misalignment_m().head<2>().norm());
     }
     if (!d.x.empty()) {
       ideal.x = {0.0, 60.0};
@@ -170,25 +170,47 @@ std::vector<std::string> make_figures(const StudyResult& r, const Session& sessi
 }  // namespace
 
 std::string format_table_iv(const StudyResult& r) {
-  std::string out = fmt::format("{:<18} {:>24} {:>24} {:>8} {:>24} {:>8}\n", "trial", "truth [x, y, D] mm",
-                                "estimate [x, y, D] mm", "e mm", "paper f(q0,0) variant", "e mm");
+  const bool joint = r.method == "joint";
+  std::string out = joint ? fmt::format("{:<18} {:>24} {:>24} {:>7} {:>24} {:>7} {:>30}\n", "trial", "truth [x, y, D] mm",
+                                        "three-step [x, y, D] mm", "e mm", "joint [x, y, D] mm", "e mm",
+                                        "joint 95 % interval half-width")
+                          : fmt::format("{:<18} {:>24} {:>24} {:>8} {:>24} {:>8}\n", "trial", "truth [x, y, D] mm",
+                                        "estimate [x, y, D] mm", "e mm", "paper f(q0,0) variant", "e mm");
   for (const auto& t : r.trials) {
     const std::string truth = t.truth_m ? mm3(*t.truth_m) : "-";
-    const std::string e = t.get_error_m() ? fmt::format("{:.1f}", 1e3 * *t.get_error_m()) : "-";
+    const std::string e3 = t.get_three_step_error_m() ? fmt::format("{:.1f}", 1e3 * *t.get_three_step_error_m()) : "-";
+    if (joint && t.joint) {
+      const std::string ej = t.get_error_m() ? fmt::format("{:.1f}", 1e3 * *t.get_error_m()) : "-";
+      const Eigen::Vector3d half = 0.5 * (t.joint->ci_high - t.joint->ci_low);
+      out += fmt::format("{:<18} {:>24} {:>24} {:>7} {:>24} {:>7} {:>30}\n", t.name, truth, mm3(t.estimate.misalignment_m),
+                         e3, mm3(t.joint->misalignment_m), ej, "+-" + mm3(half));
+      continue;
+    }
     std::string pv = "-", pe = "-";
     if (t.paper_variant) {
       pv = mm3(t.paper_variant->misalignment_m);
       if (t.truth_m) pe = fmt::format("{:.1f}", 1e3 * (t.paper_variant->misalignment_m - *t.truth_m).norm());
     }
-    out += fmt::format("{:<18} {:>24} {:>24} {:>8} {:>24} {:>8}\n", t.name, truth, mm3(t.estimate.misalignment_m), e,
-                       pv, pe);
+    out += fmt::format("{:<18} {:>24} {:>24} {:>8} {:>24} {:>8}\n", t.name, truth, mm3(t.estimate.misalignment_m), e3, pv,
+                       pe);
   }
   const nlohmann::json s = r.to_json()["summary"];
-  for (const auto& [key, label] : {std::pair<std::string, std::string>{"error_D_above_20mm", "D > 20 mm"},
-                                   {"error_D_up_to_20mm", "D <= 20 mm"}})
-    if (!s[key].is_null())
-      out += fmt::format("mean e for {}: {:.1f} +- {:.1f} mm over {} trials\n", label, 1e3 * s[key]["mean_m"].get<double>(),
+  auto line = [&](const char* key, const std::string& label) {
+    if (s.contains(key) && !s[key].is_null())
+      out += fmt::format("mean e, {}: {:.1f} +- {:.1f} mm over {} trials\n", label, 1e3 * s[key]["mean_m"].get<double>(),
                          1e3 * s[key]["sd_m"].get<double>(), s[key]["trials"].get<int>());
+  };
+  if (joint) {
+    line("three_step_error_D_above_20mm", "three-step, D > 20 mm");
+    line("three_step_error_D_up_to_20mm", "three-step, D <= 20 mm");
+    line("error_D_above_20mm", "joint, D > 20 mm");
+    line("error_D_up_to_20mm", "joint, D <= 20 mm");
+    if (s.contains("ci95_coverage"))
+      out += fmt::format("joint 95 % intervals cover the truth in {:.0f} % of trials\n", 100.0 * s["ci95_coverage"].get<double>());
+  } else {
+    line("error_D_above_20mm", "D > 20 mm");
+    line("error_D_up_to_20mm", "D <= 20 mm");
+  }
   return out;
 }
 
@@ -244,8 +266,19 @@ std::filesystem::path write_study_report(const StudyResult& r, const Session& se
       md += fmt::format("| {} | {:.2f} | {:.2f} | {:.2f} |\n", t.name, (*t.force_rmse)[0], (*t.force_rmse)[1], (*t.force_rmse)[2]);
   md += "| paper, [0, 0, 30] mm | 1.4 | 0.7 | 2.1 |\n| paper, [10, 15, 30] mm | 2.0 | 1.4 | 1.8 |\n";
 
-  md += "\n## Misalignment (Table IV)\n\nMain estimate: tau_fs of the static hold from the model run over the whole static file (friction memory carried). "
-        "Beside it, the paper's variant with tau_fs = f(q0, 0).\n\n```\n" + format_table_iv(r) + "```\n";
+  if (r.method == "joint") {
+    md += "\n## Misalignment (Table IV): three-step vs joint\n\nThree-step: paper Algorithm 1 with the hold's tau_fs carried "
+          "through the return motion. Joint: all three offsets in torque space over the trial and its static file, "
+          "with 95 % intervals from a moving-block residual bootstrap.\n\n```\n" + format_table_iv(r) + "```\n";
+    if (r.joint_tissue)
+      md += fmt::format("\nTissue model in torque space ({}): k1 = {:.1f} N/m, k3 = {:.4g} N/m^3, damping {:.2f} N s/m, "
+                        "axial friction {:.2f} N.\n",
+                        r.joint_tissue->family, r.joint_tissue->parameters[0], r.joint_tissue->parameters[1],
+                        r.joint_tissue->parameters[2], r.joint_tissue->parameters[3]);
+  } else {
+    md += "\n## Misalignment (Table IV)\n\nMain estimate: tau_fs of the static hold from the model run over the whole static file (friction memory carried). "
+          "Beside it, the paper's variant with tau_fs = f(q0, 0).\n\n```\n" + format_table_iv(r) + "```\n";
+  }
   md += "\nPaper (Table IV): mean e 4.2 +- 2.1 mm for D > 20 mm; 10.8-17.2 mm for D <= 20 mm.\n";
 
   md += "\n## Solver summaries\n\n| trial | coaxial solve | samples | radial inverse |\n|---|---|---|---|\n";

@@ -45,6 +45,11 @@ nlohmann::json estimate_json(const ThreeStepResult& r, const std::optional<Eigen
 
 std::optional<double> TrialOutcome::get_error_m() const {
   if (!truth_m) return std::nullopt;
+  return (get_misalignment_m() - *truth_m).norm();
+}
+
+std::optional<double> TrialOutcome::get_three_step_error_m() const {
+  if (!truth_m) return std::nullopt;
   return (estimate.misalignment_m - *truth_m).norm();
 }
 
@@ -75,8 +80,14 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
     throw InputError(manifest_where, "no trials to estimate");
   }
   options.three_step.check();
+  if (options.method != "three-step" && options.method != "joint") {
+    InputLocation where;
+    where.file = "method";
+    throw InputError(where, "expected three-step or joint, got '" + options.method + "'");
+  }
 
   StudyResult result;
+  result.method = options.method;
   result.session_manifest = session.manifest;
   result.model_kind = options.model_kind;
   const IncisionFrame incision = make_incision_frame(session.q0);
@@ -134,6 +145,21 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
                                                        options.tissue_sensitivity_delta_m, 3, options.tissue);
   }
 
+  // Joint method, step 2 in torque space: the tissue parameters at D*.
+  JointEstimatorOptions joint_options = options.joint;
+  if (options.method == "joint") {
+    // Residual scales: the free-space model's own error, with a floor for models
+    // that fit their training data too well.
+    for (const auto& e : result.free_space_errors)
+      if (e.index >= 1 && e.index <= 3)
+        joint_options.torque_sigma[e.index - 1] = std::max(e.rmse, e.index == 3 ? 0.05 : 0.01);
+    joint_options.sample_period_s = model.info().sample_period_s > 0 ? model.info().sample_period_s : 0.005;
+    progress(options.verbose, "joint method: identifying the tissue model in torque space");
+    result.joint_tissue = fit_joint_tissue_model(
+        incision, make_joint_samples(incision, calibration, tau_fs_cal, options.three_step.coaxial.max_theta_rad),
+        result.calibration_offset_m, joint_options);
+  }
+
   // Step 3: every trial.
   const Eigen::Vector3d tau_fs_paper = compute_settled_free_space_torque(model, session.q0, options.paper_settle_s);
   for (std::size_t i = 0; i < session.trials.size(); ++i) {
@@ -147,12 +173,20 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
     const Recording trial = load_recording(spec.recording, options.read);
     const Eigen::MatrixXd tau_fs = dynamics::predict_torque(model, trial);
     Eigen::Vector3d dtau_radial = Eigen::Vector3d::Zero();
+    std::vector<JointSample> joint_samples;
+    if (result.joint_tissue)
+      joint_samples = make_joint_samples(incision, trial, tau_fs, options.three_step.coaxial.max_theta_rad);
     if (spec.static_recording) {
       const Recording hold_rec = load_recording(*spec.static_recording, options.read);
       const Eigen::MatrixXd tau_fs_hold = dynamics::predict_torque(model, hold_rec);
       out.hold = compute_static_hold(hold_rec, tau_fs_hold, session.q0, options.rest);
       dtau_radial = out.hold->get_dtau();
+      if (result.joint_tissue) {
+        const auto hold_samples = make_joint_samples(incision, hold_rec, tau_fs_hold, options.three_step.coaxial.max_theta_rad);
+        joint_samples.insert(joint_samples.end(), hold_samples.begin(), hold_samples.end());
+      }
     }
+    if (result.joint_tissue) out.joint = estimate_joint(incision, *result.joint_tissue, joint_samples, joint_options);
     out.estimate = estimate_three_step(incision, g, trial, tau_fs, dtau_radial, options.three_step);
     if (out.hold)
       out.paper_variant = estimate_three_step(incision, g, trial, tau_fs, out.hold->tau_measured - tau_fs_paper,
@@ -201,7 +235,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
     }
     out.seconds = seconds_since(trial_start);
     if (options.verbose) {
-      const Eigen::Vector3d m = 1e3 * out.estimate.misalignment_m;
+      const Eigen::Vector3d m = 1e3 * out.get_misalignment_m();
       std::string line = "  estimate [" + std::to_string(m[0]).substr(0, 6) + ", " + std::to_string(m[1]).substr(0, 6) +
                          ", " + std::to_string(m[2]).substr(0, 6) + "] mm";
       if (auto e = out.get_error_m()) line += ", e = " + std::to_string(1e3 * *e).substr(0, 5) + " mm";
@@ -250,10 +284,47 @@ nlohmann::json StudyResult::to_json() const {
   j["free_space_model"] = {{"kind", dynamics::to_string(model_kind)}, {"test_errors", dynamics::to_json(free_space_errors)}};
   if (fit) j["free_space_model"]["fit"] = fit->to_json();
 
+  if (joint_tissue)
+    j["joint_tissue_model"] = {{"family", joint_tissue->family},
+                               {"k1_n_per_m", joint_tissue->parameters[0]},
+                               {"k3_n_per_m3", joint_tissue->parameters[1]},
+                               {"damping_n_s_per_m", joint_tissue->parameters[2]},
+                               {"axial_friction_n", joint_tissue->parameters[3]},
+                               {"bic", joint_tissue->bic},
+                               {"parameter_sd", {std::sqrt(joint_tissue->covariance(0, 0)), std::sqrt(joint_tissue->covariance(1, 1)),
+                                                 std::sqrt(joint_tissue->covariance(2, 2)), std::sqrt(joint_tissue->covariance(3, 3))}},
+                               {"bootstrap_replicates", joint_tissue->bootstrap_replicates}};
   nlohmann::json trials_json = nlohmann::json::array();
-  std::vector<double> e_far, e_near;
+  std::vector<double> e_far, e_near, e3_far, e3_near;
+  std::size_t covered = 0, with_interval = 0;
   for (const auto& t : trials) {
     nlohmann::json jt = estimate_json(t.estimate, t.truth_m);
+    jt["three_step"] = estimate_json(t.estimate, t.truth_m);
+    if (t.joint) {
+      const JointEstimate& je = *t.joint;
+      nlohmann::json jj = {{"misalignment_m", vec_json(je.misalignment_m)},
+                           {"ci95_low_m", vec_json(je.ci_low)},
+                           {"ci95_high_m", vec_json(je.ci_high)},
+                           {"sd_m", vec_json(je.covariance.diagonal().cwiseSqrt())},
+                           {"sd_bootstrap_m", vec_json(je.sd_bootstrap)},
+                           {"sd_tissue_m", vec_json(je.sd_tissue)},
+                           {"bootstrap_replicates", je.bootstrap_replicates},
+                           {"samples", je.samples},
+                           {"solver", solver_json(je.solver)}};
+      if (t.truth_m) {
+        jj["error_m"] = (je.misalignment_m - *t.truth_m).norm();
+        const bool inside = ((t.truth_m->array() >= je.ci_low.array()) && (t.truth_m->array() <= je.ci_high.array())).all();
+        jj["truth_inside_ci95"] = inside;
+        if (je.bootstrap_replicates > 0) {
+          ++with_interval;
+          covered += inside ? 1 : 0;
+        }
+      }
+      jt["joint"] = jj;
+      jt["misalignment_m"] = jj["misalignment_m"];
+      if (t.truth_m) jt["error_m"] = jj["error_m"];
+      else jt.erase("error_m");
+    }
     jt["name"] = t.name;
     if (t.truth_m) jt["truth_m"] = vec_json(*t.truth_m);
     if (t.hold)
@@ -267,6 +338,7 @@ nlohmann::json StudyResult::to_json() const {
     jt["ill_conditioned_samples"] = t.ill_conditioned_samples;
     jt["seconds"] = t.seconds;
     if (auto e = t.get_error_m()) ((*t.truth_m)[2] > 0.020 + 1e-9 ? e_far : e_near).push_back(*e);
+    if (auto e = t.get_three_step_error_m()) ((*t.truth_m)[2] > 0.020 + 1e-9 ? e3_far : e3_near).push_back(*e);
     trials_json.push_back(jt);
   }
   j["trials"] = trials_json;
@@ -280,6 +352,11 @@ nlohmann::json StudyResult::to_json() const {
     return {{"mean_m", mean}, {"sd_m", sd}, {"trials", v.size()}};
   };
   j["summary"] = {{"error_D_above_20mm", stats(e_far)}, {"error_D_up_to_20mm", stats(e_near)}, {"seconds", seconds}};
+  if (method == "joint") {
+    j["summary"]["three_step_error_D_above_20mm"] = stats(e3_far);
+    j["summary"]["three_step_error_D_up_to_20mm"] = stats(e3_near);
+    if (with_interval > 0) j["summary"]["ci95_coverage"] = static_cast<double>(covered) / static_cast<double>(with_interval);
+  }
   return j;
 }
 

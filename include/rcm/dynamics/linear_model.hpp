@@ -7,7 +7,8 @@
 // tilt lies in span{a(q1) b(q2) c(q3)}, a in {1, sin, cos}, b in {1, sin, cos},
 // c in {1, q3}; torque_j = dU/dq_j. The 17 coefficients are shared by joints 1-3,
 // which is what makes the fit physically consistent across joints.
-// Inertia: a constant armature per joint times qddot (backward difference).
+// Inertia: a constant armature per joint times qddot (backward difference of
+// qdot through a first-order low-pass, acceleration_filter_s).
 // Friction per joint: viscous v, an offset, and Coulomb/stiction through a Dahl
 // state z in [-1, 1] that moves toward sign(dq) over a characteristic
 // displacement x_c and stays put at rest, so the holding torque remembers the
@@ -30,6 +31,7 @@ struct LinearTorqueParameters {
   Eigen::VectorXd coulomb;            // per output joint, multiplies the Dahl state
   Eigen::VectorXd offset;             // per output joint
   Eigen::VectorXd dahl_displacement;  // x_c per output joint (rad or m), > 0
+  double acceleration_filter_s = 0.03;  // first-order low-pass of the differentiated velocity
 };
 
 class LinearTorqueModel final : public TorqueModel {

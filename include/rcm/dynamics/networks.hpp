@@ -51,8 +51,8 @@ struct Normalization {
 };
 
 // Streaming LSTM with its state (h, c per layer) and every buffer preallocated.
-// The kernel fuses [W_ih W_hh] column-major and runs an axpy-form GEMV that the
-// compiler vectorizes (AVX2/FMA clone chosen at load time when the CPU has it).
+// The kernel fuses [W_ih W_hh] into one matrix stored in 64-row panels read
+// sequentially by an AVX2/FMA GEMV (chosen at run time; a portable loop otherwise).
 class LstmKernel {
  public:
   explicit LstmKernel(const LstmNetwork& network);
@@ -68,8 +68,9 @@ class LstmKernel {
 
  private:
   LstmNetwork network_;
-  std::vector<Eigen::MatrixXf> fused_;  // 4H x (in + H), column-major
-  std::vector<Eigen::VectorXf> bias_;   // b_ih + b_hh
+  int rows_padded_ = 0;                 // 4H rounded up to a multiple of 8
+  std::vector<Eigen::VectorXf> fused_;  // panels of [W_ih W_hh] (4H x (in + H))
+  std::vector<Eigen::VectorXf> bias_;   // b_ih + b_hh, zero-padded
 };
 
 // Dense stack forward in float; a and b are scratch of max_width() each. No allocation.

@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "rcm/dynamics/fit.hpp"
+#include "rcm/estimation/joint.hpp"
 #include "rcm/estimation/three_step.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/session.hpp"
@@ -25,6 +26,10 @@ using TorqueModelFitter = std::function<dynamics::FitResult(
     dynamics::TorqueModelKind, const std::vector<Recording>&, const dynamics::FitOptions&)>;
 
 struct StudyOptions {
+  // "three-step" (paper Algorithm 1) or "joint" (all offsets in torque space;
+  // the three-step estimate is computed beside it for comparison).
+  std::string method = "three-step";
+  JointEstimatorOptions joint;
   dynamics::TorqueModelKind model_kind = dynamics::TorqueModelKind::lstm;
   std::optional<std::filesystem::path> model_file;  // use a saved model, skip fitting
   dynamics::FitOptions fit;
@@ -49,6 +54,7 @@ struct TrialOutcome {
   std::optional<Eigen::Vector3d> truth_m;
   ThreeStepResult estimate;                     // tau_fs of the hold with state carried
   std::optional<ThreeStepResult> paper_variant;  // tau_fs of the hold = f(q0, 0)
+  std::optional<JointEstimate> joint;            // with --method joint
   std::optional<StaticHold> hold;
   // Force at the incision through J_D at the true D (or D~ without truth), vs the
   // sensor columns when present: time, estimate and sensor, T x 3 each.
@@ -60,7 +66,10 @@ struct TrialOutcome {
   std::size_t ill_conditioned_samples = 0;
   double seconds = 0.0;
 
+  // The estimate of the study's method: joint when computed, else three-step.
+  Eigen::Vector3d get_misalignment_m() const { return joint ? joint->misalignment_m : estimate.misalignment_m; }
   std::optional<double> get_error_m() const;
+  std::optional<double> get_three_step_error_m() const;
 };
 
 struct StudyResult {
@@ -74,6 +83,7 @@ struct StudyResult {
   TissuePairsReport tissue_pairs_report;
   TissuePairs tissue_pairs;
   std::optional<TissueSensitivity> tissue_sensitivity;
+  std::optional<JointTissueModel> joint_tissue;  // with --method joint
   double calibration_offset_m = 0.0;
   std::vector<TrialOutcome> trials;
   double seconds = 0.0;

@@ -1,0 +1,102 @@
+#pragma once
+// Joint estimation of all three offsets in torque space (beyond the paper).
+//
+// Instead of inverting J_D, predict the joint-torque residual directly:
+//
+//   tau - tau_fs ~ J_D(q; s)^T f,   s = D / cos(theta)
+//   f = g(|x|) x/|x| + c (ds/dt z3 + s dz3/dt) + F tanh(v / v0) z3
+//   x = s z3 - R_I [dr_x, dr_y, D]           (stretch of the incision in the pad plane)
+//   v = qd3 - ds/dt                          (the shaft sliding through the incision)
+//   g(x) = k1 x + k3 x^3
+//
+// with the tissue parameters [k1, k3, c, F] identified on the calibration (known
+// D*, no radial offset) and the offsets [dr_x, dr_y, D] solved per trial over
+// every sample of the trial and of its static file when there is one, by bounded
+// robust least squares (Ceres, Huber loss, automatic derivatives). The insertion
+// joint stays in the residual: yaw and pitch alone cannot tell (D, r) from (-D, -r).
+//
+// Uncertainty: the Ceres covariance (scaled by the residual variance) and a
+// moving-block residual bootstrap (blocks of ~1 s keep the correlation of
+// free-space model errors), giving 95 % intervals per component.
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "rcm/estimation/three_step.hpp"
+#include "rcm/io/recording.hpp"
+#include "rcm/kinematics/incision.hpp"
+
+namespace rcm {
+
+// What the joint model needs of one sample, precomputed once.
+struct JointSample {
+  Eigen::Vector3d z3, dz3_dq1, dz3_dq2, z3_dot, dtau;
+  double cos_theta = 1.0;
+  double qd3 = 0.0;
+};
+
+// Samples of a recording (with the free-space prediction tau_fs, T x >= 3) whose
+// pivot stays below max_theta_rad.
+std::vector<JointSample> make_joint_samples(const IncisionFrame& incision, const Recording& recording,
+                                            const Eigen::MatrixXd& tau_fs, double max_theta_rad = 80.0 * M_PI / 180.0);
+
+// [k1 (N/m), k3 (N/m^3), c (N s/m), F (N)]
+struct JointTissueModel {
+  Eigen::Vector4d parameters = Eigen::Vector4d(800.0, 0.0, 0.0, 0.0);
+  std::string family = "linear";  // "linear" (k3 = 0) or "stiffening"
+  double axial_velocity_scale = 0.002;  // v0, m/s
+  double cost = 0.0;
+  double bic = 0.0;
+  // Uncertainty of the parameters, from a moving-block bootstrap of the
+  // calibration; propagated into every trial's interval.
+  Eigen::Matrix4d covariance = Eigen::Matrix4d::Zero();
+  int bootstrap_replicates = 0;
+};
+
+struct JointEstimatorOptions {
+  double D_min = -0.020, D_max = 0.070;  // m, as the three-step method
+  double radial_max = 0.040;             // m, bound of |dr_x|, |dr_y|
+  std::vector<double> D_starts = {0.010, 0.030, 0.050};  // multi-start, m
+  // Per-joint scale of the torque residual (N m, N m, N): the free-space model's
+  // error. Residuals are divided by it.
+  Eigen::Vector3d torque_sigma = Eigen::Vector3d(0.05, 0.05, 0.2);
+  double huber_scale = 2.0;  // in units of sigma
+  int bootstrap_replicates = 60;
+  int calibration_bootstrap_replicates = 30;
+  double bootstrap_block_s = 1.0;
+  double sample_period_s = 0.005;
+  unsigned seed = 1;
+  int max_iterations = 100;
+  void check() const;
+};
+
+// Step 2 in torque space: the tissue parameters on the calibration at the known
+// D* (radial offset 0). Both families are fitted; the stiffening one is chosen
+// only when its BIC is lower, counting one effective sample per second of data
+// (model errors are correlated over about that long).
+JointTissueModel fit_joint_tissue_model(const IncisionFrame& incision, const std::vector<JointSample>& calibration,
+                                        double D_star, const JointEstimatorOptions& options);
+
+struct JointEstimate {
+  Eigen::Vector3d misalignment_m = Eigen::Vector3d::Zero();  // [dr_x, dr_y, D]
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();      // from Ceres, scaled
+  // 95 % interval: the trial's residual bootstrap combined in quadrature with the
+  // tissue parameters' uncertainty propagated through dp/dtissue.
+  Eigen::Vector3d ci_low = Eigen::Vector3d::Zero(), ci_high = Eigen::Vector3d::Zero();
+  Eigen::Vector3d sd_bootstrap = Eigen::Vector3d::Zero();  // half-width of the bootstrap interval / 1.96
+  Eigen::Vector3d sd_tissue = Eigen::Vector3d::Zero();
+  int bootstrap_replicates = 0;
+  SolverReport solver;
+  std::size_t samples = 0;
+};
+
+JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueModel& tissue,
+                             const std::vector<JointSample>& samples, const JointEstimatorOptions& options);
+
+// The model's torque for one sample (for tests and plots).
+Eigen::Vector3d compute_joint_model_torque(const IncisionFrame& incision, const JointTissueModel& tissue,
+                                           const JointSample& sample, const Eigen::Vector3d& misalignment_m);
+
+}  // namespace rcm

@@ -1,0 +1,316 @@
+#include "rcm/estimation/joint.hpp"
+
+#include <ceres/ceres.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <random>
+#include <stdexcept>
+
+#include "rcm/common/error.hpp"
+
+namespace rcm {
+namespace {
+
+// tau_pred of the joint model; T is double or a ceres::Jet.
+template <typename T>
+void predict(const JointSample& d, const Eigen::Matrix3d& R_base_inc, double v0, const T* p, const T* tissue, T* tau) {
+  using V3 = Eigen::Matrix<T, 3, 1>;
+  const V3 z3 = d.z3.cast<T>(), a1 = d.dz3_dq1.cast<T>(), a2 = d.dz3_dq2.cast<T>(), z3_dot = d.z3_dot.cast<T>();
+  const T D = p[2];
+  const T s = D / d.cos_theta;
+  const double n_dot_z3dot = R_base_inc.col(2).dot(d.z3_dot);
+  const T s_dot = -D * n_dot_z3dot / (d.cos_theta * d.cos_theta);
+  const V3 anchor = R_base_inc.cast<T>() * V3(p[0], p[1], p[2]);
+  const V3 stretch = s * z3 - anchor;
+  // Smoothed norm (1 um): the radial force is continuous through zero stretch.
+  const T x = ceres::sqrt(stretch.squaredNorm() + T(1e-12));
+  const T g = tissue[0] * x + tissue[1] * x * x * x;
+  V3 f = (g / x) * stretch;
+  f += tissue[2] * (s_dot * z3 + s * z3_dot);
+  f += tissue[3] * ceres::tanh((T(d.qd3) - s_dot) / T(v0)) * z3;
+  tau[0] = s * a1.dot(f);
+  tau[1] = s * a2.dot(f);
+  tau[2] = z3.dot(f);
+}
+
+struct JointResidual {
+  JointResidual(const JointSample& sample, const Eigen::Matrix3d& R, double v0, const Eigen::Vector3d& sigma,
+                const Eigen::Vector3d& dtau)
+      : sample(sample), R(R), v0(v0), inv_sigma(sigma.cwiseInverse()), dtau(dtau) {}
+  template <typename T>
+  bool operator()(const T* p, const T* tissue, T* residual) const {
+    T tau[3];
+    predict(sample, R, v0, p, tissue, tau);
+    for (int j = 0; j < 3; ++j) residual[j] = (T(dtau[j]) - tau[j]) * inv_sigma[j];
+    return true;
+  }
+  const JointSample& sample;
+  Eigen::Matrix3d R;
+  double v0;
+  Eigen::Vector3d inv_sigma, dtau;
+};
+
+struct Fit {
+  Eigen::Vector3d p;
+  Eigen::Vector4d tissue;
+  double cost = 0.0;
+  ceres::Solver::Summary summary;
+};
+
+// One bounded robust solve; `dtau` overrides the samples' residuals (bootstrap).
+Fit solve(const IncisionFrame& incision, const std::vector<JointSample>& samples,
+          const std::vector<Eigen::Vector3d>* dtau, const JointEstimatorOptions& o, double v0, Eigen::Vector3d p0,
+          Eigen::Vector4d tissue0, bool fit_offsets, bool fit_tissue, bool fit_cubic) {
+  Fit fit;
+  fit.p = p0;
+  fit.tissue = tissue0;
+  ceres::Problem problem;
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    auto* cost = new ceres::AutoDiffCostFunction<JointResidual, 3, 3, 4>(
+        new JointResidual(samples[i], incision.R_base_inc, v0, o.torque_sigma, dtau ? (*dtau)[i] : samples[i].dtau));
+    problem.AddResidualBlock(cost, new ceres::HuberLoss(o.huber_scale), fit.p.data(), fit.tissue.data());
+  }
+  if (fit_offsets) {
+    for (int k = 0; k < 2; ++k) {
+      problem.SetParameterLowerBound(fit.p.data(), k, -o.radial_max);
+      problem.SetParameterUpperBound(fit.p.data(), k, o.radial_max);
+    }
+    problem.SetParameterLowerBound(fit.p.data(), 2, o.D_min);
+    problem.SetParameterUpperBound(fit.p.data(), 2, o.D_max);
+  } else {
+    problem.SetParameterBlockConstant(fit.p.data());
+  }
+  if (fit_tissue) {
+    for (int k = 0; k < 4; ++k) problem.SetParameterLowerBound(fit.tissue.data(), k, 0.0);
+    if (!fit_cubic) problem.SetManifold(fit.tissue.data(), new ceres::SubsetManifold(4, {1}));
+  } else {
+    problem.SetParameterBlockConstant(fit.tissue.data());
+  }
+  ceres::Solver::Options opt;
+  opt.linear_solver_type = ceres::DENSE_QR;
+  opt.max_num_iterations = o.max_iterations;
+  opt.function_tolerance = 1e-10;
+  opt.parameter_tolerance = 1e-12;
+  opt.logging_type = ceres::SILENT;
+  opt.num_threads = 1;
+  ceres::Solve(opt, &problem, &fit.summary);
+  fit.cost = fit.summary.final_cost;
+  return fit;
+}
+
+// Moving-block resampling of residuals around a fit: dtau = fitted + resid[blocks].
+void draw_block_bootstrap(const std::vector<Eigen::Vector3d>& fitted, const std::vector<Eigen::Vector3d>& resid,
+                          std::size_t block, std::mt19937_64& rng, std::vector<Eigen::Vector3d>& dtau) {
+  const std::size_t n = fitted.size();
+  std::uniform_int_distribution<std::size_t> pick(0, n > block ? n - block : 0);
+  dtau.resize(n);
+  for (std::size_t i = 0; i < n;) {
+    const std::size_t from = pick(rng);
+    for (std::size_t k = 0; k < block && i < n; ++k, ++i) dtau[i] = fitted[i] + resid[std::min(n - 1, from + k)];
+  }
+}
+
+SolverReport to_report(const ceres::Solver::Summary& s, double seconds) {
+  SolverReport r;
+  r.converged = s.termination_type == ceres::CONVERGENCE;
+  r.termination = ceres::TerminationTypeToString(s.termination_type);
+  r.message = s.message;
+  r.iterations = static_cast<int>(s.iterations.size()) - 1;
+  r.initial_cost = s.initial_cost;
+  r.final_cost = s.final_cost;
+  r.seconds = seconds;
+  return r;
+}
+
+}  // namespace
+
+void JointEstimatorOptions::check() const {
+  if (!(D_min < D_max)) throw std::invalid_argument("JointEstimatorOptions: D_min must be below D_max");
+  if (!(radial_max > 0)) throw std::invalid_argument("JointEstimatorOptions: radial_max must be > 0");
+  if (!(torque_sigma.minCoeff() > 0)) throw std::invalid_argument("JointEstimatorOptions: torque_sigma must be > 0");
+  if (!(huber_scale > 0)) throw std::invalid_argument("JointEstimatorOptions: huber_scale must be > 0");
+  if (bootstrap_replicates < 0) throw std::invalid_argument("JointEstimatorOptions: bootstrap_replicates must be >= 0");
+  if (!(bootstrap_block_s > 0) || !(sample_period_s > 0))
+    throw std::invalid_argument("JointEstimatorOptions: bootstrap_block_s and sample_period_s must be > 0");
+  for (double d : D_starts)
+    if (d < D_min || d > D_max) throw std::invalid_argument("JointEstimatorOptions: every D start must lie within the bounds");
+}
+
+std::vector<JointSample> make_joint_samples(const IncisionFrame& incision, const Recording& r,
+                                            const Eigen::MatrixXd& tau_fs, double max_theta_rad) {
+  if (tau_fs.rows() != r.time.size() || tau_fs.cols() < 3) {
+    InputLocation where;
+    where.file = r.source;
+    throw InputError(where, "free-space torque prediction does not match the recording's samples");
+  }
+  std::vector<JointSample> out;
+  out.reserve(static_cast<std::size_t>(r.time.size()));
+  for (Eigen::Index t = 0; t < r.time.size(); ++t) {
+    const Eigen::Vector3d q = r.position.row(t).head<3>().transpose();
+    JointSample s;
+    s.z3 = compute_z3_base(q);
+    s.cos_theta = incision.z_inc_base().dot(s.z3);
+    if (!(std::atan2(incision.z_inc_base().cross(s.z3).norm(), s.cos_theta) <= max_theta_rad)) continue;
+    const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), s2 = std::sin(q[1]), c2 = std::cos(q[1]);
+    s.dz3_dq1 = Eigen::Vector3d(c1 * c2, 0.0, s1 * c2);
+    s.dz3_dq2 = Eigen::Vector3d(-s1 * s2, -c2, c1 * s2);
+    s.z3_dot = s.dz3_dq1 * r.velocity(t, 0) + s.dz3_dq2 * r.velocity(t, 1);
+    s.qd3 = r.velocity(t, 2);
+    s.dtau = (r.effort.row(t).head<3>() - tau_fs.row(t).head<3>()).transpose();
+    out.push_back(s);
+  }
+  return out;
+}
+
+Eigen::Vector3d compute_joint_model_torque(const IncisionFrame& incision, const JointTissueModel& tissue,
+                                           const JointSample& sample, const Eigen::Vector3d& misalignment_m) {
+  Eigen::Vector3d tau;
+  predict(sample, incision.R_base_inc, tissue.axial_velocity_scale, misalignment_m.data(), tissue.parameters.data(),
+          tau.data());
+  return tau;
+}
+
+JointTissueModel fit_joint_tissue_model(const IncisionFrame& incision, const std::vector<JointSample>& calibration,
+                                        double D_star, const JointEstimatorOptions& o) {
+  o.check();
+  if (calibration.size() < 50) {
+    InputLocation where;
+    where.file = "calibration";
+    throw InputError(where, "too few calibration samples for the tissue model (" + std::to_string(calibration.size()) + ")");
+  }
+  const double v0 = JointTissueModel{}.axial_velocity_scale;
+  const Eigen::Vector3d p(0.0, 0.0, D_star);
+  const Fit linear = solve(incision, calibration, nullptr, o, v0, p, Eigen::Vector4d(800, 0, 0, 0), false, true, false);
+  const Fit cubic = solve(incision, calibration, nullptr, o, v0, p, linear.tissue, false, true, true);
+  // Effective sample count: one per second, the correlation time of model errors.
+  const double n_eff = std::max(10.0, static_cast<double>(calibration.size()) * o.sample_period_s);
+  const double n = static_cast<double>(calibration.size());
+  auto bic = [&](double cost, int k) { return n_eff * std::log(std::max(cost, 1e-300) / n) + k * std::log(n_eff); };
+  JointTissueModel out;
+  out.axial_velocity_scale = v0;
+  const double bic_linear = bic(linear.cost, 3), bic_cubic = bic(cubic.cost, 4);
+  const bool stiff = bic_cubic < bic_linear;
+  const Fit& chosen = stiff ? cubic : linear;
+  out.parameters = chosen.tissue;
+  out.family = stiff ? "stiffening" : "linear";
+  out.cost = chosen.cost;
+  out.bic = stiff ? bic_cubic : bic_linear;
+
+  if (o.calibration_bootstrap_replicates > 1) {
+    std::vector<Eigen::Vector3d> fitted(calibration.size()), resid(calibration.size()), dtau;
+    for (std::size_t i = 0; i < calibration.size(); ++i) {
+      fitted[i] = compute_joint_model_torque(incision, out, calibration[i], p);
+      resid[i] = calibration[i].dtau - fitted[i];
+    }
+    const std::size_t block = std::max<std::size_t>(1, static_cast<std::size_t>(o.bootstrap_block_s / o.sample_period_s));
+    std::mt19937_64 rng(o.seed ^ 0x7157u);
+    std::vector<Eigen::Vector4d> draws;
+    for (int b = 0; b < o.calibration_bootstrap_replicates; ++b) {
+      draw_block_bootstrap(fitted, resid, block, rng, dtau);
+      draws.push_back(solve(incision, calibration, &dtau, o, v0, p, out.parameters, false, true, stiff).tissue);
+    }
+    Eigen::Vector4d mean = Eigen::Vector4d::Zero();
+    for (const auto& d : draws) mean += d;
+    mean /= static_cast<double>(draws.size());
+    for (const auto& d : draws) out.covariance += (d - mean) * (d - mean).transpose();
+    out.covariance /= static_cast<double>(draws.size() - 1);
+    out.bootstrap_replicates = o.calibration_bootstrap_replicates;
+  }
+  return out;
+}
+
+JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueModel& tissue,
+                             const std::vector<JointSample>& samples, const JointEstimatorOptions& o) {
+  o.check();
+  if (samples.size() < 50) {
+    InputLocation where;
+    where.file = "trial";
+    throw InputError(where, "too few samples for the joint estimate (" + std::to_string(samples.size()) + ")");
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const double v0 = tissue.axial_velocity_scale;
+  Fit best;
+  best.cost = std::numeric_limits<double>::infinity();
+  for (double D0 : o.D_starts) {
+    Fit f = solve(incision, samples, nullptr, o, v0, Eigen::Vector3d(0, 0, D0), tissue.parameters, true, false, false);
+    if (f.cost < best.cost) best = f;
+  }
+  JointEstimate out;
+  out.misalignment_m = best.p;
+  out.samples = samples.size();
+  out.solver = to_report(best.summary,
+                         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+
+  // Covariance at the optimum, scaled by the residual variance.
+  {
+    Fit at = best;
+    ceres::Problem problem;
+    for (const auto& s : samples)
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<JointResidual, 3, 3, 4>(
+                                   new JointResidual(s, incision.R_base_inc, v0, o.torque_sigma, s.dtau)),
+                               nullptr, at.p.data(), at.tissue.data());
+    problem.SetParameterBlockConstant(at.tissue.data());
+    ceres::Covariance::Options co;
+    ceres::Covariance covariance(co);
+    std::vector<std::pair<const double*, const double*>> blocks = {{at.p.data(), at.p.data()}};
+    if (covariance.Compute(blocks, &problem)) {
+      double c[9];
+      covariance.GetCovarianceBlock(at.p.data(), at.p.data(), c);
+      double cost = 0.0;
+      problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr);
+      const double dof = std::max(1.0, 3.0 * static_cast<double>(samples.size()) - 3.0);
+      out.covariance = Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(c) * (2.0 * cost / dof);
+    }
+  }
+
+  // Moving-block bootstrap of the residuals around the fitted model.
+  if (o.bootstrap_replicates > 0) {
+    const std::size_t n = samples.size();
+    std::vector<Eigen::Vector3d> fitted(n), resid(n), dtau;
+    for (std::size_t i = 0; i < n; ++i) {
+      fitted[i] = compute_joint_model_torque(incision, tissue, samples[i], best.p);
+      resid[i] = samples[i].dtau - fitted[i];
+    }
+    const std::size_t block = std::max<std::size_t>(1, static_cast<std::size_t>(o.bootstrap_block_s / o.sample_period_s));
+    std::mt19937_64 rng(o.seed);
+    std::vector<Eigen::Vector3d> draws;
+    for (int b = 0; b < o.bootstrap_replicates; ++b) {
+      draw_block_bootstrap(fitted, resid, block, rng, dtau);
+      draws.push_back(solve(incision, samples, &dtau, o, v0, best.p, tissue.parameters, true, false, false).p);
+    }
+    out.bootstrap_replicates = o.bootstrap_replicates;
+    for (int k = 0; k < 3; ++k) {
+      std::vector<double> v;
+      for (const auto& d : draws) v.push_back(d[k]);
+      std::sort(v.begin(), v.end());
+      auto quantile = [&](double q) {
+        const double pos = q * static_cast<double>(v.size() - 1);
+        const std::size_t lo = static_cast<std::size_t>(pos);
+        const std::size_t hi = std::min(v.size() - 1, lo + 1);
+        return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
+      };
+      out.sd_bootstrap[k] = (quantile(0.975) - quantile(0.025)) / (2.0 * 1.96);
+    }
+  }
+
+  // The tissue parameters' uncertainty, through dp/dtissue by re-solving with
+  // each parameter moved by its standard deviation.
+  Eigen::Matrix<double, 3, 4> S = Eigen::Matrix<double, 3, 4>::Zero();
+  for (int j = 0; j < 4; ++j) {
+    const double sd = std::sqrt(std::max(0.0, tissue.covariance(j, j)));
+    if (!(sd > 0.0)) continue;
+    Eigen::Vector4d moved = tissue.parameters;
+    moved[j] += sd;
+    S.col(j) = (solve(incision, samples, nullptr, o, v0, best.p, moved, true, false, false).p - best.p) / sd;
+  }
+  const Eigen::Matrix3d cov_tissue = S * tissue.covariance * S.transpose();
+  out.sd_tissue = cov_tissue.diagonal().cwiseMax(0.0).cwiseSqrt();
+  const Eigen::Vector3d half = 1.96 * (out.sd_bootstrap.array().square() + out.sd_tissue.array().square()).sqrt().matrix();
+  out.ci_low = best.p - half;
+  out.ci_high = best.p + half;
+  return out;
+}
+
+}  // namespace rcm
