@@ -238,7 +238,6 @@ std::filesystem::path write_study_report(const StudyResult& r, const Session& se
                       e.index <= 3 ? paper_ii[e.index - 1] : "-");
   if (r.fit) {
     md += fmt::format("\nFit: {}\n", r.fit->brief_report());
-    for (const auto& w : r.fit->warnings) md += "- warning: " + w + "\n";
   }
 
   md += fmt::format("\n## Tissue law (step 2, D* = {:.1f} mm)\n\n", 1e3 * r.calibration_offset_m);
