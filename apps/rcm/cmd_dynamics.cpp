@@ -58,13 +58,13 @@ void run_fit(const DynamicsArgs& a) {
   const auto recs = load_all(a.recordings, a.dedupe);
   FitResult fit;
 #if defined(RCM_HAVE_TORCH)
+  if (!a.torchscript_out.empty() && kind != TorqueModelKind::lstm) {
+    rcm::InputLocation where;
+    where.field = "--torchscript";
+    throw rcm::InputError(where, "TorchScript export is for --model lstm only");
+  }
   fit = fit_torque_model(kind, recs, o);
   if (!a.torchscript_out.empty()) {
-    if (kind != TorqueModelKind::lstm) {
-      rcm::InputLocation where;
-      where.field = "--torchscript";
-      throw rcm::InputError(where, "TorchScript export is for --model lstm only");
-    }
     export_torchscript(static_cast<const LstmTorqueModel&>(*fit.model), a.torchscript_out);
   }
 #else
