@@ -78,7 +78,7 @@ const bool registered = rcm::cli::register_command({"demo", 5, [](CLI::App& app)
   cmd->add_option("--out", o->out, "output folder (default demo-out): bench/ (the session) and report/");
   cmd->add_flag("--quick", o->quick, "shorter recordings and training, for a smoke test");
   cmd->add_option("--seed", o->seed, "seed of the simulation and of the model fit");
-  cmd->add_option("--model", o->model, "free-space model: lstm (default), mlp, linear, hybrid");
+  cmd->add_option("--model", o->model, "free-space model: hybrid (default with LibTorch), lstm, mlp, linear");
   cmd->add_option("--method", o->method,
                   "joint (default: all offsets in torque space, with the paper's three-step method beside it) or three-step");
   cmd->add_option("--max-train-minutes", o->max_minutes, "budget of the free-space fit (default 5, --quick 0.75)");

@@ -57,7 +57,7 @@ const bool registered = rcm::cli::register_command({"run", 60, [](CLI::App& app)
   cmd->add_option("--method", o->method,
                   "three-step (paper Algorithm 1, default) or joint (all offsets in torque space, with 95 % intervals; "
                   "three-step beside it)");
-  cmd->add_option("--model", o->model, "free-space model to fit: lstm (default with LibTorch), mlp, linear, hybrid");
+  cmd->add_option("--model", o->model, "free-space model to fit: hybrid (default with LibTorch), lstm, mlp, linear");
   cmd->add_option("--model-file", o->model_file, "use a saved free-space model instead of fitting one");
   cmd->add_option("--seed", o->seed, "seed of the model fit");
   cmd->add_option("--D0", o->D0, "initial guess of D in m (default: middle of [-0.020, 0.070])");

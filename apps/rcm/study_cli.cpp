@@ -26,7 +26,11 @@ TorqueModelFitter get_torque_model_fitter() {
 
 dynamics::TorqueModelKind get_default_model_kind() {
 #if RCM_HAVE_TORCH
-  return dynamics::TorqueModelKind::lstm;
+  // Linear-in-parameters dynamics with a friction state plus an LSTM on its
+  // residual (Yang et al. [19]): the most accurate free-space model on the
+  // simulated bench and a few minutes to fit; the pure LSTM of the paper is
+  // --model lstm.
+  return dynamics::TorqueModelKind::hybrid;
 #else
   return dynamics::TorqueModelKind::linear;
 #endif

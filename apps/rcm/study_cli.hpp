@@ -9,7 +9,7 @@ namespace rcm::cli {
 // fit_torque_model of rcm::torch when built with LibTorch; otherwise only the
 // linear model (the others raise a clear error).
 TorqueModelFitter get_torque_model_fitter();
-// The default kind: lstm with LibTorch, linear without.
+// The default kind: hybrid with LibTorch, linear without.
 dynamics::TorqueModelKind get_default_model_kind();
 
 }  // namespace rcm::cli
