@@ -128,6 +128,7 @@ void fail(const std::string& source, const std::string& field, const std::string
   InputLocation where;
   where.file = source;
   where.field = field;
+  where.kind = InputLocation::Kind::json_field;  // model files are JSON
   throw InputError(where, what);
 }
 
@@ -187,7 +188,9 @@ TorqueModelKind parse_torque_model_kind(const std::string& text, const std::stri
   for (auto k : {TorqueModelKind::lstm, TorqueModelKind::mlp, TorqueModelKind::linear, TorqueModelKind::hybrid})
     if (text == to_string(k)) return k;
   InputLocation where;
+  where.file = "command line";
   where.field = what;
+  where.kind = InputLocation::Kind::plain;
   throw InputError(where, "expected lstm, mlp, linear or hybrid, got " + quote_token(text));
 }
 
