@@ -18,16 +18,7 @@ Eigen::MatrixXf rnd(int r, int c, std::mt19937& rng) {
   for (int i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
   return m;
 }
-LstmNetwork lstm(int in, int H, int L, int out) {
-  std::mt19937 rng(1);
-  LstmNetwork n;
-  for (int k = 0; k < L; ++k)
-    n.layers.push_back({rnd(4 * H, k ? H : in, rng), rnd(4 * H, H, rng), rnd(4 * H, 1, rng).col(0),
-                        rnd(4 * H, 1, rng).col(0)});
-  n.head.layers.push_back({rnd(64, H, rng), rnd(64, 1, rng).col(0), Activation::tanh});
-  n.head.layers.push_back({rnd(out, 64, rng), rnd(out, 1, rng).col(0), Activation::identity});
-  return n;
-}
+LstmNetwork lstm(int in, int H, int L, int out) { return make_random_lstm_network(in, H, L, 64, out, 1, 0.2f); }
 TorqueModelInfo info6() {
   TorqueModelInfo i;
   i.num_joints = 6;

@@ -16,21 +16,7 @@ void torch_threads_for_benchmark() { set_libtorch_threads(2); }
 }  // namespace
 
 namespace {
-LstmNetwork lstm(int in, int H, int L, int out) {
-  std::mt19937 rng(1);
-  std::normal_distribution<float> g(0.0f, 0.2f);
-  auto rnd = [&](int r, int c) {
-    Eigen::MatrixXf m(r, c);
-    for (int i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
-    return m;
-  };
-  LstmNetwork n;
-  for (int k = 0; k < L; ++k)
-    n.layers.push_back({rnd(4 * H, k ? H : in), rnd(4 * H, H), rnd(4 * H, 1).col(0), rnd(4 * H, 1).col(0)});
-  n.head.layers.push_back({rnd(64, H), rnd(64, 1).col(0), Activation::tanh});
-  n.head.layers.push_back({rnd(out, 64), rnd(out, 1).col(0), Activation::identity});
-  return n;
-}
+LstmNetwork lstm(int in, int H, int L, int out) { return make_random_lstm_network(in, H, L, 64, out, 1, 0.2f); }
 }  // namespace
 
 // Sizes: 6 joints -> 12 inputs, H hidden x L layers (args), head 64, 6 outputs.

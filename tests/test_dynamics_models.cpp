@@ -29,14 +29,7 @@ Eigen::MatrixXf random_matrix(int r, int c, std::mt19937& rng, float scale = 0.3
 }
 
 LstmNetwork random_lstm(int in, int H, int L, int head, int out, unsigned seed) {
-  std::mt19937 rng(seed);
-  LstmNetwork n;
-  for (int k = 0; k < L; ++k)
-    n.layers.push_back({random_matrix(4 * H, k ? H : in, rng), random_matrix(4 * H, H, rng),
-                        random_matrix(4 * H, 1, rng).col(0), random_matrix(4 * H, 1, rng).col(0)});
-  n.head.layers.push_back({random_matrix(head, H, rng), random_matrix(head, 1, rng).col(0), Activation::tanh});
-  n.head.layers.push_back({random_matrix(out, head, rng), random_matrix(out, 1, rng).col(0), Activation::identity});
-  return n;
+  return make_random_lstm_network(in, H, L, head, out, seed);
 }
 
 // Plain double LSTM step written from the equations of torch.nn.LSTM.

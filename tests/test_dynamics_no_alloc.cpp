@@ -35,15 +35,6 @@ Eigen::MatrixXf rnd(int r, int c, std::mt19937& rng) {
   for (int i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
   return m;
 }
-LstmNetwork lstm(int in, int H, int L, int out, std::mt19937& rng) {
-  LstmNetwork n;
-  for (int k = 0; k < L; ++k)
-    n.layers.push_back({rnd(4 * H, k ? H : in, rng), rnd(4 * H, H, rng), rnd(4 * H, 1, rng).col(0),
-                        rnd(4 * H, 1, rng).col(0)});
-  n.head.layers.push_back({rnd(16, H, rng), rnd(16, 1, rng).col(0), Activation::tanh});
-  n.head.layers.push_back({rnd(out, 16, rng), rnd(out, 1, rng).col(0), Activation::identity});
-  return n;
-}
 }  // namespace
 
 TEST(NoAllocation, CountingOperatorNewSeesAllocations) {
@@ -65,7 +56,7 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
                             Eigen::VectorXd::Ones(6), Eigen::VectorXd::Ones(6), Eigen::VectorXd::Constant(6, 1e-3)};
   auto base = std::make_shared<const LinearTorqueModel>(info, lp);
   std::vector<std::unique_ptr<TorqueModel>> models;
-  models.push_back(std::make_unique<LstmTorqueModel>(info, lstm(12, 128, 2, 6, rng), norm));
+  models.push_back(std::make_unique<LstmTorqueModel>(info, make_random_lstm_network(12, 128, 2, 16, 6, 1), norm));
   std::vector<DenseStack> stacks;
   for (int j = 0; j < 6; ++j) {
     DenseStack s;
@@ -75,7 +66,7 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
   }
   models.push_back(std::make_unique<MlpTorqueModel>(info, stacks, norm));
   models.push_back(std::make_unique<LinearTorqueModel>(info, lp));
-  models.push_back(std::make_unique<HybridTorqueModel>(info, base, lstm(12, 32, 1, 6, rng), norm));
+  models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(12, 32, 1, 16, 6, 2), norm));
   for (const auto& m : models) {
     auto ws = m->create_workspace();
     double q[6] = {0.1, 0.2, 0.12, 0, 0, 0}, qd[6] = {0.3, -0.2, 0.01, 0, 0, 0}, tau[6];

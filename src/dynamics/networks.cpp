@@ -1,11 +1,13 @@
 #include "rcm/dynamics/networks.hpp"
 
+#include <random>
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cstddef>
 #if defined(__x86_64__)
 #include <immintrin.h>
+#include <random>
 #endif
 #include <stdexcept>
 
@@ -586,6 +588,24 @@ std::unique_ptr<TorqueModel> detail::load_network_parameters(TorqueModelInfo inf
   } catch (const std::invalid_argument& e) {
     fail(source, "parameters", e.what());
   }
+}
+
+LstmNetwork make_random_lstm_network(int inputs, int hidden, int layers, int head_hidden, int outputs, unsigned seed,
+                                     float stddev) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g(0.0f, stddev);
+  auto rnd = [&](int r, int c) {
+    Eigen::MatrixXf m(r, c);
+    for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
+    return m;
+  };
+  const int H = hidden;
+  LstmNetwork n;
+  for (int k = 0; k < layers; ++k)
+    n.layers.push_back({rnd(4 * H, k ? H : inputs), rnd(4 * H, H), rnd(4 * H, 1).col(0), rnd(4 * H, 1).col(0)});
+  n.head.layers.push_back({rnd(head_hidden, H), rnd(head_hidden, 1).col(0), Activation::tanh});
+  n.head.layers.push_back({rnd(outputs, head_hidden), rnd(outputs, 1).col(0), Activation::identity});
+  return n;
 }
 
 }  // namespace rcm::dynamics

@@ -176,6 +176,28 @@ std::size_t origin_of(const Recording& recording, std::size_t t) {
 
 }  // namespace
 
+namespace {
+
+// A pair with finite x and y is kept with its origin; anything else is counted.
+void keep_pair(const Recording& recording, Eigen::Index t, double x, double y, std::vector<double>& xs,
+               std::vector<double>& ys, TissuePairsResult& result) {
+  if (!std::isfinite(x) || !std::isfinite(y)) {
+    ++result.report.dropped_non_finite;
+    return;
+  }
+  xs.push_back(x);
+  ys.push_back(y);
+  result.pairs.origin.push_back(origin_of(recording, static_cast<std::size_t>(t)));
+}
+
+void finish_pairs(const std::vector<double>& xs, const std::vector<double>& ys, TissuePairsResult& result) {
+  result.report.kept = xs.size();
+  result.pairs.x = Eigen::Map<const Eigen::VectorXd>(xs.data(), static_cast<Eigen::Index>(xs.size()));
+  result.pairs.y = Eigen::Map<const Eigen::VectorXd>(ys.data(), static_cast<Eigen::Index>(ys.size()));
+}
+
+}  // namespace
+
 TissuePairsResult compute_tissue_pairs(const Recording& recording, const Eigen::MatrixXd& tau_fs,
                                        const Eigen::Vector3d& q0, double D_star,
                                        const TissuePairOptions& options) {
@@ -226,17 +248,9 @@ TissuePairsResult compute_tissue_pairs(const Recording& recording, const Eigen::
     }
     const double y = series.f_inc_base.row(t).norm();
     const double x = D_star * std::tan(theta);
-    if (!std::isfinite(x) || !std::isfinite(y)) {
-      ++result.report.dropped_non_finite;
-      continue;
-    }
-    xs.push_back(x);
-    ys.push_back(y);
-    result.pairs.origin.push_back(origin_of(recording, static_cast<std::size_t>(t)));
+    keep_pair(recording, t, x, y, xs, ys, result);
   }
-  result.report.kept = xs.size();
-  result.pairs.x = Eigen::Map<const Eigen::VectorXd>(xs.data(), static_cast<Eigen::Index>(xs.size()));
-  result.pairs.y = Eigen::Map<const Eigen::VectorXd>(ys.data(), static_cast<Eigen::Index>(ys.size()));
+  finish_pairs(xs, ys, result);
   return result;
 }
 
@@ -264,17 +278,9 @@ TissuePairsResult compute_tissue_pairs_from_measured_force(const Recording& reco
     }
     const double x = D_star * std::tan(theta);
     const double y = recording.force->row(t).norm();
-    if (!std::isfinite(x) || !std::isfinite(y)) {
-      ++result.report.dropped_non_finite;
-      continue;
-    }
-    xs.push_back(x);
-    ys.push_back(y);
-    result.pairs.origin.push_back(origin_of(recording, static_cast<std::size_t>(t)));
+    keep_pair(recording, t, x, y, xs, ys, result);
   }
-  result.report.kept = xs.size();
-  result.pairs.x = Eigen::Map<const Eigen::VectorXd>(xs.data(), static_cast<Eigen::Index>(xs.size()));
-  result.pairs.y = Eigen::Map<const Eigen::VectorXd>(ys.data(), static_cast<Eigen::Index>(ys.size()));
+  finish_pairs(xs, ys, result);
   return result;
 }
 

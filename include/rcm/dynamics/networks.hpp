@@ -44,6 +44,11 @@ struct LstmNetwork {
   void check() const;
 };
 
+// Weights drawn from N(0, stddev^2) in a fixed order from `seed`, with a tanh
+// head layer of head_hidden units: the networks of tests and benchmarks.
+LstmNetwork make_random_lstm_network(int inputs, int hidden, int layers, int head_hidden, int outputs, unsigned seed,
+                                     float stddev = 0.3f);
+
 // x_normalized = (x - mean) / scale; y = y_normalized * scale + mean.
 struct Normalization {
   Eigen::VectorXf input_mean, input_scale;    // 2 num_joints: [q, qdot]

@@ -345,6 +345,22 @@ FitSummary make_summary(TorqueModelKind kind, const TimeSplit& split) {
   return s;
 }
 
+// What the LSTM and hybrid fits keep of a training run.
+void record_training(FitSummary& summary, const LstmTrainResult& tr) {
+  summary.epochs = tr.epochs;
+  summary.best_epoch = tr.best_epoch;
+  summary.best_validation_loss = tr.best_loss;
+  add_network_warnings(summary, kFewSamplesNetwork);
+}
+
+TorqueModelInfo make_network_info(const std::vector<Recording>& recs, int N, int M) {
+  TorqueModelInfo info;
+  info.num_joints = N;
+  info.num_outputs = M;
+  info.sample_period_s = median_sample_period(recs);
+  return info;
+}
+
 FitResult finish(std::unique_ptr<TorqueModel> model, FitSummary summary, const std::vector<Recording>& recs,
                  const TimeSplit& split, const FitOptions& o, Clock::time_point t0,
                  const std::function<std::unique_ptr<TorqueModel>(TorqueModelInfo)>& rebuild) {
@@ -378,14 +394,8 @@ FitResult fit_lstm_torque_model(const std::vector<Recording>& recs, const FitOpt
     std::cerr << fmt::format("[lstm] {} layers x {} hidden, window {}, {} streams, weight decay {}\n", shape.layers,
                              shape.hidden, shape.window, shape.streams, shape.weight_decay);
   auto tr = train_lstm(data, split, N, M, o, shape, device, t0, "lstm");
-  summary.epochs = tr.epochs;
-  summary.best_epoch = tr.best_epoch;
-  summary.best_validation_loss = tr.best_loss;
-  add_network_warnings(summary, kFewSamplesNetwork);
-  TorqueModelInfo info;
-  info.num_joints = N;
-  info.num_outputs = M;
-  info.sample_period_s = median_sample_period(recs);
+  record_training(summary, tr);
+  const TorqueModelInfo info = make_network_info(recs, N, M);
   auto model = std::make_unique<LstmTorqueModel>(info, tr.network, data.norm);
   return finish(std::move(model), std::move(summary), recs, split, o, t0, [&](TorqueModelInfo i) {
     return std::make_unique<LstmTorqueModel>(std::move(i), tr.network, data.norm);
@@ -415,14 +425,8 @@ FitResult fit_hybrid_torque_model(const std::vector<Recording>& recs, const FitO
   const SequenceData data = prepare_data(recs, residual, split, N, M);
   const LstmShape shape = choose_shape(o, summary.train_samples);
   auto tr = train_lstm(data, split, N, M, o, shape, device, t0, "hybrid");
-  summary.epochs = tr.epochs;
-  summary.best_epoch = tr.best_epoch;
-  summary.best_validation_loss = tr.best_loss;
-  add_network_warnings(summary, kFewSamplesNetwork);
-  TorqueModelInfo info;
-  info.num_joints = N;
-  info.num_outputs = M;
-  info.sample_period_s = median_sample_period(recs);
+  record_training(summary, tr);
+  const TorqueModelInfo info = make_network_info(recs, N, M);
   auto model = std::make_unique<HybridTorqueModel>(info, base, tr.network, data.norm);
   return finish(std::move(model), std::move(summary), recs, split, o, t0, [&](TorqueModelInfo i) {
     return std::make_unique<HybridTorqueModel>(std::move(i), base, tr.network, data.norm);
