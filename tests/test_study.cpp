@@ -9,6 +9,7 @@
 #include <random>
 
 #include "rcm/dynamics/linear_model.hpp"
+#include "rcm/estimation/online.hpp"
 #include "rcm/estimation/study.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/sim/bench.hpp"
@@ -112,6 +113,88 @@ TEST(Study, JointMethodRecoversOffsetsWithCoveringIntervals) {
   EXPECT_TRUE(j["trials"][0]["three_step"]["misalignment_m"].is_array());
 }
 
+// The online estimator on the same trials, streamed sample by sample: it must
+// find what the batch finds, settle early, and stay quiet in free space.
+TEST(Study, OnlineEstimatorTracksEveryTrialAndStaysQuietInFreeSpace) {
+  const rcm::MonitorSetup setup = rcm::prepare_monitor(bench().session, linear_options(), linear_fitter());
+  const rcm::OnlinePipeline pipeline(setup.free_space.model, rcm::OnlineEstimator(setup.incision, setup.tissue,
+                                                                                  rcm::make_online_options(setup.joint_options)));
+  auto stream = [&](const rcm::Recording& r, std::vector<Eigen::Vector3d>* trace) {
+    auto ws = pipeline.create_workspace();
+    for (Eigen::Index t = 0; t < r.time.size(); ++t) {
+      const Eigen::VectorXd q = r.position.row(t), qd = r.velocity.row(t), e = r.effort.row(t);
+      const rcm::OnlineOutput& out = pipeline.compute_sample(ws, r.time(t), q.data(), qd.data(), e.data());
+      if (trace) trace->push_back(out.misalignment_m);
+    }
+    return rcm::get_online_output(ws.estimator);
+  };
+  for (const auto& spec : bench().session.trials) {
+    const rcm::Recording r = rcm::load_recording(spec.recording);
+    std::vector<Eigen::Vector3d> trace;
+    const rcm::OnlineOutput out = stream(r, &trace);
+    ASSERT_TRUE(spec.truth_misalignment_m);
+    EXPECT_LT((out.misalignment_m - *spec.truth_misalignment_m).norm(), 0.0015)
+        << spec.name << ": " << out.misalignment_m.transpose();
+    EXPECT_TRUE(out.onset) << spec.name;
+    // Within 5 mm of the final value from 20 s of motion on (the trials move from their start).
+    for (Eigen::Index t = 0; t < r.time.size(); ++t)
+      if (r.time(t) - r.time(0) >= 20.0) {
+        ASSERT_LT((trace[static_cast<std::size_t>(t)] - out.misalignment_m).norm(), 0.005) << spec.name << " at " << r.time(t);
+      }
+  }
+  const rcm::OnlineOutput free = stream(rcm::load_recording(bench().session.free_space.front()), nullptr);
+  EXPECT_FALSE(free.onset) << "cusum " << free.cusum;
+  EXPECT_LT(free.misalignment_m.head<2>().norm(), 0.003) << free.misalignment_m.transpose();
+}
+
+// Issue 7's claim beyond the paper: the joint estimator holds on stiffening and
+// axial-friction tissue too, where the three-step subtraction of radial from
+// total force is not exact.
+TEST(Study, JointMethodHoldsOnStiffeningAndSlidingTissue) {
+  int covered = 0, trials = 0;
+  for (const std::string preset : {"stiffening", "sliding"}) {
+    std::random_device rd;
+    const fs::path dir = fs::temp_directory_path() / ("rcm_test_study_" + preset + std::to_string(rd()));
+    rcm::sim::SimConfig config = rcm::sim::make_default_config();
+    rcm::sim::apply_tissue_preset(config.tissue, preset);
+    config.protocol.free_space_s = 180.0;
+    config.protocol.calibration_s = 40.0;
+    config.protocol.trial_s = 40.0;
+    config.protocol.static_hold_s = 4.0;
+    config.protocol.baseline_hold_s = 4.0;
+    config.protocol.coaxial_offsets_m = {0.015, 0.040};
+    config.protocol.write_truth = false;
+    const auto written = rcm::sim::simulate_session(config, dir);
+    rcm::StudyOptions o = linear_options();
+    o.method = "joint";
+    o.joint.bootstrap_replicates = 20;
+    o.joint.calibration_bootstrap_replicates = 10;
+    o.tissue_sensitivity_delta_m = 0.0;
+    const rcm::StudyResult r = rcm::run_study(rcm::load_session(written.manifest), o, linear_fitter());
+    ASSERT_TRUE(r.joint_tissue);
+    if (preset == "stiffening") EXPECT_EQ(r.joint_tissue->family, "stiffening");
+    if (preset == "sliding") EXPECT_GT(r.joint_tissue->parameters[3], 0.1) << "axial friction, N";
+    for (const auto& t : r.trials) {
+      ASSERT_TRUE(t.joint && t.online && t.truth_m);
+      const double bound = (*t.truth_m)[2] > 0.020 ? 0.001 : 0.0015;  // the issue's targets
+      EXPECT_LT((t.joint->misalignment_m - *t.truth_m).norm(), bound) << preset << " " << t.name;
+      EXPECT_LT((t.online->final_output.misalignment_m - *t.truth_m).norm(), 0.0015) << preset << " " << t.name;
+      const bool inside =
+          ((t.truth_m->array() >= t.joint->ci_low.array()) && (t.truth_m->array() <= t.joint->ci_high.array())).all();
+      covered += inside;
+      ++trials;
+      if (!inside)
+        std::cerr << preset << " " << t.name << ": truth outside " << t.joint->ci_low.transpose() << " .. "
+                  << t.joint->ci_high.transpose() << "\n";
+    }
+    std::error_code ec;
+    fs::remove_all(dir, ec);
+  }
+  // 95 % intervals: all 8 inside is not to be expected (0.95^8 = 66 %); 5 or
+  // fewer would happen with honest intervals less than 1 % of the time.
+  EXPECT_GE(covered, 6) << "of " << trials;
+}
+
 TEST(Study, ResultsFollowTheContract) {
   const nlohmann::json j = study().to_json();
   EXPECT_EQ(j["format"], "rcm-results/1");
@@ -179,6 +262,56 @@ TEST(StudyCli, RunWritesTheContractJson) {
   const nlohmann::json j = nlohmann::json::parse(out);
   EXPECT_EQ(j["format"], "rcm-results/1");
   EXPECT_TRUE(fs::exists(dir / "report.md"));
+}
+
+TEST(StudyCli, MonitorReplaysATrial) {
+  const auto& trial = bench().session.trials.back();
+  std::string out;
+  const fs::path trace = bench().dir / "monitor.csv";
+  ASSERT_EQ(run_cli("monitor --session " + bench().session.manifest.string() + " " + trial.recording.string() +
+                        " --model linear --json --out " + trace.string(),
+                    &out, true),
+            0)
+      << out;
+  const nlohmann::json j = nlohmann::json::parse(out);
+  ASSERT_TRUE(j["final"]["misalignment_m"].is_array());
+  EXPECT_LT(j["error_m"].get<double>(), 0.0015);
+  EXPECT_TRUE(j["onset_s"].is_number());
+  EXPECT_TRUE(j["alarms"].is_array());
+  EXPECT_GT(j["update_us"]["mean"].get<double>(), 0.0);
+  EXPECT_TRUE(fs::exists(trace));
+  std::string err;
+  EXPECT_EQ(run_cli("monitor --session " + bench().session.manifest.string() + " /nonexistent.csv --model linear", &err), 2);
+  EXPECT_NE(err.find("/nonexistent.csv"), std::string::npos) << err;
+}
+
+TEST(StudyCli, ForceSeriesAgainstTheSensor) {
+  const fs::path model = bench().dir / "force_model.json";
+  std::string out;
+  ASSERT_EQ(run_cli("dynamics fit --model linear --out " + model.string() + " " +
+                        bench().session.free_space.front().string(),
+                    &out),
+            0)
+      << out;
+  const auto& trial = bench().session.trials.back();  // D = 40 mm with a radial offset
+  const fs::path series = bench().dir / "force.csv";
+  ASSERT_EQ(run_cli("force --model " + model.string() + " --offset " + std::to_string((*trial.truth_misalignment_m)[2]) +
+                        " --q0 " + std::to_string(bench().session.q0[0]) + "," + std::to_string(bench().session.q0[1]) +
+                        "," + std::to_string(bench().session.q0[2]) + " " + trial.recording.string() + " --json --out " +
+                        series.string(),
+                    &out, true),
+            0)
+      << out;
+  const nlohmann::json j = nlohmann::json::parse(out);
+  ASSERT_TRUE(j["rmse"].is_object()) << out;
+  // Table III's order of magnitude: a few newtons at most per axis.
+  for (const char* axis : {"x", "y", "z"}) EXPECT_LT(j["rmse"][axis].get<double>(), 4.0) << axis;
+  EXPECT_GT(j["samples"].get<int>(), 1000);
+  const std::string csv = rcm::read_text_file(series);
+  EXPECT_EQ(csv.rfind("time,force_x,force_y,force_z,theta,condition,status\n", 0), 0u);
+  std::string err;
+  EXPECT_EQ(run_cli("force --model " + model.string() + " --offset 0.03 --q0 0,0 " + trial.recording.string(), &err), 2);
+  EXPECT_NE(err.find("--q0"), std::string::npos) << err;
 }
 
 }  // namespace

@@ -169,4 +169,39 @@ TEST(ThreeStep, NoHoldAtQ0IsALocatedError) {
   }
 }
 
+// A joint that stops on the edge of an encoder count: the quantized position
+// toggles between two counts. The play operator one and a half counts wide
+// removes every toggle, keeps real motion (lag at most half the width) and
+// leaves an unquantized recording within half its smallest step.
+TEST(ThreeStep, PositionChatterIsRemovedAndMotionKept) {
+  const double count = 2e-5;
+  rcm::Recording r;
+  const int T = 400;
+  r.time = Eigen::VectorXd::LinSpaced(T, 0.0, (T - 1) * 0.005);
+  r.position = Eigen::MatrixXd::Zero(T, 3);
+  r.velocity = Eigen::MatrixXd::Zero(T, 3);
+  r.effort = Eigen::MatrixXd::Zero(T, 3);
+  std::mt19937 rng(3);
+  std::bernoulli_distribution toggle(0.4);
+  for (int t = 0; t < T; ++t) {
+    // joint 1: ramps down 40 counts, then sits on the edge between counts 10 and 11
+    const double q1 = (t < 100 ? std::round(50.0 - 0.4 * t) : (toggle(rng) ? 11.0 : 10.0)) * count;
+    r.position(t, 0) = q1;
+    r.position(t, 1) = std::round(1e-3 * std::sin(0.05 * t) / count) * count;  // moving, quantized
+    r.position(t, 2) = 1e-4 * std::sin(0.03 * t);                              // not quantized
+  }
+  const Eigen::VectorXd quantum = rcm::estimate_position_quantum(r);
+  EXPECT_NEAR(quantum[0], count, 1e-12);
+  EXPECT_NEAR(quantum[1], count, 1e-12);
+  EXPECT_LT(quantum[2], 1e-6);
+  const rcm::Recording f = rcm::remove_position_chatter(r, 1.5 * quantum);
+  // No reversal left at rest: the filtered joint 1 is constant over the hold.
+  EXPECT_EQ(f.position.col(0).segment(110, T - 110).maxCoeff(), f.position.col(0).segment(110, T - 110).minCoeff());
+  for (int j = 0; j < 3; ++j)
+    EXPECT_LE((f.position.col(j) - r.position.col(j)).cwiseAbs().maxCoeff(), 0.75 * quantum[j] + 1e-15) << j;
+  EXPECT_EQ(f.velocity, r.velocity);
+  EXPECT_EQ(f.effort, r.effort);
+  EXPECT_THROW(rcm::remove_position_chatter(r, Eigen::Vector3d(-1.0, 0.0, 0.0)), std::invalid_argument);
+}
+
 }  // namespace

@@ -44,17 +44,16 @@ void run(const Options& o) {
   rcm::save_session(written.manifest, session);
   session = rcm::load_session(written.manifest);
 
-  rcm::StudyOptions options;
+  rcm::cli::FreeSpaceFlags flags;
+  flags.model = o.model;
+  flags.seed = o.seed;
+  flags.max_minutes = o.max_minutes > 0 ? o.max_minutes : (o.quick ? 0.75 : 5.0);
+  rcm::StudyOptions options = rcm::cli::make_study_options(flags);
   options.method = o.method;
-  options.joint.seed = o.seed;
   if (o.quick) {
     options.joint.bootstrap_replicates = 20;
     options.joint.calibration_bootstrap_replicates = 10;
   }
-  options.model_kind = o.model.empty() ? rcm::cli::get_default_model_kind()
-                                       : rcm::dynamics::parse_torque_model_kind(o.model, "--model");
-  options.fit.seed = o.seed;
-  options.fit.max_minutes = o.max_minutes > 0 ? o.max_minutes : (o.quick ? 0.75 : 5.0);
   const rcm::StudyResult result = rcm::run_study(session, options, rcm::cli::get_torque_model_fitter());
   const auto report = rcm::write_study_report(result, session, out / "report");
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

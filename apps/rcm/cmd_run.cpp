@@ -11,26 +11,18 @@
 namespace {
 
 struct Options {
-  std::string session, out = "rcm-run", method = "three-step", model, model_file, export_problems;
-  unsigned seed = 1;
+  std::string session, out = "rcm-run", method = "three-step", export_problems;
+  rcm::cli::FreeSpaceFlags free_space;
   double D0 = std::numeric_limits<double>::quiet_NaN();
-  double max_minutes = 10.0;
-  bool json = false, dedupe = false;
+  bool json = false;
 };
 
 void run(const Options& o) {
   if (o.method != "three-step" && o.method != "joint")
     throw rcm::InputError(rcm::cli::flag_location("--method"), "expected three-step or joint, got '" + o.method + "'");
   const rcm::Session session = rcm::load_session(o.session);
-  rcm::StudyOptions options;
+  rcm::StudyOptions options = rcm::cli::make_study_options(o.free_space);
   options.method = o.method;
-  options.joint.seed = o.seed;
-  options.model_kind = o.model.empty() ? rcm::cli::get_default_model_kind()
-                                       : rcm::dynamics::parse_torque_model_kind(o.model, "--model");
-  if (!o.model_file.empty()) options.model_file = o.model_file;
-  options.fit.seed = o.seed;
-  options.fit.max_minutes = o.max_minutes;
-  options.read.dedupe = o.dedupe;
   if (!std::isnan(o.D0)) options.three_step.D_initial = o.D0;
   if (!o.export_problems.empty()) options.export_problems_dir = o.export_problems;
   try {
@@ -40,6 +32,8 @@ void run(const Options& o) {
   }
   const rcm::StudyResult result = rcm::run_study(session, options, rcm::cli::get_torque_model_fitter());
   const auto report = rcm::write_study_report(result, session, o.out);
+  // Saved so that `rcm monitor --model-file` and later runs can reuse the fit.
+  rcm::dynamics::save_torque_model(std::filesystem::path(o.out) / "free_space_model.json", *result.model);
   if (o.json) {
     rcm::cli::print_json(result.to_json());
   } else {
@@ -57,14 +51,14 @@ const bool registered = rcm::cli::register_command({"run", 60, [](CLI::App& app)
   cmd->add_option("--method", o->method,
                   "three-step (paper Algorithm 1, default) or joint (all offsets in torque space, with 95 % intervals; "
                   "three-step beside it)");
-  cmd->add_option("--model", o->model, "free-space model to fit: hybrid (default with LibTorch), lstm, mlp, linear");
-  cmd->add_option("--model-file", o->model_file, "use a saved free-space model instead of fitting one");
-  cmd->add_option("--seed", o->seed, "seed of the model fit");
+  cmd->add_option("--model", o->free_space.model, "free-space model to fit: hybrid (default with LibTorch), lstm, mlp, linear");
+  cmd->add_option("--model-file", o->free_space.model_file, "use a saved free-space model instead of fitting one");
+  cmd->add_option("--seed", o->free_space.seed, "seed of the model fit");
   cmd->add_option("--D0", o->D0, "initial guess of D in m (default: middle of [-0.020, 0.070])");
-  cmd->add_option("--max-train-minutes", o->max_minutes, "wall-clock budget of the free-space fit (default 10)");
+  cmd->add_option("--max-train-minutes", o->free_space.max_minutes, "wall-clock budget of the free-space fit (default 10)");
   cmd->add_option("--export-problems", o->export_problems,
                   "write every trial's coaxial least-squares problem as JSON into this folder (solver cross-checks)");
-  cmd->add_flag("--dedupe", o->dedupe, "drop repeated rows of every recording");
+  cmd->add_flag("--dedupe", o->free_space.dedupe, "drop repeated rows of every recording");
   cmd->add_flag("--json", o->json, "print results.json on stdout");
   cmd->callback([o] { run(*o); });
 }});

@@ -36,4 +36,15 @@ dynamics::TorqueModelKind get_default_model_kind() {
 #endif
 }
 
+StudyOptions make_study_options(const FreeSpaceFlags& f) {
+  StudyOptions options;
+  options.model_kind = f.model.empty() ? get_default_model_kind() : dynamics::parse_torque_model_kind(f.model, "--model");
+  if (!f.model_file.empty()) options.model_file = f.model_file;
+  options.fit.seed = f.seed;
+  options.fit.max_minutes = f.max_minutes;
+  options.joint.seed = f.seed;
+  options.read.dedupe = f.dedupe;
+  return options;
+}
+
 }  // namespace rcm::cli

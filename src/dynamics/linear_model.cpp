@@ -3,10 +3,14 @@
 #include <fmt/format.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <iostream>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 
 #include "model_io.hpp"
@@ -17,10 +21,17 @@ namespace {
 
 constexpr int G = LinearTorqueModel::kGravityTerms;
 constexpr int kBlock = 4;  // armature, viscous, coulomb, offset
-// Time constant of the acceleration low-pass used for fitting. 30 ms minimized
-// the error of the filtered qddot against the true one on the simulated bench
-// (0.45 -> 0.15 rad/s^2 RMS for the yaw joint at 200 Hz).
-constexpr double kAccelerationFilter = 0.03;
+// qddot estimate of model files that predate the choice: backward difference
+// through a 30 ms first-order low-pass (it minimized the error of the filtered
+// qddot against the true one on the simulated bench, 0.45 -> 0.15 rad/s^2 RMS
+// for the yaw joint at 200 Hz, before the windowed fit existed).
+constexpr double kDefaultAccelerationWindow = 0.0;
+constexpr double kDefaultAccelerationFilter = 0.03;
+// The ring buffer of the windowed fit holds the window at the model's sampling
+// rate or at 2 kHz, whichever is faster; run faster still, the fit sees fewer
+// samples than the window (a shorter effective window).
+constexpr double kFastestSamplePeriod = 1.0 / 2000.0;
+constexpr Eigen::Index kMaxWindowSamples = 4096;
 
 // Exact discretization of the rate-independent Dahl state over a displacement dq.
 inline double advance_dahl(double z, double dq, double x_c) {
@@ -29,16 +40,120 @@ inline double advance_dahl(double z, double dq, double x_c) {
   return s + (z - s) * std::exp(-std::abs(dq) / x_c);
 }
 
-// qddot from differentiated velocity is mostly noise at 200 Hz (the velocity is
-// itself a filtered difference of quantized encoders); a first-order causal
-// low-pass with time constant tau trades that noise for a little lag.
-inline double filter_acceleration(double filtered, double raw, double dt, double tau) {
-  return filtered + dt / (tau + dt) * (raw - filtered);
+Eigen::Index window_capacity(double window_s, double sample_period_s) {
+  if (!(window_s > 0)) return 2;
+  const double period = sample_period_s > 0 ? std::min(sample_period_s, kFastestSamplePeriod) : kFastestSamplePeriod;
+  const double n = std::ceil(window_s / period * (1.0 + 1e-9)) + 2.0;
+  return static_cast<Eigen::Index>(std::clamp(n, 3.0, static_cast<double>(kMaxWindowSamples)));
+}
+
+// Causal qddot of one joint from its measured qdot (velocity is itself a filtered
+// difference of quantized encoders, so differentiating it again is mostly noise
+// at 200 Hz). A first-order low-pass of the backward difference (window 0) lags
+// by about its time constant; the slope at the newest sample of a least-squares
+// quadratic through the last `window` seconds has no lag while qddot changes
+// linearly over the window and averages the noise over the window instead. The
+// optional low-pass follows the fit. A sample at the same time as the previous
+// one is ignored; one earlier than it restarts the window (as the old backward
+// difference did). Sized once; update() does not allocate.
+class AccelerationEstimator {
+ public:
+  AccelerationEstimator(double window_s, double filter_s, double sample_period_s)
+      : window_(window_s), filter_(filter_s) {
+    const Eigen::Index n = window_capacity(window_s, sample_period_s);
+    t_.resize(n);
+    v_.resize(n);
+  }
+  void reset() {
+    count_ = 0;
+    head_ = 0;
+    filtered_ = 0.0;
+  }
+  double value() const { return filtered_; }
+  double update(double t, double v) {
+    if (count_ > 0 && t == t_[head_]) return filtered_;
+    if (count_ > 0 && !(t > t_[head_])) count_ = 0;  // time went back: restart the window
+    const double dt = count_ > 0 ? t - t_[head_] : 0.0;
+    const Eigen::Index cap = t_.size();
+    head_ = (head_ + 1) % cap;
+    t_[head_] = t;
+    v_[head_] = v;
+    count_ = std::min(count_ + 1, cap);
+    if (count_ < 2) return filtered_;
+    const double raw = window_ > 0 ? fitted_slope() : (v - previous(1)) / dt;
+    filtered_ = filter_ > 0 ? filtered_ + dt / (filter_ + dt) * (raw - filtered_) : raw;
+    return filtered_;
+  }
+
+ private:
+  double previous(Eigen::Index k) const { return v_[(head_ - k + t_.size()) % t_.size()]; }
+  double previous_time(Eigen::Index k) const { return t_[(head_ - k + t_.size()) % t_.size()]; }
+  // Slope at the newest sample of the least-squares quadratic through the
+  // samples no older than the window (s = (t_k - t) / window in [-1, 0]).
+  double fitted_slope() const {
+    const double t = t_[head_];
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    Eigen::Index n = 0;
+    for (Eigen::Index k = 0; k < count_; ++k) {
+      const double s = (previous_time(k) - t) / window_;
+      if (s < -1.0 - 1e-9) break;
+      const Eigen::Vector3d phi(1.0, s, s * s);
+      A.noalias() += phi * phi.transpose();
+      b.noalias() += previous(k) * phi;
+      ++n;
+    }
+    if (n < 3) return (previous(0) - previous(1)) / (t - previous_time(1));
+    return A.ldlt().solve(b)(1) / window_;
+  }
+
+  double window_, filter_;
+  Eigen::VectorXd t_, v_;  // ring buffer, newest at head_
+  Eigen::Index head_ = 0, count_ = 0;
+  double filtered_ = 0.0;
+};
+
+bool is_time_sorted(const Eigen::VectorXd& time) {
+  const Eigen::Index T = time.size();
+  return T < 2 || ((time.tail(T - 1) - time.head(T - 1)).array() >= 0).all();
+}
+
+// Zero-phase qddot of a whole recording (time never decreasing): at each sample
+// the slope of the least-squares quadratic through the samples within
+// +- window / 2 of it. Symmetric inside the recording; near either end the window
+// is cut and the fit becomes one-sided. With fewer than three distinct times in
+// the window, the difference across it.
+Eigen::VectorXd compute_zero_phase_acceleration(const Eigen::VectorXd& time, const Eigen::VectorXd& velocity,
+                                                double window_s) {
+  const Eigen::Index T = time.size();
+  const double h = 0.5 * window_s;
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(T);
+  Eigen::Index lo = 0, hi = 0;  // window [lo, hi)
+  for (Eigen::Index i = 0; i < T; ++i) {
+    while (time(lo) < time(i) - h * (1.0 + 1e-9)) ++lo;
+    if (hi < i + 1) hi = i + 1;
+    while (hi < T && time(hi) <= time(i) + h * (1.0 + 1e-9)) ++hi;
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    for (Eigen::Index k = lo; k < hi; ++k) {
+      const double s = (time(k) - time(i)) / h;
+      const Eigen::Vector3d phi(1.0, s, s * s);
+      A.noalias() += phi * phi.transpose();
+      b.noalias() += velocity(k) * phi;
+    }
+    const double n = static_cast<double>(hi - lo);
+    if (hi - lo >= 3 && A.determinant() > 1e-9 * n * n * n) {
+      out(i) = A.ldlt().solve(b)(1) / h;
+    } else if (time(hi - 1) > time(lo)) {
+      out(i) = (velocity(hi - 1) - velocity(lo)) / (time(hi - 1) - time(lo));
+    }
+  }
+  return out;
 }
 
 struct LinearWorkspace final : TorqueModelWorkspace {
-  Eigen::VectorXd prev_q, prev_qd, z, qdd;
-  double prev_t = 0.0;
+  Eigen::VectorXd prev_q, z;
+  std::vector<AccelerationEstimator> qdd;
   bool has_previous = false;
   Eigen::Matrix<double, 3, G> Y;
 };
@@ -67,48 +182,84 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
     : TorqueModel(std::move(info)), parameters_(std::move(p)) {
   const int M = num_outputs();
   if (num_joints() < 3) throw std::invalid_argument("linear model: needs at least 3 joints");
-  if (parameters_.gravity.size() != G || parameters_.armature.size() != M || parameters_.viscous.size() != M ||
-      parameters_.coulomb.size() != M || parameters_.offset.size() != M || parameters_.dahl_displacement.size() != M)
+  auto& q = parameters_;
+  if (q.acceleration_window_s.size() == 0) q.acceleration_window_s = Eigen::VectorXd::Constant(M, kDefaultAccelerationWindow);
+  if (q.acceleration_filter_s.size() == 0) q.acceleration_filter_s = Eigen::VectorXd::Constant(M, kDefaultAccelerationFilter);
+  if (q.batch_acceleration_window_s.size() == 0) q.batch_acceleration_window_s = Eigen::VectorXd::Zero(M);
+  if (q.gravity.size() != G || q.armature.size() != M || q.viscous.size() != M || q.coulomb.size() != M ||
+      q.offset.size() != M || q.dahl_displacement.size() != M || q.acceleration_window_s.size() != M ||
+      q.acceleration_filter_s.size() != M || q.batch_acceleration_window_s.size() != M)
     throw std::invalid_argument("linear model: parameter sizes do not match num_outputs");
-  if ((parameters_.dahl_displacement.array() <= 0).any())
+  if ((q.dahl_displacement.array() <= 0).any())
     throw std::invalid_argument("linear model: dahl_displacement must be positive");
+  if (!(q.acceleration_window_s.array() >= 0).all() || !(q.acceleration_filter_s.array() >= 0).all() ||
+      !(q.batch_acceleration_window_s.array() >= 0).all())
+    throw std::invalid_argument("linear model: the acceleration windows and filters must be >= 0");
 }
 
 std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() const {
   auto ws = std::make_unique<LinearWorkspace>();
-  ws->prev_q = Eigen::VectorXd::Zero(num_outputs());
-  ws->prev_qd = Eigen::VectorXd::Zero(num_outputs());
-  ws->z = Eigen::VectorXd::Zero(num_outputs());
-  ws->qdd = Eigen::VectorXd::Zero(num_outputs());
+  const int M = num_outputs();
+  ws->prev_q = Eigen::VectorXd::Zero(M);
+  ws->z = Eigen::VectorXd::Zero(M);
+  ws->qdd.reserve(M);
+  for (int j = 0; j < M; ++j)
+    ws->qdd.emplace_back(parameters_.acceleration_window_s[j], parameters_.acceleration_filter_s[j],
+                         info().sample_period_s);
   return ws;
 }
 
 void LinearTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   auto& ws = static_cast<LinearWorkspace&>(workspace);
   ws.z.setZero();
-  ws.qdd.setZero();
+  for (auto& e : ws.qdd) e.reset();
   ws.has_previous = false;
 }
 
 void LinearTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                                      double* tau) const {
+  compute_step_with_acceleration(workspace, t, q, qd, nullptr, tau);
+}
+
+void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& workspace, double t, const double* q,
+                                                       const double* qd, const double* qdd_batch,
+                                                       double* tau) const {
   auto& ws = static_cast<LinearWorkspace&>(workspace);
   const auto& p = parameters_;
   compute_gravity_regressor(q, ws.Y);
-  const double dt = ws.has_previous ? t - ws.prev_t : 0.0;
   for (int j = 0; j < num_outputs(); ++j) {
-    if (ws.has_previous) {
-      ws.z[j] = advance_dahl(ws.z[j], q[j] - ws.prev_q[j], p.dahl_displacement[j]);
-      if (dt > 0) ws.qdd[j] = filter_acceleration(ws.qdd[j], (qd[j] - ws.prev_qd[j]) / dt, dt, p.acceleration_filter_s);
-    }
-    double value = p.armature[j] * ws.qdd[j] + p.viscous[j] * qd[j] + p.coulomb[j] * ws.z[j] + p.offset[j];
+    if (ws.has_previous) ws.z[j] = advance_dahl(ws.z[j], q[j] - ws.prev_q[j], p.dahl_displacement[j]);
+    double qdd = ws.qdd[j].update(t, qd[j]);
+    if (qdd_batch && p.batch_acceleration_window_s[j] > 0) qdd = qdd_batch[j];
+    double value = p.armature[j] * qdd + p.viscous[j] * qd[j] + p.coulomb[j] * ws.z[j] + p.offset[j];
     if (j < 3) value += ws.Y.row(j).dot(p.gravity);
     tau[j] = value;
     ws.prev_q[j] = q[j];
-    ws.prev_qd[j] = qd[j];
   }
-  ws.prev_t = t;
   ws.has_previous = true;
+}
+
+Eigen::MatrixXd LinearTorqueModel::predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
+                                                    const Eigen::MatrixXd& velocity) const {
+  const int M = num_outputs(), N = num_joints();
+  const Eigen::Index T = time.size();
+  if (!is_time_sorted(time) || !(parameters_.batch_acceleration_window_s.array() > 0).any())
+    return TorqueModel::predict_sequence(time, position, velocity);
+  Eigen::MatrixXd qdd = Eigen::MatrixXd::Zero(M, T);  // column per sample
+  for (int j = 0; j < M; ++j)
+    if (parameters_.batch_acceleration_window_s[j] > 0)
+      qdd.row(j) = compute_zero_phase_acceleration(time, velocity.col(j), parameters_.batch_acceleration_window_s[j])
+                       .transpose();
+  auto ws = create_workspace();
+  Eigen::VectorXd q(N), qd(N), tau(M);
+  Eigen::MatrixXd out(T, M);
+  for (Eigen::Index t = 0; t < T; ++t) {
+    q = position.row(t).head(N).transpose();
+    qd = velocity.row(t).head(N).transpose();
+    compute_step_with_acceleration(*ws, time(t), q.data(), qd.data(), qdd.col(t).data(), tau.data());
+    out.row(t) = tau.transpose();
+  }
+  return out;
 }
 
 nlohmann::json LinearTorqueModel::save_parameters() const {
@@ -119,7 +270,9 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
           {"coulomb", detail::encode_vector(p.coulomb)},
           {"offset", detail::encode_vector(p.offset)},
           {"dahl_displacement", detail::encode_vector(p.dahl_displacement)},
-          {"acceleration_filter_s", p.acceleration_filter_s}};
+          {"acceleration_window_s", detail::encode_vector(p.acceleration_window_s)},
+          {"acceleration_filter_s", detail::encode_vector(p.acceleration_filter_s)},
+          {"batch_acceleration_window_s", detail::encode_vector(p.batch_acceleration_window_s)}};
 }
 
 std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info, const nlohmann::json& j,
@@ -135,9 +288,30 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
   p.dahl_displacement =
       decode_vector_d(require(j, "dahl_displacement", source, f), source, f + ".dahl_displacement", M);
   if ((p.dahl_displacement.array() <= 0).any()) fail(source, f + ".dahl_displacement", "expected positive values");
+  // Files written before the qddot estimate was chosen per joint hold one number
+  // for the low-pass and no windows (backward difference, causal batch).
   const auto& tau = require(j, "acceleration_filter_s", source, f);
-  if (!tau.is_number() || !(tau.get<double>() >= 0)) fail(source, f + ".acceleration_filter_s", "expected a number >= 0");
-  p.acceleration_filter_s = tau.get<double>();
+  if (tau.is_number()) {
+    if (!(tau.get<double>() >= 0)) fail(source, f + ".acceleration_filter_s", "expected a number >= 0");
+    p.acceleration_filter_s = Eigen::VectorXd::Constant(M, tau.get<double>());
+  } else {
+    p.acceleration_filter_s = decode_vector_d(tau, source, f + ".acceleration_filter_s", M);
+  }
+  if (j.contains("acceleration_window_s"))
+    p.acceleration_window_s = decode_vector_d(j["acceleration_window_s"], source, f + ".acceleration_window_s", M);
+  else
+    p.acceleration_window_s = Eigen::VectorXd::Constant(M, kDefaultAccelerationWindow);
+  if (j.contains("batch_acceleration_window_s"))
+    p.batch_acceleration_window_s =
+        decode_vector_d(j["batch_acceleration_window_s"], source, f + ".batch_acceleration_window_s", M);
+  else
+    p.batch_acceleration_window_s = Eigen::VectorXd::Zero(M);
+  if (!(p.batch_acceleration_window_s.array() >= 0).all())
+    fail(source, f + ".batch_acceleration_window_s", "expected values >= 0");
+  if (!(p.acceleration_filter_s.array() >= 0).all())
+    fail(source, f + ".acceleration_filter_s", "expected values >= 0");
+  if (!(p.acceleration_window_s.array() >= 0).all())
+    fail(source, f + ".acceleration_window_s", "expected values >= 0");
   if (info.num_joints < 3) fail(source, "num_joints", "the linear model needs at least 3 joints");
   return std::make_unique<LinearTorqueModel>(std::move(info), std::move(p));
 }
@@ -146,9 +320,8 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
 
 namespace {
 
-// Per joint and per Dahl candidate: Gram matrix of the joint's regressor
-// [gravity (17, joints 1-3), qdd, v, z, 1] and its products with the torque, so
-// that every candidate combination is scored without touching the samples again.
+// Gram matrix of one joint's regressor [gravity (17, joints 1-3), qdd, v, z, 1]
+// and its products with the torque, for one x_c and one qddot candidate.
 struct JointStats {
   Eigen::MatrixXd C;  // (G + 4)^2
   Eigen::VectorXd r;
@@ -161,54 +334,94 @@ struct JointStats {
   }
 };
 
-JointStats compute_stats(const std::vector<Recording>& recs, const std::vector<SampleSegment>& segments, int j,
-                         double x_c, double weight, double tau_a) {
-  const int P = G + kBlock;
-  JointStats s{Eigen::MatrixXd::Zero(P, P), Eigen::VectorXd::Zero(P), 0.0};
-  Eigen::Matrix<double, 3, G> Y;
-  constexpr Eigen::Index kChunk = 4096;
-  Eigen::MatrixXd F(kChunk, P);
-  Eigen::VectorXd y(kChunk);
-  for (const auto& seg : segments) {
-    const auto& rec = recs[seg.recording];
-    // The state needs the history from the recording's start.
-    double z = 0.0, qdd = 0.0;
-    for (Eigen::Index t = 1; t < seg.begin; ++t) {
-      z = advance_dahl(z, rec.position(t, j) - rec.position(t - 1, j), x_c);
-      const double dt = rec.time(t) - rec.time(t - 1);
-      qdd = filter_acceleration(qdd, (rec.velocity(t, j) - rec.velocity(t - 1, j)) / dt, dt, tau_a);
-    }
-    Eigen::Index n = 0;
-    auto flush = [&]() {
-      s.C.noalias() += F.topRows(n).transpose() * F.topRows(n);
-      s.r.noalias() += F.topRows(n).transpose() * y.head(n);
-      s.yy += y.head(n).squaredNorm();
-      n = 0;
-    };
-    for (Eigen::Index t = seg.begin; t < seg.end; ++t) {
-      if (t > 0) {
-        z = advance_dahl(z, rec.position(t, j) - rec.position(t - 1, j), x_c);
-        const double dt = rec.time(t) - rec.time(t - 1);
-        qdd = filter_acceleration(qdd, (rec.velocity(t, j) - rec.velocity(t - 1, j)) / dt, dt, tau_a);
+// A candidate qddot estimate: window and low-pass time constant, s.
+struct AccelerationChoice {
+  double window_s, filter_s;
+};
+
+// One pass over a joint's samples with every candidate at once: the Gram matrix
+// of [gravity, v, 1, qdd per causal qddot candidate, qdd per zero-phase window,
+// z per x_c candidate] and its products with the torque, from which the
+// statistics of any combination are read without touching the samples again.
+// Acceleration column a < acc.size() is causal candidate a, the others are the
+// zero-phase estimates batch[recording][a - acc.size()] of the joint.
+class JointCandidateStats {
+ public:
+  JointCandidateStats(const std::vector<Recording>& recs, const std::vector<SampleSegment>& segments, int j,
+                      const std::vector<double>& x_c, const std::vector<AccelerationChoice>& acc,
+                      const std::vector<std::vector<Eigen::VectorXd>>& batch, double weight, double sample_period_s)
+      : A_(static_cast<int>(acc.size() + (batch.empty() ? 0 : batch.front().size()))),
+        K_(static_cast<int>(x_c.size())) {
+    const int causal = static_cast<int>(acc.size());
+    const int P = G + 2 + A_ + K_;
+    C_ = Eigen::MatrixXd::Zero(P, P);
+    r_ = Eigen::VectorXd::Zero(P);
+    Eigen::Matrix<double, 3, G> Y;
+    constexpr Eigen::Index kChunk = 4096;
+    Eigen::MatrixXd F(kChunk, P);
+    Eigen::VectorXd y(kChunk);
+    std::vector<AccelerationEstimator> estimators;
+    for (const auto& a : acc) estimators.emplace_back(a.window_s, a.filter_s, sample_period_s);
+    Eigen::VectorXd z(K_);
+    for (const auto& seg : segments) {
+      const auto& rec = recs[seg.recording];
+      // The states need the history from the recording's start; the estimators
+      // are compute_step's, so that fit and prediction agree.
+      for (auto& e : estimators) e.reset();
+      z.setZero();
+      Eigen::Index n = 0;
+      auto flush = [&]() {
+        C_.noalias() += F.topRows(n).transpose() * F.topRows(n);
+        r_.noalias() += F.topRows(n).transpose() * y.head(n);
+        yy_ += y.head(n).squaredNorm();
+        n = 0;
+      };
+      for (Eigen::Index t = 0; t < seg.end; ++t) {
+        if (t > 0)
+          for (int k = 0; k < K_; ++k) z[k] = advance_dahl(z[k], rec.position(t, j) - rec.position(t - 1, j), x_c[k]);
+        for (int a = 0; a < causal; ++a) estimators[a].update(rec.time(t), rec.velocity(t, j));
+        if (t < seg.begin) continue;
+        if (j < 3) {
+          double q3[3] = {rec.position(t, 0), rec.position(t, 1), rec.position(t, 2)};
+          LinearTorqueModel::compute_gravity_regressor(q3, Y);
+          F.row(n).head(G) = Y.row(j) * weight;
+        } else {
+          F.row(n).head(G).setZero();
+        }
+        F(n, G + 0) = rec.velocity(t, j) * weight;
+        F(n, G + 1) = weight;
+        for (int a = 0; a < causal; ++a) F(n, G + 2 + a) = estimators[a].value() * weight;
+        for (int a = causal; a < A_; ++a) F(n, G + 2 + a) = batch[seg.recording][a - causal](t) * weight;
+        for (int k = 0; k < K_; ++k) F(n, G + 2 + A_ + k) = z[k] * weight;
+        y(n) = rec.effort(t, j) * weight;
+        if (++n == kChunk) flush();
       }
-      if (j < 3) {
-        double q3[3] = {rec.position(t, 0), rec.position(t, 1), rec.position(t, 2)};
-        LinearTorqueModel::compute_gravity_regressor(q3, Y);
-        F.row(n).head(G) = Y.row(j) * weight;
-      } else {
-        F.row(n).head(G).setZero();
-      }
-      F(n, G + 0) = qdd * weight;
-      F(n, G + 1) = rec.velocity(t, j) * weight;
-      F(n, G + 2) = z * weight;
-      F(n, G + 3) = weight;
-      y(n) = rec.effort(t, j) * weight;
-      if (++n == kChunk) flush();
+      if (n) flush();
     }
-    if (n) flush();
   }
-  return s;
-}
+
+  JointStats get_stats(int dahl, int acceleration) const {
+    // Columns of the combination in JointStats order [gravity, qdd, v, z, 1].
+    std::array<int, G + kBlock> idx;
+    for (int k = 0; k < G; ++k) idx[k] = k;
+    idx[G + 0] = G + 2 + acceleration;
+    idx[G + 1] = G;
+    idx[G + 2] = G + 2 + A_ + dahl;
+    idx[G + 3] = G + 1;
+    JointStats s{Eigen::MatrixXd(G + kBlock, G + kBlock), Eigen::VectorXd(G + kBlock), yy_};
+    for (int u = 0; u < G + kBlock; ++u) {
+      s.r(u) = r_(idx[u]);
+      for (int v = 0; v < G + kBlock; ++v) s.C(u, v) = C_(idx[u], idx[v]);
+    }
+    return s;
+  }
+
+ private:
+  int A_, K_;
+  Eigen::MatrixXd C_;
+  Eigen::VectorXd r_;
+  double yy_ = 0.0;
+};
 
 // Index of joint j's block parameter b in the global vector.
 inline int block_index(int j, int b) { return G + kBlock * j + b; }
@@ -309,42 +522,97 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
     weight[j] = var > 0 ? 1.0 / std::sqrt(var) : 1.0;
     range[j] = std::max(hi - lo, 1e-6);
   }
+  const double sample_period = median_sample_period(recordings);
   const std::vector<double> grid = {1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1};
+  // Causal qddot candidates (compute_step): the low-pass of the backward
+  // difference (the first is the default of older model files) and quadratic fits
+  // over 40-120 ms, with or without a light low-pass after them.
+  const std::vector<AccelerationChoice> accelerations = {
+      {0.0, kDefaultAccelerationFilter}, {0.0, 0.01}, {0.0, 0.02}, {0.0, 0.05}, {0.04, 0.0}, {0.06, 0.0},
+      {0.08, 0.0}, {0.10, 0.0}, {0.12, 0.0}, {0.06, 0.01}, {0.10, 0.01}};
+  // Zero-phase windows (predict_torque); the fit regresses on the chosen one.
+  // Recordings read from files have increasing time; one built in memory whose
+  // time goes back gets the causal estimate only.
+  bool sorted = true;
+  for (const auto& r : recordings) sorted = sorted && is_time_sorted(r.time);
+  const std::vector<double> batch_windows =
+      sorted ? std::vector<double>{0.03, 0.05, 0.07, 0.10} : std::vector<double>{};
   const int K = static_cast<int>(grid.size());
-  std::vector<std::vector<JointStats>> train(M), val(M);
-  for (int j = 0; j < M; ++j)
-    for (int k = 0; k < K; ++k) {
-      train[j].push_back(compute_stats(recordings, split.train, j, grid[k] * range[j], weight[j], kAccelerationFilter));
-      val[j].push_back(compute_stats(recordings, split.validation, j, grid[k] * range[j], weight[j], kAccelerationFilter));
-    }
-  // Coordinate descent over each joint's x_c, scored on the validation split.
-  std::vector<int> choice(M, 4);
-  auto score = [&](const std::vector<int>& c) {
+  const int A = static_cast<int>(accelerations.size());
+  const int B = static_cast<int>(batch_windows.size());
+  // Statistics of every joint and candidate, one pass per joint and split.
+  std::vector<JointCandidateStats> train, val;
+  for (int j = 0; j < M; ++j) {
+    std::vector<double> x_c(K);
+    for (int k = 0; k < K; ++k) x_c[k] = grid[k] * range[j];
+    std::vector<std::vector<Eigen::VectorXd>> batch(recordings.size());
+    for (std::size_t r = 0; r < recordings.size(); ++r)
+      for (double w : batch_windows)
+        batch[r].push_back(compute_zero_phase_acceleration(recordings[r].time, recordings[r].velocity.col(j), w));
+    train.emplace_back(recordings, split.train, j, x_c, accelerations, batch, weight[j], sample_period);
+    val.emplace_back(recordings, split.validation, j, x_c, accelerations, batch, weight[j], sample_period);
+  }
+  struct Choice {
+    int dahl, acceleration;  // acceleration: column, < A causal, >= A zero-phase
+  };
+  // Scoring reads a few hundred combinations; keep each one read.
+  std::vector<std::vector<std::unique_ptr<JointStats>>> cache_train(M), cache_val(M);
+  for (int j = 0; j < M; ++j) {
+    cache_train[j].resize(K * (A + B));
+    cache_val[j].resize(K * (A + B));
+  }
+  auto stats = [&](int j, const Choice& c, bool validation) -> const JointStats& {
+    auto& slot = (validation ? cache_val : cache_train)[j][c.dahl * (A + B) + c.acceleration];
+    if (!slot)
+      slot = std::make_unique<JointStats>((validation ? val : train)[j].get_stats(c.dahl, c.acceleration));
+    return *slot;
+  };
+  auto score = [&](const std::vector<Choice>& c) {
     std::vector<const JointStats*> tr(M), va(M);
     for (int j = 0; j < M; ++j) {
-      tr[j] = &train[j][c[j]];
-      va[j] = &val[j][c[j]];
+      tr[j] = &stats(j, c[j], false);
+      va[j] = &stats(j, c[j], true);
     }
     return objective(va, solve_constrained(tr, M), M);
   };
-  double best = score(choice);
-  for (int sweep = 0; sweep < 2; ++sweep)
-    for (int j = 0; j < M; ++j)
-      for (int k = 0; k < K; ++k) {
-        auto trial = choice;
-        trial[j] = k;
-        const double e = score(trial);
-        if (e < best) {
-          best = e;
-          choice = trial;
+  // Coordinate descent over each joint's x_c and qddot column in [first, end),
+  // scored on the validation split.
+  auto descend = [&](std::vector<Choice> choice, int first, int end, double& best) {
+    best = score(choice);
+    for (int sweep = 0; sweep < 2; ++sweep) {
+      for (int j = 0; j < M; ++j)
+        for (int k = 0; k < K; ++k) {
+          auto trial = choice;
+          trial[j].dahl = k;
+          const double e = score(trial);
+          if (e < best) best = e, choice = trial;
         }
-      }
+      for (int j = 0; j < M; ++j)
+        for (int a = first; a < end; ++a) {
+          auto trial = choice;
+          trial[j].acceleration = a;
+          const double e = score(trial);
+          if (e < best) best = e, choice = trial;
+        }
+    }
+    return choice;
+  };
+  // The causal estimate of compute_step, then x_c and the zero-phase window with
+  // which the coefficients are fitted.
+  double best_causal = 0.0, best = 0.0;
+  const std::vector<Choice> causal = descend(std::vector<Choice>(M, Choice{4, 0}), 0, A, best_causal);
+  std::vector<Choice> choice = causal;
+  best = best_causal;
+  if (B > 0) {
+    for (int j = 0; j < M; ++j) choice[j].acceleration = A + 1;
+    choice = descend(choice, A, A + B, best);
+  }
   // Final coefficients from train + validation.
   std::vector<JointStats> both(M);
   std::vector<const JointStats*> ptr(M);
   for (int j = 0; j < M; ++j) {
-    both[j] = train[j][choice[j]];
-    both[j] += val[j][choice[j]];
+    both[j] = stats(j, choice[j], false);
+    both[j] += stats(j, choice[j], true);
     ptr[j] = &both[j];
   }
   const Eigen::VectorXd theta = solve_constrained(ptr, M);
@@ -356,15 +624,20 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
   p.coulomb.resize(M);
   p.offset.resize(M);
   p.dahl_displacement.resize(M);
+  p.acceleration_window_s.resize(M);
+  p.acceleration_filter_s.resize(M);
+  p.batch_acceleration_window_s.resize(M);
   for (int j = 0; j < M; ++j) {
     // Rows were scaled by weight[j] on both sides, so coefficients are in joint units.
     p.armature[j] = theta(block_index(j, 0));
     p.viscous[j] = theta(block_index(j, 1));
     p.coulomb[j] = theta(block_index(j, 2));
     p.offset[j] = theta(block_index(j, 3));
-    p.dahl_displacement[j] = grid[choice[j]] * range[j];
+    p.dahl_displacement[j] = grid[choice[j].dahl] * range[j];
+    p.acceleration_window_s[j] = accelerations[causal[j].acceleration].window_s;
+    p.acceleration_filter_s[j] = accelerations[causal[j].acceleration].filter_s;
+    p.batch_acceleration_window_s[j] = B > 0 ? batch_windows[choice[j].acceleration - A] : 0.0;
   }
-  p.acceleration_filter_s = kAccelerationFilter;
   summary.best_validation_loss = best / static_cast<double>(summary.validation_samples * M);
 
   // Too few data: fewer than 20 training rows per parameter, or a joint whose
@@ -391,7 +664,7 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
   TorqueModelInfo info;
   info.num_joints = N;
   info.num_outputs = M;
-  info.sample_period_s = median_sample_period(recordings);
+  info.sample_period_s = sample_period;
   auto model_for_test = std::make_unique<LinearTorqueModel>(info, p);
   if (!split.test.empty()) summary.test_errors = evaluate_on_segments(*model_for_test, recordings, split.test);
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

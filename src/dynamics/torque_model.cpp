@@ -201,14 +201,20 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& 
     throw std::invalid_argument("predict_torque: time, position and velocity sizes differ");
   if (position.cols() < model.num_joints())
     throw std::invalid_argument("predict_torque: fewer joints than the model reads");
-  auto ws = model.create_workspace();
-  const int N = model.num_joints();
-  Eigen::VectorXd q(N), qd(N), tau(model.num_outputs());
-  Eigen::MatrixXd out(T, model.num_outputs());
+  return model.predict_sequence(time, position, velocity);
+}
+
+Eigen::MatrixXd TorqueModel::predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
+                                              const Eigen::MatrixXd& velocity) const {
+  const Eigen::Index T = time.size();
+  auto ws = create_workspace();
+  const int N = num_joints();
+  Eigen::VectorXd q(N), qd(N), tau(num_outputs());
+  Eigen::MatrixXd out(T, num_outputs());
   for (Eigen::Index t = 0; t < T; ++t) {
     q = position.row(t).head(N).transpose();
     qd = velocity.row(t).head(N).transpose();
-    model.compute_step(*ws, time(t), q.data(), qd.data(), tau.data());
+    compute_step(*ws, time(t), q.data(), qd.data(), tau.data());
     out.row(t) = tau.transpose();
   }
   return out;

@@ -8,32 +8,11 @@
 #include <random>
 #include <stdexcept>
 
+#include "joint_model.hpp"
 #include "rcm/common/error.hpp"
 
 namespace rcm {
 namespace {
-
-// tau_pred of the joint model; T is double or a ceres::Jet.
-template <typename T>
-void predict(const JointSample& d, const Eigen::Matrix3d& R_base_inc, double v0, const T* p, const T* tissue, T* tau) {
-  using V3 = Eigen::Matrix<T, 3, 1>;
-  const V3 z3 = d.z3.cast<T>(), a1 = d.dz3_dq1.cast<T>(), a2 = d.dz3_dq2.cast<T>(), z3_dot = d.z3_dot.cast<T>();
-  const T D = p[2];
-  const T s = D / d.cos_theta;
-  const double n_dot_z3dot = R_base_inc.col(2).dot(d.z3_dot);
-  const T s_dot = -D * n_dot_z3dot / (d.cos_theta * d.cos_theta);
-  const V3 anchor = R_base_inc.cast<T>() * V3(p[0], p[1], p[2]);
-  const V3 stretch = s * z3 - anchor;
-  // Smoothed norm (1 um): the radial force is continuous through zero stretch.
-  const T x = ceres::sqrt(stretch.squaredNorm() + T(1e-12));
-  const T g = tissue[0] * x + tissue[1] * x * x * x;
-  V3 f = (g / x) * stretch;
-  f += tissue[2] * (s_dot * z3 + s * z3_dot);
-  f += tissue[3] * ceres::tanh((T(d.qd3) - s_dot) / T(v0)) * z3;
-  tau[0] = s * a1.dot(f);
-  tau[1] = s * a2.dot(f);
-  tau[2] = z3.dot(f);
-}
 
 struct JointResidual {
   JointResidual(const JointSample& sample, const Eigen::Matrix3d& R, double v0, const Eigen::Vector3d& sigma,
@@ -42,7 +21,7 @@ struct JointResidual {
   template <typename T>
   bool operator()(const T* p, const T* tissue, T* residual) const {
     T tau[3];
-    predict(sample, R, v0, p, tissue, tau);
+    detail::predict_joint_torque(sample, R, v0, p, tissue, tau);
     for (int j = 0; j < 3; ++j) residual[j] = (T(dtau[j]) - tau[j]) * inv_sigma[j];
     return true;
   }
@@ -147,27 +126,43 @@ std::vector<JointSample> make_joint_samples(const IncisionFrame& incision, const
   }
   std::vector<JointSample> out;
   out.reserve(static_cast<std::size_t>(r.time.size()));
+  JointSample s;
   for (Eigen::Index t = 0; t < r.time.size(); ++t) {
-    const Eigen::Vector3d q = r.position.row(t).head<3>().transpose();
-    JointSample s;
-    s.z3 = compute_z3_base(q);
-    s.cos_theta = incision.z_inc_base().dot(s.z3);
-    if (!(std::atan2(incision.z_inc_base().cross(s.z3).norm(), s.cos_theta) <= max_theta_rad)) continue;
-    const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), s2 = std::sin(q[1]), c2 = std::cos(q[1]);
-    s.dz3_dq1 = Eigen::Vector3d(c1 * c2, 0.0, s1 * c2);
-    s.dz3_dq2 = Eigen::Vector3d(-s1 * s2, -c2, c1 * s2);
-    s.z3_dot = s.dz3_dq1 * r.velocity(t, 0) + s.dz3_dq2 * r.velocity(t, 1);
-    s.qd3 = r.velocity(t, 2);
-    s.dtau = (r.effort.row(t).head<3>() - tau_fs.row(t).head<3>()).transpose();
-    out.push_back(s);
+    const Eigen::Vector3d dtau = (r.effort.row(t).head<3>() - tau_fs.row(t).head<3>()).transpose();
+    if (compute_joint_sample(incision, r.position.row(t).head<3>().transpose(), r.velocity.row(t).head<3>().transpose(),
+                             dtau, max_theta_rad, s))
+      out.push_back(s);
   }
   return out;
+}
+
+bool compute_joint_sample(const IncisionFrame& incision, const Eigen::Vector3d& q, const Eigen::Vector3d& qd,
+                          const Eigen::Vector3d& dtau, double max_theta_rad, JointSample& s) {
+  s.z3 = compute_z3_base(q);
+  s.cos_theta = incision.z_inc_base().dot(s.z3);
+  if (!(std::atan2(incision.z_inc_base().cross(s.z3).norm(), s.cos_theta) <= max_theta_rad)) return false;
+  const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), s2 = std::sin(q[1]), c2 = std::cos(q[1]);
+  s.dz3_dq1 = Eigen::Vector3d(c1 * c2, 0.0, s1 * c2);
+  s.dz3_dq2 = Eigen::Vector3d(-s1 * s2, -c2, c1 * s2);
+  s.z3_dot = s.dz3_dq1 * qd[0] + s.dz3_dq2 * qd[1];
+  s.qd3 = qd[2];
+  s.dtau = dtau;
+  return true;
+}
+
+Eigen::Vector3d compute_joint_model_force(const IncisionFrame& incision, const JointTissueModel& tissue,
+                                          const JointSample& sample, const Eigen::Vector3d& misalignment_m) {
+  double tau[3];
+  Eigen::Vector3d f;
+  detail::predict_joint_torque(sample, incision.R_base_inc, tissue.axial_velocity_scale, misalignment_m.data(),
+                               tissue.parameters.data(), tau, &f);
+  return f;
 }
 
 Eigen::Vector3d compute_joint_model_torque(const IncisionFrame& incision, const JointTissueModel& tissue,
                                            const JointSample& sample, const Eigen::Vector3d& misalignment_m) {
   Eigen::Vector3d tau;
-  predict(sample, incision.R_base_inc, tissue.axial_velocity_scale, misalignment_m.data(), tissue.parameters.data(),
+  detail::predict_joint_torque(sample, incision.R_base_inc, tissue.axial_velocity_scale, misalignment_m.data(), tissue.parameters.data(),
           tau.data());
   return tau;
 }
@@ -197,6 +192,18 @@ JointTissueModel fit_joint_tissue_model(const IncisionFrame& incision, const std
   out.family = stiff ? "stiffening" : "linear";
   out.cost = chosen.cost;
   out.bic = stiff ? bic_cubic : bic_linear;
+
+  {
+    // The fitted model re-estimates the calibration's own offsets (multi-start,
+    // as a trial): any departure from [0, 0, D*] is systematic.
+    Fit best;
+    best.cost = std::numeric_limits<double>::infinity();
+    for (double D0 : o.D_starts) {
+      Fit f = solve(incision, calibration, nullptr, o, v0, Eigen::Vector3d(0, 0, D0), out.parameters, true, false, false);
+      if (f.cost < best.cost) best = f;
+    }
+    out.calibration_bias_m = best.p - p;
+  }
 
   if (o.calibration_bootstrap_replicates > 1) {
     std::vector<Eigen::Vector3d> fitted(calibration.size()), resid(calibration.size()), dtau;
@@ -307,7 +314,11 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
   }
   const Eigen::Matrix3d cov_tissue = S * tissue.covariance * S.transpose();
   out.sd_tissue = cov_tissue.diagonal().cwiseMax(0.0).cwiseSqrt();
-  const Eigen::Vector3d half = 1.96 * (out.sd_bootstrap.array().square() + out.sd_tissue.array().square()).sqrt().matrix();
+  out.sd_systematic = tissue.calibration_bias_m.cwiseAbs();
+  const Eigen::Vector3d half = 1.96 * (out.sd_bootstrap.array().square() + out.sd_tissue.array().square() +
+                                       out.sd_systematic.array().square())
+                                          .sqrt()
+                                          .matrix();
   out.ci_low = best.p - half;
   out.ci_high = best.p + half;
   return out;

@@ -66,6 +66,66 @@ Eigen::Vector3d compute_settled_free_space_torque(const dynamics::TorqueModel& m
   return {tau[0], tau[1], tau[2]};
 }
 
+FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOptions& options,
+                                       const TorqueModelFitter& fitter) {
+  FreeSpaceModelStep out;
+  out.kind = options.model_kind;
+  std::vector<Recording> free_space;
+  for (const auto& p : session.free_space) free_space.push_back(load_recording(p, options.read));
+  if (options.model_file) {
+    progress(options.verbose, "loading free-space model " + options.model_file->string());
+    out.model = dynamics::load_torque_model(*options.model_file);
+    out.kind = out.model->kind();
+    const dynamics::TimeSplit split = dynamics::split_in_time(free_space, 0.7, 0.2);
+    out.errors = dynamics::evaluate_on_segments(*out.model, free_space, split.test);
+  } else {
+    progress(options.verbose, "fitting the " + dynamics::to_string(options.model_kind) + " free-space model on " +
+                                  std::to_string(free_space.size()) + " recording(s)");
+    dynamics::FitResult fit = fitter(options.model_kind, free_space, options.fit);
+    out.fit = fit.summary;
+    out.errors = fit.summary.test_errors;
+    out.model = std::move(fit.model);
+    progress(options.verbose, "free-space model: " + out.fit->brief_report());
+  }
+  if (out.model->num_outputs() < 3) {
+    InputLocation where;
+    where.file = options.model_file ? options.model_file->string() : "free-space model";
+    throw InputError(where, "the model predicts " + std::to_string(out.model->num_outputs()) +
+                                " joints; the estimator needs joints 1-3");
+  }
+  return out;
+}
+
+JointEstimatorOptions make_joint_options_for_model(const JointEstimatorOptions& base, const FreeSpaceModelStep& step) {
+  JointEstimatorOptions o = base;
+  // Residual scales: the free-space model's own held-out error, with a floor for
+  // models that fit their data too well.
+  for (const auto& e : step.errors)
+    if (e.index >= 1 && e.index <= 3) o.torque_sigma[e.index - 1] = std::max(e.rmse, e.index == 3 ? 0.05 : 0.01);
+  o.sample_period_s = step.model->info().sample_period_s > 0 ? step.model->info().sample_period_s : 0.005;
+  return o;
+}
+
+MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
+  if (!session.calibration) {
+    InputLocation where;
+    where.file = session.manifest.string();
+    where.kind = InputLocation::Kind::json_field;
+    where.field = "calibration";
+    throw InputError(where, "missing: the monitor identifies the tissue on a calibration at a known coaxial offset");
+  }
+  MonitorSetup setup{fit_free_space_step(session, options, fitter), make_incision_frame(session.q0), {}, {}};
+  setup.joint_options = make_joint_options_for_model(options.joint, setup.free_space);
+  const Recording calibration = load_recording(session.calibration->recording, options.read);
+  progress(options.verbose, "identifying the tissue model in torque space on " + calibration.source);
+  const Eigen::MatrixXd tau_fs_cal = dynamics::predict_torque(*setup.free_space.model, calibration);
+  setup.tissue = fit_joint_tissue_model(
+      setup.incision,
+      make_joint_samples(setup.incision, calibration, tau_fs_cal, options.three_step.coaxial.max_theta_rad),
+      session.calibration->coaxial_offset_m, setup.joint_options);
+  return setup;
+}
+
 StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
   const auto start = std::chrono::steady_clock::now();
   InputLocation manifest_where;
@@ -93,30 +153,12 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   const IncisionFrame incision = make_incision_frame(session.q0);
 
   // Step 0: the free-space model.
-  std::vector<Recording> free_space;
-  for (const auto& p : session.free_space) free_space.push_back(load_recording(p, options.read));
-  if (options.model_file) {
-    progress(options.verbose, "loading free-space model " + options.model_file->string());
-    result.model = dynamics::load_torque_model(*options.model_file);
-    result.model_kind = result.model->kind();
-    const dynamics::TimeSplit split = dynamics::split_in_time(free_space, 0.7, 0.2);
-    result.free_space_errors = dynamics::evaluate_on_segments(*result.model, free_space, split.test);
-  } else {
-    progress(options.verbose, "fitting the " + dynamics::to_string(options.model_kind) + " free-space model on " +
-                                  std::to_string(free_space.size()) + " recording(s)");
-    dynamics::FitResult fit = fitter(options.model_kind, free_space, options.fit);
-    result.fit = fit.summary;
-    result.free_space_errors = fit.summary.test_errors;
-    result.model = std::move(fit.model);
-    progress(options.verbose, "free-space model: " + result.fit->brief_report());
-  }
+  FreeSpaceModelStep free_space_step = fit_free_space_step(session, options, fitter);
+  result.model = free_space_step.model;
+  result.model_kind = free_space_step.kind;
+  result.fit = free_space_step.fit;
+  result.free_space_errors = free_space_step.errors;
   const dynamics::TorqueModel& model = *result.model;
-  if (model.num_outputs() < 3) {
-    InputLocation where;
-    where.file = options.model_file ? options.model_file->string() : "free-space model";
-    throw InputError(where, "the model predicts " + std::to_string(model.num_outputs()) +
-                                " joints; the estimator needs joints 1-3");
-  }
 
   // Step 2: the tissue law from the calibration at D*.
   const Recording calibration = load_recording(session.calibration->recording, options.read);
@@ -148,12 +190,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   // Joint method, step 2 in torque space: the tissue parameters at D*.
   JointEstimatorOptions joint_options = options.joint;
   if (options.method == "joint") {
-    // Residual scales: the free-space model's own error, with a floor for models
-    // that fit their training data too well.
-    for (const auto& e : result.free_space_errors)
-      if (e.index >= 1 && e.index <= 3)
-        joint_options.torque_sigma[e.index - 1] = std::max(e.rmse, e.index == 3 ? 0.05 : 0.01);
-    joint_options.sample_period_s = model.info().sample_period_s > 0 ? model.info().sample_period_s : 0.005;
+    joint_options = make_joint_options_for_model(options.joint, free_space_step);
     progress(options.verbose, "joint method: identifying the tissue model in torque space");
     result.joint_tissue = fit_joint_tissue_model(
         incision, make_joint_samples(incision, calibration, tau_fs_cal, options.three_step.coaxial.max_theta_rad),
@@ -178,7 +215,13 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
       joint_samples = make_joint_samples(incision, trial, tau_fs, options.three_step.coaxial.max_theta_rad);
     if (spec.static_recording) {
       const Recording hold_rec = load_recording(*spec.static_recording, options.read);
-      const Eigen::MatrixXd tau_fs_hold = dynamics::predict_torque(model, hold_rec);
+      // At the hold the encoders chatter by a count; the model runs on positions
+      // with that chatter removed so that its friction memory survives.
+      const Eigen::MatrixXd tau_fs_hold =
+          options.hold_chatter_width_counts > 0
+              ? dynamics::predict_torque(model, remove_position_chatter(hold_rec, options.hold_chatter_width_counts *
+                                                                                    estimate_position_quantum(hold_rec)))
+              : dynamics::predict_torque(model, hold_rec);
       out.hold = compute_static_hold(hold_rec, tau_fs_hold, session.q0, options.rest);
       dtau_radial = out.hold->get_dtau();
       if (result.joint_tissue) {
@@ -186,7 +229,13 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
         joint_samples.insert(joint_samples.end(), hold_samples.begin(), hold_samples.end());
       }
     }
-    if (result.joint_tissue) out.joint = estimate_joint(incision, *result.joint_tissue, joint_samples, joint_options);
+    if (result.joint_tissue) {
+      out.joint = estimate_joint(incision, *result.joint_tissue, joint_samples, joint_options);
+      // The same trial streamed sample by sample, as `rcm monitor` would see it.
+      const OnlinePipeline pipeline(result.model, OnlineEstimator(incision, *result.joint_tissue,
+                                                                  make_online_options(joint_options)));
+      out.online = replay_online(pipeline, trial);
+    }
     out.estimate = estimate_three_step(incision, g, trial, tau_fs, dtau_radial, options.three_step);
     if (out.hold)
       out.paper_variant = estimate_three_step(incision, g, trial, tau_fs, out.hold->tau_measured - tau_fs_paper,
@@ -293,9 +342,11 @@ nlohmann::json StudyResult::to_json() const {
                                {"bic", joint_tissue->bic},
                                {"parameter_sd", {std::sqrt(joint_tissue->covariance(0, 0)), std::sqrt(joint_tissue->covariance(1, 1)),
                                                  std::sqrt(joint_tissue->covariance(2, 2)), std::sqrt(joint_tissue->covariance(3, 3))}},
-                               {"bootstrap_replicates", joint_tissue->bootstrap_replicates}};
+                               {"bootstrap_replicates", joint_tissue->bootstrap_replicates},
+                               {"calibration_bias_m", vec_json(joint_tissue->calibration_bias_m)}};
   nlohmann::json trials_json = nlohmann::json::array();
-  std::vector<double> e_far, e_near, e3_far, e3_near;
+  std::vector<double> e_far, e_near, e3_far, e3_near, eo_far, eo_near;
+  double settle_max = 0.0;
   std::size_t covered = 0, with_interval = 0;
   for (const auto& t : trials) {
     nlohmann::json jt = estimate_json(t.estimate, t.truth_m);
@@ -308,6 +359,7 @@ nlohmann::json StudyResult::to_json() const {
                            {"sd_m", vec_json(je.covariance.diagonal().cwiseSqrt())},
                            {"sd_bootstrap_m", vec_json(je.sd_bootstrap)},
                            {"sd_tissue_m", vec_json(je.sd_tissue)},
+                           {"sd_systematic_m", vec_json(je.sd_systematic)},
                            {"bootstrap_replicates", je.bootstrap_replicates},
                            {"samples", je.samples},
                            {"solver", solver_json(je.solver)}};
@@ -321,6 +373,25 @@ nlohmann::json StudyResult::to_json() const {
         }
       }
       jt["joint"] = jj;
+      if (t.online) {
+        const OnlineReplay& o = *t.online;
+        auto opt = [](const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); };
+        nlohmann::json jo = {{"misalignment_m", vec_json(o.final_output.misalignment_m)},
+                             {"sd_m", vec_json(o.final_output.sd_m)},
+                             {"onset_s", opt(o.onset_s)},
+                             {"motion_start_s", opt(o.motion_start_s)},
+                             {"settled_after_s", opt(o.settled_after_s)},
+                             {"alarms", o.alarms.size()},
+                             {"peak_force_n", o.peak_force_n},
+                             {"mean_update_us", 1e6 * o.mean_update_s}};
+        if (t.truth_m) {
+          const double e = (o.final_output.misalignment_m - *t.truth_m).norm();
+          jo["error_m"] = e;
+          ((*t.truth_m)[2] > 0.020 + 1e-9 ? eo_far : eo_near).push_back(e);
+        }
+        if (o.settled_after_s) settle_max = std::max(settle_max, *o.settled_after_s);
+        jt["online"] = jo;
+      }
       jt["misalignment_m"] = jj["misalignment_m"];
       if (t.truth_m) jt["error_m"] = jj["error_m"];
       else jt.erase("error_m");
@@ -356,6 +427,9 @@ nlohmann::json StudyResult::to_json() const {
     j["summary"]["three_step_error_D_above_20mm"] = stats(e3_far);
     j["summary"]["three_step_error_D_up_to_20mm"] = stats(e3_near);
     if (with_interval > 0) j["summary"]["ci95_coverage"] = static_cast<double>(covered) / static_cast<double>(with_interval);
+    j["summary"]["online_error_D_above_20mm"] = stats(eo_far);
+    j["summary"]["online_error_D_up_to_20mm"] = stats(eo_near);
+    j["summary"]["online_settled_after_s_max"] = settle_max;
   }
   return j;
 }

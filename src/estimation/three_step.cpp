@@ -2,8 +2,10 @@
 
 #include <ceres/ceres.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -51,6 +53,38 @@ StaticHold compute_static_hold(const Recording& r, const Eigen::MatrixXd& tau_fs
   hold.tau_measured = r.effort.block(hold.segment.begin, 0, n, 3).colwise().mean().transpose();
   hold.tau_free_space = tau_fs.block(hold.segment.begin, 0, n, 3).colwise().mean().transpose();
   return hold;
+}
+
+Eigen::VectorXd estimate_position_quantum(const Recording& r) {
+  const Eigen::Index T = r.position.rows(), N = r.position.cols();
+  Eigen::VectorXd quantum = Eigen::VectorXd::Zero(N);
+  for (Eigen::Index j = 0; j < N; ++j) {
+    double smallest = std::numeric_limits<double>::infinity();
+    for (Eigen::Index t = 1; t < T; ++t) {
+      const double step = std::abs(r.position(t, j) - r.position(t - 1, j));
+      if (step > 0.0 && step < smallest) smallest = step;
+    }
+    if (std::isfinite(smallest)) quantum[j] = smallest;
+  }
+  return quantum;
+}
+
+Recording remove_position_chatter(const Recording& recording, const Eigen::VectorXd& width) {
+  if (width.size() > recording.position.cols() || (width.array() < 0.0).any() || !width.allFinite())
+    throw std::invalid_argument("remove_position_chatter: one finite width >= 0 per joint at most");
+  Recording out = recording;
+  const Eigen::Index T = out.position.rows();
+  for (Eigen::Index j = 0; j < width.size(); ++j) {
+    if (!(width[j] > 0.0) || T == 0) continue;
+    const double half = 0.5 * width[j];
+    double y = out.position(0, j);
+    for (Eigen::Index t = 0; t < T; ++t) {
+      const double q = out.position(t, j);
+      y = std::clamp(y, q - half, q + half);
+      out.position(t, j) = y;
+    }
+  }
+  return out;
 }
 
 InverseDecomposition compute_inverse_decomposition(const IncisionFrame& incision, const Eigen::Vector3d& q,

@@ -7,8 +7,16 @@
 // tilt lies in span{a(q1) b(q2) c(q3)}, a in {1, sin, cos}, b in {1, sin, cos},
 // c in {1, q3}; torque_j = dU/dq_j. The 17 coefficients are shared by joints 1-3,
 // which is what makes the fit physically consistent across joints.
-// Inertia: a constant armature per joint times qddot (backward difference of
-// qdot through a first-order low-pass, acceleration_filter_s).
+// Inertia: a constant armature per joint times qddot, estimated causally from
+// the measured qdot: the slope at the newest sample of a least-squares quadratic
+// through the samples of the last acceleration_window_s (0: the backward
+// difference of the last two samples), then a first-order low-pass with time
+// constant acceleration_filter_s (0: none). Both are chosen per joint at fit time
+// on the validation split. Over a whole recording (predict_torque, offline) qddot
+// may instead come from a zero-phase estimate, the slope of a least-squares
+// quadratic through the samples within +- batch_acceleration_window_s / 2 of each
+// sample (0: the causal estimate); the fit then regresses on that estimate, so
+// the armature is not biased by the causal lag. compute_step() stays causal.
 // Friction per joint: viscous v, an offset, and Coulomb/stiction through a Dahl
 // state z in [-1, 1] that moves toward sign(dq) over a characteristic
 // displacement x_c and stays put at rest, so the holding torque remembers the
@@ -31,7 +39,13 @@ struct LinearTorqueParameters {
   Eigen::VectorXd coulomb;            // per output joint, multiplies the Dahl state
   Eigen::VectorXd offset;             // per output joint
   Eigen::VectorXd dahl_displacement;  // x_c per output joint (rad or m), > 0
-  double acceleration_filter_s = 0.03;  // first-order low-pass of the differentiated velocity
+  // Causal qddot estimate per output joint (see above). Left empty, they take the
+  // defaults of model files written before they existed: window 0 (backward
+  // difference) and a 30 ms low-pass.
+  Eigen::VectorXd acceleration_window_s;  // s, >= 0
+  Eigen::VectorXd acceleration_filter_s;  // s, >= 0
+  // Zero-phase qddot of predict_torque() per output joint; empty: all 0 (causal).
+  Eigen::VectorXd batch_acceleration_window_s;  // s, >= 0
 };
 
 class LinearTorqueModel final : public TorqueModel {
@@ -44,17 +58,26 @@ class LinearTorqueModel final : public TorqueModel {
   void compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                     double* tau) const override;
   nlohmann::json save_parameters() const override;
+  // compute_step() over the recording, with the zero-phase qddot for the joints
+  // whose batch_acceleration_window_s > 0 (and a time axis that never decreases).
+  Eigen::MatrixXd predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
+                                   const Eigen::MatrixXd& velocity) const override;
   const LinearTorqueParameters& parameters() const { return parameters_; }
 
   // dU/dq_j of the 17 gravity basis functions at q (joints 1-3), j = 0..2.
   static void compute_gravity_regressor(const double* q, Eigen::Matrix<double, 3, kGravityTerms>& Y);
 
  private:
+  // compute_step() with qddot taken from `qdd` (num_outputs values) for the
+  // joints whose batch_acceleration_window_s > 0, when `qdd` is not null.
+  void compute_step_with_acceleration(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
+                                      const double* qdd, double* tau) const;
   LinearTorqueParameters parameters_;
 };
 
-// Least squares on the training split; x_c chosen per joint on the validation
-// split from a grid; final coefficients from train + validation.
+// Least squares on the training split; x_c and the causal and zero-phase qddot
+// estimates chosen per joint on the validation split from grids; final
+// coefficients from train + validation, regressed on the zero-phase qddot.
 FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, const FitOptions& options);
 
 }  // namespace rcm::dynamics

@@ -68,12 +68,22 @@ class TorqueModel {
   // Body of the model file (see docs/dynamics.md); `info` is written by the caller.
   virtual nlohmann::json save_parameters() const = 0;
 
+  // Whole-recording prediction behind predict_torque(): T x num_outputs from the
+  // reset state. By default compute_step() over every sample; a model may
+  // override it with estimates that also use later samples (the linear model's
+  // zero-phase qddot), which only offline analysis can afford. Sizes are checked
+  // by predict_torque().
+  virtual Eigen::MatrixXd predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
+                                           const Eigen::MatrixXd& velocity) const;
+
  private:
   TorqueModelInfo info_;
 };
 
-// Runs the model over a whole recording from the reset state: T x num_outputs.
-// Throws InputError if the recording has fewer joints than the model reads.
+// Runs the model over a whole recording from the reset state: T x num_outputs
+// (model.predict_sequence: compute_step() per sample, or a model's non-causal
+// batch estimate; see docs/dynamics.md). Throws InputError if the recording has
+// fewer joints than the model reads.
 Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording);
 Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& time,
                                const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);

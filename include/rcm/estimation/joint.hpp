@@ -53,6 +53,11 @@ struct JointTissueModel {
   // calibration; propagated into every trial's interval.
   Eigen::Matrix4d covariance = Eigen::Matrix4d::Zero();
   int bootstrap_replicates = 0;
+  // The offsets that the fitted model finds on the calibration itself, minus
+  // the known [0, 0, D*]: what model misspecification and free-space model bias
+  // do to an estimate where the truth is known. Neither the covariance nor a
+  // residual bootstrap sees such a bias, so every trial's interval includes it.
+  Eigen::Vector3d calibration_bias_m = Eigen::Vector3d::Zero();
 };
 
 struct JointEstimatorOptions {
@@ -83,10 +88,12 @@ struct JointEstimate {
   Eigen::Vector3d misalignment_m = Eigen::Vector3d::Zero();  // [dr_x, dr_y, D]
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();      // from Ceres, scaled
   // 95 % interval: the trial's residual bootstrap combined in quadrature with the
-  // tissue parameters' uncertainty propagated through dp/dtissue.
+  // tissue parameters' uncertainty propagated through dp/dtissue and with the
+  // systematic error seen on the calibration.
   Eigen::Vector3d ci_low = Eigen::Vector3d::Zero(), ci_high = Eigen::Vector3d::Zero();
   Eigen::Vector3d sd_bootstrap = Eigen::Vector3d::Zero();  // half-width of the bootstrap interval / 1.96
   Eigen::Vector3d sd_tissue = Eigen::Vector3d::Zero();
+  Eigen::Vector3d sd_systematic = Eigen::Vector3d::Zero();  // |calibration_bias_m| of the tissue model
   int bootstrap_replicates = 0;
   SolverReport solver;
   std::size_t samples = 0;
@@ -94,6 +101,16 @@ struct JointEstimate {
 
 JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueModel& tissue,
                              const std::vector<JointSample>& samples, const JointEstimatorOptions& options);
+
+// One JointSample from one streamed sample (make_joint_samples uses it too).
+// Returns false, leaving `sample` unspecified, when the pivot exceeds
+// max_theta_rad. No allocation.
+bool compute_joint_sample(const IncisionFrame& incision, const Eigen::Vector3d& q, const Eigen::Vector3d& qd,
+                          const Eigen::Vector3d& dtau, double max_theta_rad, JointSample& sample);
+
+// The model's force f_inc_base for one sample: elastic + damping + axial friction.
+Eigen::Vector3d compute_joint_model_force(const IncisionFrame& incision, const JointTissueModel& tissue,
+                                          const JointSample& sample, const Eigen::Vector3d& misalignment_m);
 
 // The model's torque for one sample (for tests and plots).
 Eigen::Vector3d compute_joint_model_torque(const IncisionFrame& incision, const JointTissueModel& tissue,

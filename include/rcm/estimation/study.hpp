@@ -15,6 +15,7 @@
 
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/estimation/joint.hpp"
+#include "rcm/estimation/online.hpp"
 #include "rcm/estimation/three_step.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/session.hpp"
@@ -42,6 +43,12 @@ struct StudyOptions {
   // The paper's f(q0, 0): the model stepped on (q0, 0) from its reset state for
   // this long, then read.
   double paper_settle_s = 2.0;
+  // The free-space model reads the static file's positions through a play
+  // operator this many encoder counts wide (the count measured from the file;
+  // see remove_position_chatter). A joint resting on a count edge toggles by one
+  // count, which a model with a friction state reads as reversals: the holding
+  // friction it predicts then decays although the real one stays. 0 disables.
+  double hold_chatter_width_counts = 1.5;
   bool verbose = true;  // progress to stderr
   // When set, every trial's coaxial problem is written there as JSON with the
   // optimum at the paper's tolerance and at 1e-15, and the median solve time
@@ -55,6 +62,7 @@ struct TrialOutcome {
   ThreeStepResult estimate;                     // tau_fs of the hold with state carried
   std::optional<ThreeStepResult> paper_variant;  // tau_fs of the hold = f(q0, 0)
   std::optional<JointEstimate> joint;            // with --method joint
+  std::optional<OnlineReplay> online;            // with --method joint: the trial streamed through the online estimator
   std::optional<StaticHold> hold;
   // Force at the incision through J_D at the true D (or D~ without truth), vs the
   // sensor columns when present: time, estimate and sensor, T x 3 each.
@@ -91,6 +99,31 @@ struct StudyResult {
   // The rcm-results/1 object of session-format.md, with extra fields.
   nlohmann::json to_json() const;
 };
+
+// Step 0: the free-space model, fitted on the session's free-space recordings or
+// loaded from options.model_file, with its errors on the held-out last 10 %.
+struct FreeSpaceModelStep {
+  std::shared_ptr<const dynamics::TorqueModel> model;
+  dynamics::TorqueModelKind kind = dynamics::TorqueModelKind::linear;
+  std::optional<dynamics::FitSummary> fit;  // when fitted here
+  std::vector<dynamics::JointTorqueError> errors;
+};
+FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOptions& options,
+                                       const TorqueModelFitter& fitter);
+
+// The torque-space estimators' options for a free-space model: the residual
+// scales are its held-out RMSE per joint, the sample period its own.
+JointEstimatorOptions make_joint_options_for_model(const JointEstimatorOptions& base, const FreeSpaceModelStep& step);
+
+// What the online monitor needs of a session: the free-space model, the incision
+// frame at q0 and the tissue model identified on the calibration.
+struct MonitorSetup {
+  FreeSpaceModelStep free_space;
+  IncisionFrame incision;
+  JointTissueModel tissue;
+  JointEstimatorOptions joint_options;
+};
+MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter);
 
 // Throws InputError for any defect of the session's files; the study needs a
 // calibration and at least one trial.

@@ -66,6 +66,28 @@ struct StaticHold {
 StaticHold compute_static_hold(const Recording& recording, const Eigen::MatrixXd& tau_fs,
                                const Eigen::Vector3d& q0, const RestDetectionOptions& options = {});
 
+// Encoder chatter at the hold. A joint at rest on the edge of an encoder count
+// makes the measured position toggle between two adjacent counts (seen on the
+// simulated bench: 22 toggles of the pitch encoder in the first 0.3 s of a hold,
+// while the true joint moved by a few microradians). A free-space model whose
+// friction state is driven by position increments (the linear model's Dahl state,
+// x_c ~ 15 counts) reads each toggle as a reversal: the holding friction it
+// predicts decays from the level the last real motion left towards zero, while
+// the real bristles keep it. The hold's tau_fs is then wrong by up to the Coulomb
+// level (0.05 N m on the pitch joint, 2 mm of radial error at D = 30 mm).
+// Running the model on positions passed through a play (backlash) operator one
+// to two counts wide removes the toggles and keeps every real motion (delayed by
+// at most half the width).
+//
+// The smallest nonzero |q(k+1) - q(k)| of each joint (the encoder count for
+// quantized recordings; a tiny number, hence a harmless filter, for exact ones).
+// 0 for a joint that never moves.
+Eigen::VectorXd estimate_position_quantum(const Recording& recording);
+// A copy of the recording whose positions went through a play operator of total
+// width `width[j]` per joint (0 leaves the joint as it is): y <- clamp(y, q - w/2,
+// q + w/2), starting at y = q(0). Velocities and efforts are unchanged.
+Recording remove_position_chatter(const Recording& recording, const Eigen::VectorXd& width);
+
 // f = J_D^{-T} dtau at q written as u / D + w (see the file comment). Exact for
 // every D != 0; the caller checks conditioning at the D it uses.
 struct InverseDecomposition {

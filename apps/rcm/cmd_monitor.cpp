@@ -1,0 +1,175 @@
+// rcm monitor: replay a recording as a stream through the online estimator
+// (free-space model stepped with its state, bank of EKFs on the offsets, onset
+// CUSUM, force alarm), printing the running estimate and the alarms.
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+
+#include "cli_util.hpp"
+#include "command_registry.hpp"
+#include "rcm/common/error.hpp"
+#include "rcm/dynamics/torque_model.hpp"
+#include "rcm/estimation/online.hpp"
+#include "rcm/io/json_file.hpp"
+#include "rcm/io/session.hpp"
+#include "study_cli.hpp"
+
+namespace {
+
+struct Options {
+  std::string session, recording, out;
+  rcm::cli::FreeSpaceFlags free_space;
+  double print_every_s = 1.0;
+  double alarm_force_n = 10.0;
+  double onset_threshold = 0.0;
+  double settle_band_m = 0.005;
+  bool json = false, quiet = false;
+};
+
+std::optional<Eigen::Vector3d> find_truth(const rcm::Session& session, const std::filesystem::path& recording) {
+  std::error_code ec;
+  const auto target = std::filesystem::weakly_canonical(recording, ec);
+  for (const auto& t : session.trials)
+    if (std::filesystem::weakly_canonical(t.recording, ec) == target) return t.truth_misalignment_m;
+  return std::nullopt;
+}
+
+void run(const Options& o) {
+  if (!(o.print_every_s >= 0)) throw rcm::InputError(rcm::cli::flag_location("--print-every"), "must be >= 0");
+  if (!(o.alarm_force_n > 0)) throw rcm::InputError(rcm::cli::flag_location("--alarm-force"), "must be > 0");
+  if (!(o.settle_band_m > 0)) throw rcm::InputError(rcm::cli::flag_location("--settle-band"), "must be > 0");
+  const rcm::Session session = rcm::load_session(o.session);
+  const rcm::StudyOptions options = rcm::cli::make_study_options(o.free_space);
+  const rcm::Recording rec = rcm::load_recording(o.recording, options.read);
+  const rcm::MonitorSetup setup = rcm::prepare_monitor(session, options, rcm::cli::get_torque_model_fitter());
+  const rcm::dynamics::TorqueModel& model = *setup.free_space.model;
+  if (auto w = rcm::dynamics::check_sample_period(model, rec); !w.empty()) std::cerr << "warning: " << w << "\n";
+
+  rcm::OnlineEstimatorOptions online = rcm::make_online_options(setup.joint_options);
+  online.alarm_force_n = o.alarm_force_n;
+  if (o.onset_threshold > 0) online.onset_threshold = o.onset_threshold;
+  const rcm::OnlinePipeline pipeline(setup.free_space.model, rcm::OnlineEstimator(setup.incision, setup.tissue, online));
+  auto ws = pipeline.create_workspace();
+  std::cerr << fmt::format("[rcm] tissue model ({}): k1 {:.1f} N/m, k3 {:.3g} N/m^3, c {:.2f} N s/m, F {:.2f} N\n",
+                           setup.tissue.family, setup.tissue.parameters[0], setup.tissue.parameters[1],
+                           setup.tissue.parameters[2], setup.tissue.parameters[3]);
+
+  // Printing happens in the callback: events at once, the estimate at a cadence.
+  double next_print = rec.time(0);
+  std::string csv = "time,dr_x,dr_y,D,sd_dr_x,sd_dr_y,sd_D,force_x,force_y,force_z,force_norm,cusum,onset,alarm,at_rest,hypothesis\n";
+  bool onset_printed = false;
+  if (!o.json && !o.quiet)
+    std::cout << fmt::format("{:>9} {:>8} {:>8} {:>8}   {:>6} {:>6} {:>6}  {:>7}  {}\n", "time (s)", "dr_x", "dr_y", "D",
+                             "sd_x", "sd_y", "sd_D", "|f| (N)", "(mm)");
+  auto on_sample = [&](const rcm::OnlineOutput& out) {
+    if (!o.out.empty())
+      csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", out.time, out.misalignment_m[0],
+                         out.misalignment_m[1], out.misalignment_m[2], out.sd_m[0], out.sd_m[1], out.sd_m[2],
+                         out.f_inc_base[0], out.f_inc_base[1], out.f_inc_base[2], out.force_norm_n, out.cusum,
+                         out.onset ? 1 : 0, out.alarm ? 1 : 0, out.at_rest ? 1 : 0, out.hypothesis);
+    if (o.json) return;
+    if (out.onset && !onset_printed) {
+      onset_printed = true;
+      std::cout << fmt::format("{:9.3f}  ONSET of a misalignment detected\n", out.time);
+    }
+    if (out.alarm_raised)
+      std::cout << fmt::format("{:9.3f}  ALARM: incision force {:.1f} N above {:.1f} N\n", out.time, out.force_norm_n,
+                               o.alarm_force_n);
+    if (out.alarm_cleared) std::cout << fmt::format("{:9.3f}  alarm cleared ({:.1f} N)\n", out.time, out.force_norm_n);
+    if (!o.quiet && o.print_every_s > 0 && out.time >= next_print) {
+      next_print = out.time + o.print_every_s;
+      const Eigen::Vector3d p = out.misalignment_m * 1e3, sd = out.sd_m * 1e3;
+      std::cout << fmt::format("{:9.3f} {:8.2f} {:8.2f} {:8.2f}   {:6.2f} {:6.2f} {:6.2f}  {:7.2f}{}{}\n", out.time, p[0],
+                               p[1], p[2], sd[0], sd[1], sd[2], out.force_norm_n, out.onset ? "" : "  (no onset yet)",
+                               out.alarm ? "  ALARM" : "");
+    }
+  };
+  rcm::OnlineReplayOptions replay_options;
+  replay_options.settle_band_m = o.settle_band_m;
+  const rcm::OnlineReplay replay = rcm::replay_online(pipeline, rec, replay_options, on_sample);
+  if (!o.out.empty()) rcm::write_file_atomic(o.out, csv);
+
+  const rcm::OnlineOutput& final_out = replay.final_output;
+  const auto truth = find_truth(session, o.recording);
+  const double mean_us = 1e6 * replay.mean_update_s;
+  const Eigen::Index T = rec.time.size();
+  auto opt = [](const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); };
+
+  if (o.json) {
+    nlohmann::json j;
+    j["recording"] = rec.source;
+    j["samples"] = T;
+    j["duration_s"] = rec.time(T - 1) - rec.time(0);
+    j["free_space_model"] = rcm::dynamics::to_string(model.kind());
+    j["tissue"] = {{"family", setup.tissue.family},
+                   {"k1", setup.tissue.parameters[0]},
+                   {"k3", setup.tissue.parameters[1]},
+                   {"damping", setup.tissue.parameters[2]},
+                   {"axial_friction_n", setup.tissue.parameters[3]}};
+    j["final"] = {{"misalignment_m", rcm::cli::to_json(final_out.misalignment_m)},
+                  {"sd_m", rcm::cli::to_json(final_out.sd_m)},
+                  {"hypothesis", final_out.hypothesis}};
+    if (truth) {
+      j["truth_m"] = rcm::cli::to_json(*truth);
+      j["error_m"] = (final_out.misalignment_m - *truth).norm();
+    }
+    j["motion_start_s"] = opt(replay.motion_start_s);
+    j["onset_s"] = opt(replay.onset_s);
+    j["settled_after_s"] = opt(replay.settled_after_s);
+    j["settle_band_m"] = o.settle_band_m;
+    j["alarm_force_n"] = o.alarm_force_n;
+    j["peak_force_n"] = replay.peak_force_n;
+    nlohmann::json events = nlohmann::json::array();
+    for (const auto& a : replay.alarms)
+      events.push_back({{"raised_s", a.raised_s}, {"cleared_s", opt(a.cleared_s)}, {"peak_force_n", a.peak_force_n}});
+    j["alarms"] = events;
+    j["update_us"] = {{"mean", mean_us}, {"max", 1e6 * replay.max_update_s}};
+    j["trace"] = o.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(o.out);
+    rcm::cli::print_json(j);
+    return;
+  }
+  const Eigen::Vector3d p = final_out.misalignment_m * 1e3, sd = final_out.sd_m * 1e3;
+  std::cout << fmt::format("final      dr_x {:.2f} +- {:.2f}, dr_y {:.2f} +- {:.2f}, D {:.2f} +- {:.2f} mm\n", p[0],
+                           1.96 * sd[0], p[1], 1.96 * sd[1], p[2], 1.96 * sd[2]);
+  if (truth)
+    std::cout << fmt::format("truth      dr_x {:.2f}, dr_y {:.2f}, D {:.2f} mm; e = {:.2f} mm\n", (*truth)[0] * 1e3,
+                             (*truth)[1] * 1e3, (*truth)[2] * 1e3, (final_out.misalignment_m - *truth).norm() * 1e3);
+  std::cout << fmt::format("onset      {}\n",
+                           replay.onset_s ? fmt::format("{:.3f} s", *replay.onset_s) : std::string("not detected"));
+  if (replay.settled_after_s)
+    std::cout << fmt::format("settled    within {:.0f} mm of the final estimate {:.1f} s after the first motion\n",
+                             o.settle_band_m * 1e3, *replay.settled_after_s);
+  std::cout << fmt::format("alarms     {} (threshold {:.1f} N), peak model force {:.1f} N\n", replay.alarms.size(),
+                           o.alarm_force_n, replay.peak_force_n);
+  std::cout << fmt::format("update     {:.2f} us per sample on average (free-space model + estimator), max {:.1f} us\n",
+                           mean_us, 1e6 * replay.max_update_s);
+}
+
+const bool registered = rcm::cli::register_command({"monitor", 65, [](CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand(
+      "monitor", "Replay a recording as a stream through the online estimator: running estimate of all three offsets, "
+                 "onset of the misalignment and incision-force alarms");
+  cmd->add_option("--session", o->session, "rcm-session/1 manifest (free-space data, q0, calibration)")->required();
+  cmd->add_option("RECORDING", o->recording, "recording to replay (rcm CSV or rostopic CSV)")->required();
+  cmd->add_option("--model", o->free_space.model, "free-space model to fit: hybrid (default with LibTorch), lstm, mlp, linear");
+  cmd->add_option("--model-file", o->free_space.model_file,
+                  "use a saved free-space model (e.g. free_space_model.json of `rcm run`) instead of fitting one");
+  cmd->add_option("--seed", o->free_space.seed, "seed of the model fit");
+  cmd->add_option("--max-train-minutes", o->free_space.max_minutes, "wall-clock budget of the free-space fit (default 10)");
+  cmd->add_option("--print-every", o->print_every_s, "seconds of recording between printed estimates (default 1; 0: none)");
+  cmd->add_option("--alarm-force", o->alarm_force_n, "incision force that raises the alarm, N (default 10, paper V-E)");
+  cmd->add_option("--onset-threshold", o->onset_threshold, "CUSUM threshold of the onset test (default 10)");
+  cmd->add_option("--settle-band", o->settle_band_m, "band around the final estimate for the settling time, m (default 0.005)");
+  cmd->add_option("--out", o->out, "write the running estimate of every sample as CSV");
+  cmd->add_flag("--dedupe", o->free_space.dedupe, "drop repeated rows");
+  cmd->add_flag("--quiet", o->quiet, "print only events and the summary");
+  cmd->add_flag("--json", o->json, "print one JSON object at the end");
+  cmd->callback([o] { run(*o); });
+}});
+
+}  // namespace

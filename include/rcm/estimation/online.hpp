@@ -1,0 +1,190 @@
+#pragma once
+// Online misalignment estimation (beyond the paper): the joint torque-space
+// model of joint.hpp, run as a bank of extended Kalman filters on the offsets
+// p = [dr_x, dr_y, D] (incision frame) that update sample by sample, with onset
+// detection and a force alarm.
+//
+//   state      p_k = p_{k-1} + w,  w ~ N(0, Q dt)     (the incision drifts slowly)
+//   measurement dtau_k = tau_k - tau_fs,k = h(p_k; q, qd) + v
+//
+// h is exactly the batch model (compute_joint_model_torque), differentiated with
+// ceres::Jet. Three choices make it behave on real data:
+// - Free-space model errors are correlated over about a second, so one sample is
+//   not an independent measurement: the measurement variance is sigma^2 tau_c/dt,
+//   which makes the information gathered per second independent of the sampling
+//   rate (200 Hz logs and the 1.5 kHz robot behave alike) and keeps the
+//   covariance honest.
+// - (D, r) and (-D, -r) and other poor linearization points are local traps: a
+//   small bank of filters starts at several D (as the batch multi-start) and the
+//   one with the lowest exponentially forgotten innovation cost is reported.
+// - Onset: a CUSUM of the robust log-likelihood ratio of the best filter's
+//   one-step prediction against "no misalignment" (p = 0: no stretch, but the
+//   shaft's sliding friction in the tissue remains). The prediction uses the
+//   state before the sample, so the statistic is not fitted to what it tests.
+// - At rest the free-space model's error is the stiction band, a constant torque
+//   that a radial offset would explain just as well (friction memory, #4): rest
+//   samples weigh less (sigma times rest_sigma_factor) and do not feed the onset
+//   test, which therefore needs the configuration-dependent force of motion.
+// The alarm compares the force of the reported model at the current sample with
+// a threshold (default 10 N, paper V-E), with hysteresis, once onset is detected.
+//
+// The model (OnlineEstimator) is immutable; everything that changes lives in an
+// OnlineWorkspace of fixed size. compute_online_update() does not allocate.
+
+#include <Eigen/Core>
+#include <array>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "rcm/dynamics/torque_model.hpp"
+
+#include "rcm/estimation/joint.hpp"
+#include "rcm/io/recording.hpp"
+#include "rcm/kinematics/incision.hpp"
+
+namespace rcm {
+
+struct OnlineEstimatorOptions {
+  double D_min = -0.020, D_max = 0.070;  // m, as the batch estimators
+  double radial_max = 0.040;             // m, bound of |dr_x|, |dr_y|
+  std::vector<double> D_starts = {0.010, 0.030, 0.050};  // one filter each (at most kMaxHypotheses)
+  Eigen::Vector3d torque_sigma = Eigen::Vector3d(0.05, 0.05, 0.2);  // free-space model error, N m, N m, N
+  double correlation_time_s = 1.0;       // of the free-space model error
+  double huber_scale = 3.0;              // innovations beyond this many sigma are down-weighted
+  double initial_radial_sd_m = 0.020;
+  double initial_D_sd_m = 0.030;
+  double drift_sd_m_per_sqrt_s = 2e-4;   // random walk of the incision (patient motion)
+  double hypothesis_memory_s = 10.0;     // forgetting time of each filter's innovation cost
+  double onset_threshold = 10.0;         // CUSUM threshold, nats per correlation time
+  double alarm_force_n = 10.0;           // paper V-E
+  double alarm_clear_fraction = 0.9;     // the alarm clears below this fraction of the threshold
+  double max_theta_rad = 80.0 * M_PI / 180.0;
+  double rest_angular_speed = 0.01;  // rad/s, joints 1-2: below both (and the next), the arm is at rest
+  double rest_linear_speed = 0.002;  // m/s, joint 3
+  double rest_sigma_factor = 3.0;
+  // Samples closer than this in time are treated as this far apart (dt = 0 at
+  // the first sample and repeated stamps would otherwise weigh infinitely).
+  double min_dt_s = 1e-4;
+  void check() const;
+};
+
+// What the estimator says after a sample.
+struct OnlineOutput {
+  double time = 0.0;
+  bool used = false;                 // false: the pivot was beyond max_theta_rad
+  bool at_rest = false;
+  int hypothesis = 0;                // index of the reported filter
+  Eigen::Vector3d misalignment_m = Eigen::Vector3d::Zero();  // [dr_x, dr_y, D], incision frame
+  Eigen::Vector3d sd_m = Eigen::Vector3d::Zero();            // sqrt of the covariance diagonal
+  Eigen::Vector3d f_inc_base = Eigen::Vector3d::Zero();      // the model's force now, base frame
+  double force_norm_n = 0.0;
+  double cusum = 0.0;
+  bool onset = false;                // onset detected (at or before this sample)
+  double onset_time = 0.0;
+  bool alarm = false;                // force above the threshold now
+  bool alarm_raised = false;         // ... and this is the sample it rose
+  bool alarm_cleared = false;
+};
+
+class OnlineEstimator {
+ public:
+  static constexpr int kMaxHypotheses = 4;
+
+  struct Hypothesis {
+    Eigen::Vector3d p = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d P = Eigen::Matrix3d::Zero();
+    double cost = 0.0;  // exponentially forgotten mean of the robust loss of the innovation
+  };
+  struct Workspace {
+    std::array<Hypothesis, kMaxHypotheses> hypotheses;
+    int num_hypotheses = 0;
+    bool started = false;
+    double last_time = 0.0;
+    OnlineOutput output;
+  };
+
+  OnlineEstimator(const IncisionFrame& incision, const JointTissueModel& tissue, const OnlineEstimatorOptions& options);
+
+  Workspace create_workspace() const;
+  void reset(Workspace& workspace) const;
+
+  // One sample: time (s, increasing), joints 1-3 position and velocity, and the
+  // torque residual tau - tau_fs (N m, N m, N). No allocation.
+  const OnlineOutput& compute_update(Workspace& workspace, double time, const Eigen::Vector3d& q,
+                                     const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau) const;
+
+  const IncisionFrame& incision() const { return incision_; }
+  const JointTissueModel& tissue() const { return tissue_; }
+  const OnlineEstimatorOptions& options() const { return options_; }
+
+ private:
+  IncisionFrame incision_;
+  JointTissueModel tissue_;
+  OnlineEstimatorOptions options_;
+  Eigen::Vector3d measurement_variance_;  // sigma^2 tau_c (divided by dt per sample)
+};
+
+inline const OnlineOutput& get_online_output(const OnlineEstimator::Workspace& workspace) { return workspace.output; }
+
+// The same options as a batch estimate, so that the two agree on bounds and scales.
+OnlineEstimatorOptions make_online_options(const JointEstimatorOptions& joint);
+
+// The whole per-sample path of a live robot: measured joint state and effort in,
+// the free-space model stepped with its state carried, the residual into the
+// estimator. What the ROS node and `rcm monitor` run. No allocation per sample.
+class OnlinePipeline {
+ public:
+  struct Workspace {
+    std::unique_ptr<dynamics::TorqueModelWorkspace> model;
+    OnlineEstimator::Workspace estimator;
+    std::vector<double> tau_fs;  // num_outputs
+  };
+
+  // Throws std::invalid_argument when the model predicts fewer than 3 joints.
+  OnlinePipeline(std::shared_ptr<const dynamics::TorqueModel> model, OnlineEstimator estimator);
+
+  Workspace create_workspace() const;
+  void reset(Workspace& workspace) const;
+
+  // q, qd, effort: at least model.num_joints() values (joint 3 in m, m/s, N).
+  const OnlineOutput& compute_sample(Workspace& workspace, double time, const double* q, const double* qd,
+                                     const double* effort) const;
+
+  const dynamics::TorqueModel& model() const { return *model_; }
+  const OnlineEstimator& estimator() const { return estimator_; }
+
+ private:
+  std::shared_ptr<const dynamics::TorqueModel> model_;
+  OnlineEstimator estimator_;
+};
+
+// A whole recording streamed through a pipeline, as `rcm monitor` and the study
+// replay it, with what the targets are measured on.
+struct OnlineAlarm {
+  double raised_s = 0.0;
+  std::optional<double> cleared_s;
+  double peak_force_n = 0.0;
+};
+struct OnlineReplay {
+  std::size_t samples = 0;
+  OnlineOutput final_output;
+  std::optional<double> motion_start_s;  // first sample with |qd_1,2| > motion_speed
+  std::optional<double> onset_s;
+  // From the first motion, how long until the running estimate stays within
+  // settle_band_m of its final value for good.
+  std::optional<double> settled_after_s;
+  std::vector<OnlineAlarm> alarms;
+  double peak_force_n = 0.0;
+  double mean_update_s = 0.0, max_update_s = 0.0;  // wall clock per sample, pipeline included
+};
+struct OnlineReplayOptions {
+  double settle_band_m = 0.005;
+  double motion_speed = 0.01;  // rad/s
+};
+OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& recording,
+                           const OnlineReplayOptions& options = {},
+                           const std::function<void(const OnlineOutput&)>& on_sample = {});
+
+}  // namespace rcm

@@ -1,0 +1,271 @@
+#include "rcm/estimation/online.hpp"
+
+#include <ceres/jet.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "joint_model.hpp"
+#include "rcm/common/error.hpp"
+
+namespace rcm {
+
+void OnlineEstimatorOptions::check() const {
+  auto fail = [](const char* what) { throw std::invalid_argument(std::string("OnlineEstimatorOptions: ") + what); };
+  if (!(D_min < D_max)) fail("D_min must be below D_max");
+  if (!(radial_max > 0)) fail("radial_max must be > 0");
+  if (D_starts.empty() || D_starts.size() > static_cast<std::size_t>(OnlineEstimator::kMaxHypotheses))
+    fail("D_starts must hold 1 to kMaxHypotheses values");
+  for (double d : D_starts)
+    if (!(d >= D_min && d <= D_max)) fail("every D start must lie within the bounds");
+  if (!(torque_sigma.minCoeff() > 0)) fail("torque_sigma must be > 0");
+  if (!(correlation_time_s > 0)) fail("correlation_time_s must be > 0");
+  if (!(huber_scale > 0)) fail("huber_scale must be > 0");
+  if (!(initial_radial_sd_m > 0) || !(initial_D_sd_m > 0)) fail("initial standard deviations must be > 0");
+  if (!(drift_sd_m_per_sqrt_s >= 0)) fail("drift_sd_m_per_sqrt_s must be >= 0");
+  if (!(hypothesis_memory_s > 0)) fail("hypothesis_memory_s must be > 0");
+  if (!(onset_threshold > 0)) fail("onset_threshold must be > 0");
+  if (!(alarm_force_n > 0)) fail("alarm_force_n must be > 0");
+  if (!(alarm_clear_fraction > 0 && alarm_clear_fraction <= 1)) fail("alarm_clear_fraction must be in (0, 1]");
+  if (!(max_theta_rad > 0)) fail("max_theta_rad must be > 0");
+  if (!(min_dt_s > 0)) fail("min_dt_s must be > 0");
+  if (!(rest_angular_speed >= 0) || !(rest_linear_speed >= 0)) fail("rest speeds must be >= 0");
+  if (!(rest_sigma_factor >= 1)) fail("rest_sigma_factor must be >= 1");
+}
+
+OnlineEstimatorOptions make_online_options(const JointEstimatorOptions& joint) {
+  OnlineEstimatorOptions o;
+  o.D_min = joint.D_min;
+  o.D_max = joint.D_max;
+  o.radial_max = joint.radial_max;
+  o.D_starts = joint.D_starts;
+  o.torque_sigma = joint.torque_sigma;
+  o.correlation_time_s = joint.bootstrap_block_s;
+  return o;
+}
+
+OnlineEstimator::OnlineEstimator(const IncisionFrame& incision, const JointTissueModel& tissue,
+                                 const OnlineEstimatorOptions& options)
+    : incision_(incision), tissue_(tissue), options_(options) {
+  options_.check();
+  measurement_variance_ = options_.torque_sigma.array().square() * options_.correlation_time_s;
+}
+
+OnlineEstimator::Workspace OnlineEstimator::create_workspace() const {
+  Workspace ws;
+  reset(ws);
+  return ws;
+}
+
+void OnlineEstimator::reset(Workspace& ws) const {
+  ws.num_hypotheses = static_cast<int>(options_.D_starts.size());
+  const Eigen::Vector3d sd(options_.initial_radial_sd_m, options_.initial_radial_sd_m, options_.initial_D_sd_m);
+  for (int h = 0; h < ws.num_hypotheses; ++h) {
+    Hypothesis& hyp = ws.hypotheses[static_cast<std::size_t>(h)];
+    hyp.p = Eigen::Vector3d(0.0, 0.0, options_.D_starts[static_cast<std::size_t>(h)]);
+    hyp.P = sd.array().square().matrix().asDiagonal();
+    hyp.cost = 0.0;
+  }
+  ws.started = false;
+  ws.last_time = 0.0;
+  ws.output = OnlineOutput{};
+  ws.output.misalignment_m = ws.hypotheses[0].p;
+  ws.output.sd_m = sd;
+}
+
+const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, const Eigen::Vector3d& q,
+                                                    const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau) const {
+  const OnlineEstimatorOptions& o = options_;
+  const double dt = ws.started ? std::max(time - ws.last_time, o.min_dt_s) : o.min_dt_s;
+  ws.started = true;
+  ws.last_time = time;
+  OnlineOutput& out = ws.output;
+  out.time = time;
+  out.alarm_raised = out.alarm_cleared = false;
+
+  // Time update of every filter: the incision drifts as a random walk.
+  const double q_drift = o.drift_sd_m_per_sqrt_s * o.drift_sd_m_per_sqrt_s * dt;
+  for (int h = 0; h < ws.num_hypotheses; ++h) ws.hypotheses[static_cast<std::size_t>(h)].P.diagonal().array() += q_drift;
+
+  JointSample sample;
+  out.used = compute_joint_sample(incision_, q, qd, dtau, o.max_theta_rad, sample);
+  if (out.used) {
+    using Jet = ceres::Jet<double, 3>;
+    out.at_rest = std::abs(qd[0]) < o.rest_angular_speed && std::abs(qd[1]) < o.rest_angular_speed &&
+                  std::abs(qd[2]) < o.rest_linear_speed;
+    const double rest_factor = out.at_rest ? o.rest_sigma_factor * o.rest_sigma_factor : 1.0;
+    const Eigen::Vector3d R = measurement_variance_ * (rest_factor / dt);
+    const Eigen::Vector3d inv_sigma = o.torque_sigma.cwiseInverse();
+    const double forget = std::exp(-dt / o.hypothesis_memory_s);
+    Jet tissue[4];
+    for (int k = 0; k < 4; ++k) tissue[k] = Jet(tissue_.parameters[k]);
+    // The filter reported before this sample, and its one-step prediction's
+    // normalized squared innovation: what the onset test scores.
+    int prior_best = 0;
+    for (int h = 1; h < ws.num_hypotheses; ++h)
+      if (ws.hypotheses[static_cast<std::size_t>(h)].cost < ws.hypotheses[static_cast<std::size_t>(prior_best)].cost)
+        prior_best = h;
+    // Huber's rho of a normalized residual norm: the robust log-likelihood that
+    // both the hypothesis costs and the onset test use, so that a transient the
+    // free-space model misses cannot carry either.
+    const double c = o.huber_scale * std::sqrt(3.0);
+    auto rho = [c](double r) { return r <= c ? 0.5 * r * r : c * r - 0.5 * c * c; };
+    double prior_cost_sample = 0.0;
+    for (int h = 0; h < ws.num_hypotheses; ++h) {
+      Hypothesis& hyp = ws.hypotheses[static_cast<std::size_t>(h)];
+      Jet p[3], tau[3];
+      for (int k = 0; k < 3; ++k) p[k] = Jet(hyp.p[k], k);
+      detail::predict_joint_torque(sample, incision_.R_base_inc, tissue_.axial_velocity_scale, p, tissue, tau);
+      Eigen::Vector3d nu;
+      Eigen::Matrix3d H;
+      for (int j = 0; j < 3; ++j) {
+        nu[j] = dtau[j] - tau[j].a;
+        H.row(j) = tau[j].v.transpose();
+      }
+      // Huber weight on the innovation in units of the free-space model error:
+      // a friction spike the model misses must not throw the estimate.
+      const double d = std::sqrt(nu.cwiseProduct(inv_sigma).squaredNorm() / 3.0);
+      const double w = d <= o.huber_scale ? 1.0 : o.huber_scale / d;
+      const double cost_sample = rho(nu.cwiseProduct(inv_sigma).norm());
+      if (h == prior_best) prior_cost_sample = cost_sample;
+      hyp.cost = forget * hyp.cost + (1.0 - forget) * cost_sample;
+
+      const Eigen::Matrix3d PHt = hyp.P * H.transpose();
+      Eigen::Matrix3d S = H * PHt;
+      S.diagonal() += R / w;
+      const Eigen::LLT<Eigen::Matrix3d> llt(S);
+      if (llt.info() != Eigen::Success) continue;
+      const Eigen::Matrix3d K = llt.solve(PHt.transpose()).transpose();
+      hyp.p += K * nu;
+      // Joseph form: stays symmetric positive definite in floating point.
+      const Eigen::Matrix3d IKH = Eigen::Matrix3d::Identity() - K * H;
+      hyp.P = IKH * hyp.P * IKH.transpose() + K * (R / w).asDiagonal() * K.transpose();
+      hyp.P = 0.5 * (hyp.P + hyp.P.transpose()).eval();
+      // The offsets' bounds hold by projection (a constrained filter's standard move).
+      hyp.p[0] = std::clamp(hyp.p[0], -o.radial_max, o.radial_max);
+      hyp.p[1] = std::clamp(hyp.p[1], -o.radial_max, o.radial_max);
+      hyp.p[2] = std::clamp(hyp.p[2], o.D_min, o.D_max);
+    }
+    // Onset: log-likelihood ratio of that prediction against the aligned
+    // incision, per correlation time, accumulated by a CUSUM.
+    // The null hypothesis is "aligned" (p = 0), not "no force": the shaft still
+    // slides through the tissue with its friction.
+    double tau_aligned[3];
+    const double p_aligned[3] = {0.0, 0.0, 0.0};
+    detail::predict_joint_torque(sample, incision_.R_base_inc, tissue_.axial_velocity_scale, p_aligned,
+                                 tissue_.parameters.data(), tau_aligned);
+    const Eigen::Vector3d nu_aligned = dtau - Eigen::Vector3d(tau_aligned[0], tau_aligned[1], tau_aligned[2]);
+    const double llr = (rho(nu_aligned.cwiseProduct(inv_sigma).norm()) - prior_cost_sample) * (dt / o.correlation_time_s);
+    if (!out.at_rest) out.cusum = std::max(0.0, out.cusum + llr);
+    if (!out.onset && out.cusum > o.onset_threshold) {
+      out.onset = true;
+      out.onset_time = time;
+    }
+  }
+
+  // The reported filter: lowest forgotten innovation cost.
+  int best = 0;
+  for (int h = 1; h < ws.num_hypotheses; ++h)
+    if (ws.hypotheses[static_cast<std::size_t>(h)].cost < ws.hypotheses[static_cast<std::size_t>(best)].cost) best = h;
+  const Hypothesis& chosen = ws.hypotheses[static_cast<std::size_t>(best)];
+  out.hypothesis = best;
+  out.misalignment_m = chosen.p;
+  out.sd_m = chosen.P.diagonal().cwiseMax(0.0).cwiseSqrt();
+
+  if (out.used) {
+    Eigen::Vector3d f;
+    double tau[3];
+    detail::predict_joint_torque(sample, incision_.R_base_inc, tissue_.axial_velocity_scale, chosen.p.data(),
+                                 tissue_.parameters.data(), tau, &f);
+    out.f_inc_base = f;
+    out.force_norm_n = f.norm();
+  }
+  if (out.onset) {
+    if (!out.alarm && out.force_norm_n > o.alarm_force_n) {
+      out.alarm = out.alarm_raised = true;
+    } else if (out.alarm && out.force_norm_n < o.alarm_clear_fraction * o.alarm_force_n) {
+      out.alarm = false;
+      out.alarm_cleared = true;
+    }
+  }
+  return out;
+}
+
+OnlinePipeline::OnlinePipeline(std::shared_ptr<const dynamics::TorqueModel> model, OnlineEstimator estimator)
+    : model_(std::move(model)), estimator_(std::move(estimator)) {
+  if (!model_ || model_->num_outputs() < 3)
+    throw std::invalid_argument("OnlinePipeline: the free-space model must predict joints 1-3");
+}
+
+OnlinePipeline::Workspace OnlinePipeline::create_workspace() const {
+  Workspace ws;
+  ws.model = model_->create_workspace();
+  ws.estimator = estimator_.create_workspace();
+  ws.tau_fs.assign(static_cast<std::size_t>(model_->num_outputs()), 0.0);
+  reset(ws);
+  return ws;
+}
+
+void OnlinePipeline::reset(Workspace& ws) const {
+  model_->reset_state(*ws.model);
+  estimator_.reset(ws.estimator);
+}
+
+const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, const double* q, const double* qd,
+                                                   const double* effort) const {
+  model_->compute_step(*ws.model, time, q, qd, ws.tau_fs.data());
+  const Eigen::Vector3d dtau(effort[0] - ws.tau_fs[0], effort[1] - ws.tau_fs[1], effort[2] - ws.tau_fs[2]);
+  return estimator_.compute_update(ws.estimator, time, Eigen::Vector3d(q[0], q[1], q[2]),
+                                   Eigen::Vector3d(qd[0], qd[1], qd[2]), dtau);
+}
+
+OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, const OnlineReplayOptions& options,
+                           const std::function<void(const OnlineOutput&)>& on_sample) {
+  if (r.num_joints() < pipeline.model().num_joints()) {
+    InputLocation where;
+    where.file = r.source;
+    throw InputError(where, "the free-space model reads " + std::to_string(pipeline.model().num_joints()) +
+                                " joints, the recording has " + std::to_string(r.num_joints()));
+  }
+  OnlineReplay out;
+  const Eigen::Index T = r.time.size();
+  out.samples = static_cast<std::size_t>(T);
+  // Row-major copies so that each sample is contiguous, as from a live topic.
+  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const RowMajor q = r.position, qd = r.velocity, effort = r.effort;
+  std::vector<Eigen::Vector3d> trace(static_cast<std::size_t>(T));
+  auto ws = pipeline.create_workspace();
+  double total = 0.0;
+  for (Eigen::Index t = 0; t < T; ++t) {
+    const auto start = std::chrono::steady_clock::now();
+    const OnlineOutput& o = pipeline.compute_sample(ws, r.time(t), q.row(t).data(), qd.row(t).data(), effort.row(t).data());
+    const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    total += took;
+    out.max_update_s = std::max(out.max_update_s, took);
+    trace[static_cast<std::size_t>(t)] = o.misalignment_m;
+    if (!out.motion_start_s && std::hypot(r.velocity(t, 0), r.velocity(t, 1)) > options.motion_speed)
+      out.motion_start_s = r.time(t);
+    if (o.onset && !out.onset_s) out.onset_s = o.onset_time;
+    if (o.alarm_raised) out.alarms.push_back({o.time, std::nullopt, o.force_norm_n});
+    if (o.alarm && !out.alarms.empty()) out.alarms.back().peak_force_n = std::max(out.alarms.back().peak_force_n, o.force_norm_n);
+    if (o.alarm_cleared && !out.alarms.empty()) out.alarms.back().cleared_s = o.time;
+    out.peak_force_n = std::max(out.peak_force_n, o.force_norm_n);
+    if (on_sample) on_sample(o);
+  }
+  out.mean_update_s = T > 0 ? total / static_cast<double>(T) : 0.0;
+  out.final_output = get_online_output(ws.estimator);
+  if (out.motion_start_s && T > 0) {
+    Eigen::Index last_outside = -1;
+    for (Eigen::Index t = 0; t < T; ++t)
+      if ((trace[static_cast<std::size_t>(t)] - out.final_output.misalignment_m).norm() > options.settle_band_m)
+        last_outside = t;
+    const double settled_at = last_outside + 1 < T ? r.time(last_outside + 1) : r.time(T - 1);
+    out.settled_after_s = std::max(0.0, settled_at - *out.motion_start_s);
+  }
+  return out;
+}
+
+}  // namespace rcm

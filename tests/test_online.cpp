@@ -1,0 +1,249 @@
+// The online estimator on streams generated from the joint model itself (known
+// truth, controlled noise): convergence, onset, alarm, rest handling, the
+// derivative it linearizes with, and no allocation per sample.
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <new>
+#include <random>
+
+#include "../src/estimation/joint_model.hpp"
+#include "rcm/dynamics/linear_model.hpp"
+#include "rcm/estimation/online.hpp"
+
+namespace {
+std::atomic<long> g_allocations{0};
+}
+
+void* operator new(std::size_t n) {
+  ++g_allocations;
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n) { return operator new(n); }
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+
+namespace {
+
+const Eigen::Vector3d kQ0(0.0, 0.0, 0.12);
+
+rcm::JointTissueModel linear_tissue() {
+  rcm::JointTissueModel t;
+  t.parameters = Eigen::Vector4d(875.0, 0.0, 2.0, 0.3);
+  return t;
+}
+
+// A pivoting teleoperation-like path about q0: yaw and pitch sweep +-0.5 rad at
+// incommensurate rates, insertion +-2 cm.
+struct PathSample {
+  double t;
+  Eigen::Vector3d q, qd;
+};
+PathSample path(double t) {
+  const double w1 = 2 * M_PI / 7.0, w2 = 2 * M_PI / 5.3, w3 = 2 * M_PI / 9.1;
+  PathSample s;
+  s.t = t;
+  s.q = kQ0 + Eigen::Vector3d(0.5 * std::sin(w1 * t), 0.45 * std::sin(w2 * t + 0.4), 0.02 * std::sin(w3 * t));
+  s.qd = Eigen::Vector3d(0.5 * w1 * std::cos(w1 * t), 0.45 * w2 * std::cos(w2 * t + 0.4), 0.02 * w3 * std::cos(w3 * t));
+  return s;
+}
+
+// The residual the model predicts for `truth`, plus white noise of sd `noise`.
+Eigen::Vector3d make_dtau(const rcm::IncisionFrame& incision, const rcm::JointTissueModel& tissue, const PathSample& s,
+                          const Eigen::Vector3d& truth, const Eigen::Vector3d& noise, std::mt19937& rng) {
+  rcm::JointSample js;
+  EXPECT_TRUE(rcm::compute_joint_sample(incision, s.q, s.qd, Eigen::Vector3d::Zero(), M_PI / 2, js));
+  std::normal_distribution<double> n(0.0, 1.0);
+  return rcm::compute_joint_model_torque(incision, tissue, js, truth) +
+         Eigen::Vector3d(noise[0] * n(rng), noise[1] * n(rng), noise[2] * n(rng));
+}
+
+rcm::OnlineEstimatorOptions default_options() {
+  rcm::OnlineEstimatorOptions o;
+  o.torque_sigma = Eigen::Vector3d(0.02, 0.02, 0.1);
+  return o;
+}
+
+}  // namespace
+
+TEST(OnlineEstimator, ConvergesToTheTruthAndSettlesWithinTwentySeconds) {
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const auto tissue = linear_tissue();
+  const rcm::OnlineEstimator estimator(incision, tissue, default_options());
+  for (const Eigen::Vector3d truth : {Eigen::Vector3d(0.010, 0.015, 0.030), Eigen::Vector3d(-0.008, 0.012, 0.005),
+                                      Eigen::Vector3d(0.0, 0.0, 0.060), Eigen::Vector3d(0.005, -0.020, -0.010)}) {
+    auto ws = estimator.create_workspace();
+    std::mt19937 rng(3);
+    const double dt = 1.0 / 200.0;
+    Eigen::Vector3d at_20s = Eigen::Vector3d::Constant(NAN);
+    for (int k = 0; k < 60 * 200; ++k) {
+      const PathSample s = path(k * dt);
+      estimator.compute_update(ws, s.t, s.q, s.qd, make_dtau(incision, tissue, s, truth, Eigen::Vector3d(0.02, 0.02, 0.1), rng));
+      if (k == 20 * 200) at_20s = rcm::get_online_output(ws).misalignment_m;
+    }
+    const rcm::OnlineOutput& out = rcm::get_online_output(ws);
+    EXPECT_LT((out.misalignment_m - truth).norm(), 0.0005) << truth.transpose() << " -> " << out.misalignment_m.transpose();
+    EXPECT_LT((at_20s - out.misalignment_m).norm(), 0.005) << truth.transpose();
+    // The reported standard deviation is that of an honest filter: errors within 4 sd.
+    EXPECT_TRUE(((out.misalignment_m - truth).array().abs() < 4.0 * out.sd_m.array() + 1e-5).all())
+        << (out.misalignment_m - truth).transpose() << " sd " << out.sd_m.transpose();
+    EXPECT_TRUE(out.onset);
+  }
+}
+
+TEST(OnlineEstimator, DetectsOnsetOnlyAfterTheIncisionMoves) {
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const auto tissue = linear_tissue();
+  const rcm::OnlineEstimator estimator(incision, tissue, default_options());
+  auto ws = estimator.create_workspace();
+  std::mt19937 rng(5);
+  const double dt = 1.0 / 500.0, t_shift = 60.0;
+  const Eigen::Vector3d truth(0.004, -0.003, 0.015);
+  for (int k = 0; k < 90 * 500; ++k) {
+    const PathSample s = path(k * dt);
+    // Aligned (p = 0: sliding friction only) until t_shift, then misaligned.
+    const Eigen::Vector3d p = s.t < t_shift ? Eigen::Vector3d::Zero() : truth;
+    const auto& out =
+        estimator.compute_update(ws, s.t, s.q, s.qd, make_dtau(incision, tissue, s, p, Eigen::Vector3d(0.02, 0.02, 0.1), rng));
+    if (s.t < t_shift) ASSERT_FALSE(out.onset) << "false onset at " << s.t << " s, cusum " << out.cusum;
+  }
+  const rcm::OnlineOutput& out = rcm::get_online_output(ws);
+  ASSERT_TRUE(out.onset);
+  EXPECT_GT(out.onset_time, t_shift);
+  EXPECT_LT(out.onset_time, t_shift + 3.0);
+  EXPECT_LT((out.misalignment_m - truth).norm(), 0.001);
+}
+
+TEST(OnlineEstimator, AlarmRisesAboveTheThresholdAndClearsWithHysteresis) {
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const auto tissue = linear_tissue();
+  const rcm::OnlineEstimator estimator(incision, tissue, default_options());
+  auto ws = estimator.create_workspace();
+  std::mt19937 rng(7);
+  const Eigen::Vector3d truth(0.0, 0.0, 0.045);
+  int raised = 0, cleared = 0;
+  double max_force_without_alarm = 0.0, min_force_with_alarm = 1e9;
+  for (int k = 0; k < 60 * 200; ++k) {
+    const PathSample s = path(k / 200.0);
+    const auto& out =
+        estimator.compute_update(ws, s.t, s.q, s.qd, make_dtau(incision, tissue, s, truth, Eigen::Vector3d(0.02, 0.02, 0.1), rng));
+    raised += out.alarm_raised;
+    cleared += out.alarm_cleared;
+    if (s.t < 10.0) continue;  // converged
+    // The alarm follows the true force, not the noise.
+    rcm::JointSample js;
+    ASSERT_TRUE(rcm::compute_joint_sample(incision, s.q, s.qd, Eigen::Vector3d::Zero(), M_PI / 2, js));
+    const double f_true = rcm::compute_joint_model_force(incision, tissue, js, truth).norm();
+    if (out.alarm_raised) EXPECT_GT(f_true, 9.5) << s.t;
+    if (out.alarm_cleared) EXPECT_LT(f_true, 9.5) << s.t;
+    if (out.alarm) min_force_with_alarm = std::min(min_force_with_alarm, out.force_norm_n);
+    else max_force_without_alarm = std::max(max_force_without_alarm, out.force_norm_n);
+  }
+  // D = 45 mm at up to ~0.6 rad of pivot: the force crosses 10 N back and forth.
+  EXPECT_GE(raised, 2);
+  EXPECT_GE(cleared, 1);
+  EXPECT_GE(min_force_with_alarm, 9.0 - 1e-9);
+  EXPECT_LE(max_force_without_alarm, 10.0 + 1e-9);
+}
+
+TEST(OnlineEstimator, RestDoesNotFeedTheOnsetTest) {
+  // At rest the free-space model misses the stiction band: a constant residual
+  // that a radial offset would explain as well. It must not trigger an onset.
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const rcm::OnlineEstimator estimator(incision, linear_tissue(), default_options());
+  auto ws = estimator.create_workspace();
+  const Eigen::Vector3d q = kQ0 + Eigen::Vector3d(0.1, -0.05, 0.0);
+  for (int k = 0; k < 60 * 200; ++k)
+    estimator.compute_update(ws, k / 200.0, q, Eigen::Vector3d::Zero(), Eigen::Vector3d(0.15, -0.1, 0.5));
+  EXPECT_FALSE(rcm::get_online_output(ws).onset);
+  EXPECT_TRUE(rcm::get_online_output(ws).at_rest);
+  // The same residual while moving is evidence.
+  rcm::OnlineEstimatorOptions o = default_options();
+  o.rest_angular_speed = 0.0;
+  o.rest_linear_speed = 0.0;
+  const rcm::OnlineEstimator moving(incision, linear_tissue(), o);
+  auto ws2 = moving.create_workspace();
+  for (int k = 0; k < 60 * 200; ++k)
+    moving.compute_update(ws2, k / 200.0, q, Eigen::Vector3d::Zero(), Eigen::Vector3d(0.15, -0.1, 0.5));
+  EXPECT_TRUE(rcm::get_online_output(ws2).onset);
+}
+
+TEST(OnlineEstimator, JetDerivativeMatchesFiniteDifferences) {
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const auto tissue = linear_tissue();
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  using Jet = ceres::Jet<double, 3>;
+  for (int trial = 0; trial < 200; ++trial) {
+    const PathSample s = path(50.0 * (u(rng) + 1.0));
+    rcm::JointSample js;
+    ASSERT_TRUE(rcm::compute_joint_sample(incision, s.q, s.qd, Eigen::Vector3d::Zero(), M_PI / 2, js));
+    const Eigen::Vector3d p(0.02 * u(rng), 0.02 * u(rng), 0.035 + 0.03 * u(rng));
+    Jet pj[3], tj[3], tissue_j[4];
+    for (int k = 0; k < 3; ++k) pj[k] = Jet(p[k], k);
+    for (int k = 0; k < 4; ++k) tissue_j[k] = Jet(tissue.parameters[k]);
+    rcm::detail::predict_joint_torque(js, incision.R_base_inc, tissue.axial_velocity_scale, pj, tissue_j, tj);
+    // Central differences; step h = 1e-6 m gives an error ~ h^2 |f'''| plus
+    // rounding eps |tau| / h, both far below the tolerance.
+    const double h = 1e-6;
+    for (int k = 0; k < 3; ++k) {
+      Eigen::Vector3d pp = p, pm = p;
+      pp[k] += h;
+      pm[k] -= h;
+      const Eigen::Vector3d fd = (rcm::compute_joint_model_torque(incision, tissue, js, pp) -
+                                  rcm::compute_joint_model_torque(incision, tissue, js, pm)) /
+                                 (2 * h);
+      for (int j = 0; j < 3; ++j) EXPECT_NEAR(tj[j].v[k], fd[j], 1e-5 * (1.0 + std::abs(fd[j]))) << trial << " " << j << k;
+    }
+  }
+}
+
+TEST(OnlineEstimator, PerSampleUpdateDoesNotAllocate) {
+  const long before_check = g_allocations;
+  auto* probe = new std::vector<int>(10);
+  delete probe;
+  ASSERT_GT(g_allocations - before_check, 0);  // the counter works
+
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const rcm::OnlineEstimator estimator(incision, linear_tissue(), default_options());
+  // A pipeline with a linear free-space model (its step is allocation free, as
+  // every kind's, see test_dynamics_no_alloc).
+  rcm::dynamics::TorqueModelInfo info;
+  info.num_joints = 3;
+  info.num_outputs = 3;
+  info.sample_period_s = 0.005;
+  rcm::dynamics::LinearTorqueParameters lp{Eigen::VectorXd::Ones(17),          Eigen::VectorXd::Ones(3),
+                                           Eigen::VectorXd::Ones(3),           Eigen::VectorXd::Ones(3),
+                                           Eigen::VectorXd::Ones(3),           Eigen::VectorXd::Constant(3, 1e-3)};
+  const rcm::OnlinePipeline pipeline(std::make_shared<const rcm::dynamics::LinearTorqueModel>(info, lp), estimator);
+  auto ws = pipeline.create_workspace();
+  auto ews = estimator.create_workspace();
+  std::mt19937 rng(1);
+  const long before = g_allocations;
+  for (int k = 0; k < 2000; ++k) {
+    const PathSample s = path(k / 200.0);
+    const double effort[3] = {0.1, -0.2, 0.5};
+    pipeline.compute_sample(ws, s.t, s.q.data(), s.qd.data(), effort);
+    estimator.compute_update(ews, s.t, s.q, s.qd, Eigen::Vector3d(0.1, 0.05, 0.3));
+  }
+  EXPECT_EQ(g_allocations - before, 0);
+}
+
+TEST(OnlineEstimator, OptionsAreChecked) {
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  rcm::OnlineEstimatorOptions o;
+  o.D_starts = {0.01, 0.02, 0.03, 0.04, 0.05};
+  EXPECT_THROW(rcm::OnlineEstimator(incision, linear_tissue(), o), std::invalid_argument);
+  o = {};
+  o.correlation_time_s = 0.0;
+  EXPECT_THROW(rcm::OnlineEstimator(incision, linear_tissue(), o), std::invalid_argument);
+  o = {};
+  o.D_starts = {0.1};
+  EXPECT_THROW(rcm::OnlineEstimator(incision, linear_tissue(), o), std::invalid_argument);
+}
