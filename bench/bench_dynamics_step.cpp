@@ -1,5 +1,5 @@
-// Per-sample cost of the torque models' streaming step (Eigen/float kernels,
-// no allocation): the default 2 x 128 LSTM on 6 joints, the per-joint MLP and
+// Per-sample cost of the torque models' streaming step (float kernels, no
+// allocation): the default 1 x 128 LSTM on 6 joints (and other sizes), the per-joint MLP and
 // the model-based linear model with its friction state.
 
 #include <benchmark/benchmark.h>
@@ -44,7 +44,8 @@ void run(benchmark::State& state, const TorqueModel& m) {
 
 static void BM_LstmKernelStep(benchmark::State& state) {
   const int H = static_cast<int>(state.range(0)), L = static_cast<int>(state.range(1));
-  LstmKernel k(lstm(12, H, L, 6));
+  LstmKernel k(lstm(12, H, L, 6));  // AVX2/FMA kernels when the CPU has them
+  state.SetLabel(to_string(k.isa()));
   auto s = k.create_state();
   Eigen::VectorXf x = Eigen::VectorXf::Constant(12, 0.1f), y(6);
   for (auto _ : state) {
@@ -54,6 +55,20 @@ static void BM_LstmKernelStep(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_LstmKernelStep)->Args({128, 1})->Args({128, 2})->Args({256, 1})->Args({32, 1});
+
+// The same step on the portable kernels (what a CPU without AVX2/FMA runs).
+static void BM_LstmKernelStepPortable(benchmark::State& state) {
+  const int H = static_cast<int>(state.range(0)), L = static_cast<int>(state.range(1));
+  LstmKernel k(lstm(12, H, L, 6), KernelIsa::portable);
+  auto s = k.create_state();
+  Eigen::VectorXf x = Eigen::VectorXf::Constant(12, 0.1f), y(6);
+  for (auto _ : state) {
+    x[0] += 1e-4f;
+    k.step(s, x.data(), y.data());
+    benchmark::DoNotOptimize(y.data());
+  }
+}
+BENCHMARK(BM_LstmKernelStepPortable)->Args({128, 1});
 
 static void BM_LstmModelStep(benchmark::State& state) {
   LstmTorqueModel m(info6(), lstm(12, 128, 1, 6), norm6());  // the default architecture

@@ -68,25 +68,62 @@ struct ReferenceLstm {
 
 }  // namespace
 
+std::vector<KernelIsa> available_isas() {
+  std::vector<KernelIsa> isas{KernelIsa::portable};
+  if (kernel_isa_available(KernelIsa::avx2_fma)) isas.push_back(KernelIsa::avx2_fma);
+  return isas;
+}
+
 TEST(LstmKernel, MatchesDoubleReferenceOverManySteps) {
-  for (int layers : {1, 2}) {
-    const auto net = random_lstm(6, 24, layers, 16, 3, 11 + layers);
-    LstmKernel kernel(net);
-    auto state = kernel.create_state();
-    ReferenceLstm ref(net);
-    std::mt19937 rng(5);
-    std::normal_distribution<double> g(0.0, 1.5);
-    double worst = 0.0;
-    for (int t = 0; t < 300; ++t) {
-      Eigen::VectorXd x(6);
-      for (int i = 0; i < 6; ++i) x(i) = g(rng);
-      const Eigen::VectorXf xf = x.cast<float>();
-      Eigen::VectorXf y(3);
-      kernel.step(state, xf.data(), y.data());
-      const Eigen::VectorXd yr = ref.step(xf.cast<double>());
-      worst = std::max(worst, (y.cast<double>() - yr).cwiseAbs().maxCoeff());
+  // H = 24 pads to two 16-unit panels; head rows 16 and 3 pad to 8-row blocks.
+  for (const KernelIsa isa : available_isas())
+    for (int layers : {1, 2}) {
+      const auto net = random_lstm(6, 24, layers, 16, 3, 11 + layers);
+      LstmKernel kernel(net, isa);
+      EXPECT_EQ(kernel.isa(), isa);
+      auto state = kernel.create_state();
+      ReferenceLstm ref(net);
+      std::mt19937 rng(5);
+      std::normal_distribution<double> g(0.0, 1.5);
+      double worst = 0.0;
+      for (int t = 0; t < 300; ++t) {
+        Eigen::VectorXd x(6);
+        for (int i = 0; i < 6; ++i) x(i) = g(rng);
+        const Eigen::VectorXf xf = x.cast<float>();
+        Eigen::VectorXf y(3);
+        kernel.step(state, xf.data(), y.data());
+        const Eigen::VectorXd yr = ref.step(xf.cast<double>());
+        worst = std::max(worst, (y.cast<double>() - yr).cwiseAbs().maxCoeff());
+      }
+      EXPECT_LT(worst, 1e-5) << layers << " layers, " << to_string(isa);
     }
-    EXPECT_LT(worst, 1e-5) << layers << " layers";
+}
+
+// The AVX2/FMA kernels (chosen at run time) and the portable ones compute the
+// same steps: the default 1 x 128 architecture, two layers, and sizes that are
+// not multiples of the panel blocks (H = 20, head 10 -> 7 outputs).
+TEST(LstmKernel, Avx2AndPortableKernelsAgree) {
+  if (!kernel_isa_available(KernelIsa::avx2_fma)) GTEST_SKIP() << "this CPU has no AVX2/FMA";
+  struct Shape {
+    int in, H, L, head, out;
+  };
+  for (const Shape sh : {Shape{12, 128, 1, 64, 6}, Shape{12, 128, 2, 64, 6}, Shape{5, 20, 2, 10, 7}}) {
+    const auto net = make_random_lstm_network(sh.in, sh.H, sh.L, sh.head, sh.out, 21, 0.2f);
+    const LstmKernel fast(net, KernelIsa::avx2_fma), portable(net, KernelIsa::portable);
+    auto sf = fast.create_state(), sp = portable.create_state();
+    std::mt19937 rng(9);
+    std::normal_distribution<float> g(0.0f, 1.5f);
+    Eigen::VectorXf x(sh.in), yf(sh.out), yp(sh.out);
+    double worst = 0.0, largest = 0.0;
+    for (int t = 0; t < 1000; ++t) {
+      for (int i = 0; i < sh.in; ++i) x[i] = g(rng);
+      fast.step(sf, x.data(), yf.data());
+      portable.step(sp, x.data(), yp.data());
+      worst = std::max(worst, static_cast<double>((yf - yp).cwiseAbs().maxCoeff()));
+      largest = std::max(largest, static_cast<double>(yp.cwiseAbs().maxCoeff()));
+    }
+    EXPECT_LT(worst, 1e-5) << sh.H << " hidden, " << sh.L << " layers";
+    EXPECT_GT(largest, 0.1);  // the outputs are not trivially zero
   }
 }
 

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include "counting_new.hpp"
+
 #include <atomic>
 #include <cstdlib>
 #include <new>
@@ -11,20 +13,7 @@
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/networks.hpp"
 
-namespace {
-std::atomic<long> g_allocations{0};
-}
-
-void* operator new(std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) { return operator new(n); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+using rcm::test::g_allocations;
 
 using namespace rcm::dynamics;
 
@@ -78,5 +67,23 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
     m->reset_state(*ws);
     m->compute_step(*ws, 0.0, q, qd, tau);
     EXPECT_EQ(g_allocations - before, 0) << to_string(m->kind());
+  }
+}
+
+TEST(NoAllocation, LstmKernelStepOnEveryInstructionSet) {
+  const auto net = make_random_lstm_network(12, 128, 2, 64, 6, 3);
+  for (const KernelIsa isa : {KernelIsa::portable, KernelIsa::avx2_fma}) {
+    if (!kernel_isa_available(isa)) continue;
+    const LstmKernel kernel(net, isa);
+    auto state = kernel.create_state();
+    float x[12] = {0.1f, -0.2f}, y[6];
+    const long before = g_allocations;
+    for (int t = 0; t < 200; ++t) {
+      x[0] += 1e-3f;
+      kernel.step(state, x, y);
+    }
+    LstmKernel::reset(state);
+    kernel.step(state, x, y);
+    EXPECT_EQ(g_allocations - before, 0) << to_string(isa);
   }
 }

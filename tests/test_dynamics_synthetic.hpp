@@ -20,6 +20,38 @@ struct SyntheticArmOptions {
   bool pauses = true;
 };
 
+// The arm itself: gravity of a tilted yaw/pitch/insertion arm, configuration-
+// dependent inertia, and LuGre friction whose bristle state z is the memory.
+struct SyntheticArm {
+  static constexpr int N = 3;
+  // LuGre: sigma0 (bristle stiffness), Coulomb, static, Stribeck velocity, viscous.
+  double Fc[N] = {0.05, 0.06, 0.4}, Fs[N] = {0.07, 0.08, 0.55}, vs[N] = {0.02, 0.02, 0.005};
+  double s0[N] = {0.05 / 2e-3, 0.06 / 2e-3, 0.4 / 2e-4}, s2[N] = {0.03, 0.04, 0.8};
+  double z[N] = {0, 0, 0};
+  double F[N] = {0, 0, 0};  // friction after the last advance_friction
+
+  // LuGre bristle state over dt at velocity qd, exact exponential update at constant velocity.
+  void advance_friction(const double* qd, double dt) {
+    for (int j = 0; j < N; ++j) {
+      const double v = qd[j];
+      const double g = Fc[j] + (Fs[j] - Fc[j]) * std::exp(-(v / vs[j]) * (v / vs[j]));
+      const double zss = v == 0 ? z[j] : g / s0[j] * (v > 0 ? 1 : -1);
+      z[j] = zss + (z[j] - zss) * std::exp(-s0[j] * std::abs(v) * dt / g);
+      F[j] = s0[j] * z[j] + s2[j] * v;
+    }
+  }
+  // Noise-free joint torque at (q, qdd) with the current friction.
+  void compute_effort(const double* q, const double* qdd, double* tau) const {
+    const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), sn2 = std::sin(q[1]), c2 = std::cos(q[1]);
+    const double m3 = 0.3, g0 = 9.81;
+    // Potential: U = m3 g (q3 - 0.1) c1 c2 + 0.4 s2 c1 + 0.1 s1 (a tilted base).
+    const double tau_g[N] = {-m3 * g0 * (q[2] - 0.1) * s1 * c2 - 0.4 * sn2 * s1 + 0.1 * c1,
+                             -m3 * g0 * (q[2] - 0.1) * c1 * sn2 + 0.4 * c2 * c1, m3 * g0 * c1 * c2};
+    const double inertia[N] = {0.02 + m3 * q[2] * q[2], 0.02 + m3 * q[2] * q[2], m3};
+    for (int j = 0; j < N; ++j) tau[j] = inertia[j] * qdd[j] + tau_g[j] + F[j];
+  }
+};
+
 inline Recording make_synthetic_free_space(const SyntheticArmOptions& o = {}) {
   std::mt19937 rng(o.seed);
   std::uniform_real_distribution<double> uni(0.0, 1.0);
@@ -33,10 +65,7 @@ inline Recording make_synthetic_free_space(const SyntheticArmOptions& o = {}) {
       ph[j][k] = 2 * M_PI * uni(rng);
       a[j][k] = amp[j] / K * (0.5 + uni(rng));
     }
-  // LuGre: sigma0 (bristle stiffness), Coulomb, static, Stribeck velocity, viscous.
-  const double Fc[N] = {0.05, 0.06, 0.4}, Fs[N] = {0.07, 0.08, 0.55}, vs[N] = {0.02, 0.02, 0.005};
-  const double s0[N] = {0.05 / 2e-3, 0.06 / 2e-3, 0.4 / 2e-4}, s2[N] = {0.03, 0.04, 0.8};
-  double z[N] = {0, 0, 0};
+  SyntheticArm arm;
 
   const int sub = 5;
   const double dt = 1.0 / (o.rate_hz * sub);
@@ -53,7 +82,7 @@ inline Recording make_synthetic_free_space(const SyntheticArmOptions& o = {}) {
   bool moving = true;
   double gate = 1.0, gate_rate = 0.0;
   for (Eigen::Index i = 0; i < T; ++i) {
-    double q[N], qd[N], qdd[N], F[N];
+    double q[N], qd[N], qdd[N], tau[N];
     for (int k = 0; k < sub; ++k) {
       t += dt;
       if (o.pauses && t > phase_end) {
@@ -75,25 +104,15 @@ inline Recording make_synthetic_free_space(const SyntheticArmOptions& o = {}) {
         q[j] = p;
         qd[j] = dp * gate;
         qdd[j] = ddp * gate * gate + dp * gate_rate;
-        // LuGre bristle state, exact exponential update at constant velocity.
-        const double v = qd[j];
-        const double g = Fc[j] + (Fs[j] - Fc[j]) * std::exp(-(v / vs[j]) * (v / vs[j]));
-        const double zss = v == 0 ? z[j] : g / s0[j] * (v > 0 ? 1 : -1);
-        z[j] = zss + (z[j] - zss) * std::exp(-s0[j] * std::abs(v) * dt / g);
-        F[j] = s0[j] * z[j] + s2[j] * v;
       }
+      arm.advance_friction(qd, dt);
     }
-    const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), sn2 = std::sin(q[1]), c2 = std::cos(q[1]);
-    const double m3 = 0.3, g0 = 9.81;
-    // Potential: U = m3 g (q3 - 0.1) c1 c2 + 0.4 s2 c1 + 0.1 s1 (a tilted base).
-    const double tau_g[N] = {-m3 * g0 * (q[2] - 0.1) * s1 * c2 - 0.4 * sn2 * s1 + 0.1 * c1,
-                             -m3 * g0 * (q[2] - 0.1) * c1 * sn2 + 0.4 * c2 * c1, m3 * g0 * c1 * c2};
-    const double inertia[N] = {0.02 + m3 * q[2] * q[2], 0.02 + m3 * q[2] * q[2], m3};
+    arm.compute_effort(q, qdd, tau);
     r.time(i) = static_cast<double>(i) / o.rate_hz;
     for (int j = 0; j < N; ++j) {
       r.position(i, j) = q[j];
       r.velocity(i, j) = qd[j];
-      r.effort(i, j) = inertia[j] * qdd[j] + tau_g[j] + F[j] + o.effort_noise * Fc[j] * 10 * gauss(rng);
+      r.effort(i, j) = tau[j] + o.effort_noise * arm.Fc[j] * 10 * gauss(rng);
     }
   }
   return r;

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include "counting_new.hpp"
+
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -14,20 +16,7 @@
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/estimation/online.hpp"
 
-namespace {
-std::atomic<long> g_allocations{0};
-}
-
-void* operator new(std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) { return operator new(n); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+using rcm::test::g_allocations;
 
 namespace {
 

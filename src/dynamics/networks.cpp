@@ -1,16 +1,15 @@
 #include "rcm/dynamics/networks.hpp"
 
-#include <random>
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cstddef>
-#if defined(__x86_64__)
-#include <immintrin.h>
+#include <cstdlib>
+#include <cstring>
 #include <random>
-#endif
 #include <stdexcept>
 
+#include "kernels.hpp"
 #include "model_io.hpp"
 #include "rcm/common/error.hpp"
 
@@ -18,134 +17,8 @@ namespace rcm::dynamics {
 
 namespace {
 
-// The per-sample kernels. Weights of each LSTM layer are stored as "panels": for
-// every block of 64 gate rows, the 64 values of column 0, then column 1, ... so the
-// GEMV reads them strictly sequentially while up to 8 AVX registers accumulate.
-// An AVX2/FMA version is chosen at run time when the CPU has it; the generic
-// version is plain loops the compiler vectorizes for the baseline ISA.
-#define RCM_ALWAYS_INLINE inline __attribute__((always_inline))
-constexpr int kPanelRows = 64;
-
-RCM_ALWAYS_INLINE void panel_gemv_body(const float* __restrict p, int rows_padded, int cols,
-                                       const float* __restrict x, float* __restrict y) {
-  for (int rb = 0; rb < rows_padded; rb += kPanelRows) {
-    const int nb = std::min(kPanelRows, rows_padded - rb);
-    float acc[kPanelRows];
-    for (int i = 0; i < nb; ++i) acc[i] = y[rb + i];
-    for (int j = 0; j < cols; ++j) {
-      const float xj = x[j];
-      for (int i = 0; i < nb; ++i) acc[i] += p[i] * xj;
-      p += nb;
-    }
-    for (int i = 0; i < nb; ++i) y[rb + i] = acc[i];
-  }
-}
-
-// tanh by the rational approximation Eigen uses for float (error a few ulp),
-// written as a branch-free loop.
-RCM_ALWAYS_INLINE void tanh_body(float* __restrict v, int n) {
-  for (int i = 0; i < n; ++i) {
-    const float a = v[i];
-    const float x = std::min(7.90531110763549805f, std::max(-7.90531110763549805f, a));
-    const float x2 = x * x;
-    float p = -2.76076847742355e-16f;
-    p = p * x2 + 2.00018790482477e-13f;
-    p = p * x2 + -8.60467152213735e-11f;
-    p = p * x2 + 5.12229709037114e-08f;
-    p = p * x2 + 1.48572235717979e-05f;
-    p = p * x2 + 6.37261928875436e-04f;
-    p = p * x2 + 4.89352455891786e-03f;
-    p = p * x;
-    float q = 1.19825839466702e-06f;
-    q = q * x2 + 1.18534705686654e-04f;
-    q = q * x2 + 2.26843463243900e-03f;
-    q = q * x2 + 4.89352518554385e-03f;
-    const float r = p / q;
-    v[i] = std::abs(a) < 0.0004f ? a : r;
-  }
-}
-
-// sigmoid(x) = (tanh(x / 2) + 1) / 2 on the i, f, o blocks; tanh on g.
-RCM_ALWAYS_INLINE void gates_body(float* __restrict gates, float* __restrict c, float* __restrict h, int H) {
-  float* gi = gates;
-  float* gf = gates + H;
-  float* go = gates + 3 * H;
-  for (int k = 0; k < H; ++k) {
-    gi[k] *= 0.5f;
-    gf[k] *= 0.5f;
-    go[k] *= 0.5f;
-  }
-  tanh_body(gates, 4 * H);
-  const float* gg = gates + 2 * H;
-  for (int k = 0; k < H; ++k) {
-    const float i = 0.5f * gi[k] + 0.5f;
-    const float f = 0.5f * gf[k] + 0.5f;
-    c[k] = f * c[k] + i * gg[k];
-    h[k] = c[k];
-  }
-  tanh_body(h, H);
-  for (int k = 0; k < H; ++k) h[k] *= 0.5f * go[k] + 0.5f;
-}
-
-// y[0:rows] += W x, W column-major rows x cols (dense heads; small).
-RCM_ALWAYS_INLINE void gemv_body(const float* __restrict W, int rows, int cols, const float* __restrict x,
-                                 float* __restrict y) {
-  for (int j = 0; j < cols; ++j) {
-    const float xj = x[j];
-    const float* w = W + static_cast<std::size_t>(j) * rows;
-    for (int i = 0; i < rows; ++i) y[i] += xj * w[i];
-  }
-}
-
-void panel_gemv_generic(const float* p, int rows_padded, int cols, const float* x, float* y) {
-  panel_gemv_body(p, rows_padded, cols, x, y);
-}
-void gates_generic(float* gates, float* c, float* h, int H) { gates_body(gates, c, h, H); }
-void tanh_generic(float* v, int n) { tanh_body(v, n); }
-void gemv_generic(const float* W, int rows, int cols, const float* x, float* y) { gemv_body(W, rows, cols, x, y); }
-
-#if defined(__x86_64__) && defined(__GNUC__)
-#define RCM_HAVE_AVX2_PATH 1
-template <int V>
-__attribute__((target("avx2,fma"))) inline const float* panel_block_avx2(const float* p, int cols, const float* x,
-                                                                       float* y) {
-  __m256 acc[V];
-  for (int v = 0; v < V; ++v) acc[v] = _mm256_loadu_ps(y + 8 * v);
-  for (int j = 0; j < cols; ++j) {
-    const __m256 xj = _mm256_broadcast_ss(x + j);
-    for (int v = 0; v < V; ++v) acc[v] = _mm256_fmadd_ps(_mm256_loadu_ps(p + 8 * v), xj, acc[v]);
-    p += 8 * V;
-  }
-  for (int v = 0; v < V; ++v) _mm256_storeu_ps(y + 8 * v, acc[v]);
-  return p;
-}
-
-__attribute__((target("avx2,fma"))) void panel_gemv_avx2(const float* p, int rows_padded, int cols, const float* x,
-                                                        float* y) {
-  for (int rb = 0; rb < rows_padded; rb += kPanelRows) {
-    switch (std::min(kPanelRows, rows_padded - rb) / 8) {
-      case 8: p = panel_block_avx2<8>(p, cols, x, y + rb); break;
-      case 7: p = panel_block_avx2<7>(p, cols, x, y + rb); break;
-      case 6: p = panel_block_avx2<6>(p, cols, x, y + rb); break;
-      case 5: p = panel_block_avx2<5>(p, cols, x, y + rb); break;
-      case 4: p = panel_block_avx2<4>(p, cols, x, y + rb); break;
-      case 3: p = panel_block_avx2<3>(p, cols, x, y + rb); break;
-      case 2: p = panel_block_avx2<2>(p, cols, x, y + rb); break;
-      default: p = panel_block_avx2<1>(p, cols, x, y + rb); break;
-    }
-  }
-}
-__attribute__((target("avx2,fma"))) void gates_avx2(float* gates, float* c, float* h, int H) {
-  gates_body(gates, c, h, H);
-}
-__attribute__((target("avx2,fma"))) void tanh_avx2(float* v, int n) { tanh_body(v, n); }
-__attribute__((target("avx2,fma"))) void gemv_avx2(const float* W, int rows, int cols, const float* x, float* y) {
-  gemv_body(W, rows, cols, x, y);
-}
-#endif
-
 bool cpu_has_avx2_fma() {
-#if defined(RCM_HAVE_AVX2_PATH)
+#if (defined(__x86_64__) || defined(__i386__)) && defined(__GNUC__)
   static const bool has = [] {
     __builtin_cpu_init();
     return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
@@ -156,51 +29,27 @@ bool cpu_has_avx2_fma() {
 #endif
 }
 
-void panel_gemv(const float* p, int rows_padded, int cols, const float* x, float* y) {
-#if defined(RCM_HAVE_AVX2_PATH)
-  if (cpu_has_avx2_fma()) return panel_gemv_avx2(p, rows_padded, cols, x, y);
-#endif
-  panel_gemv_generic(p, rows_padded, cols, x, y);
-}
-void lstm_gates_and_state(float* gates, float* c, float* h, int H) {
-#if defined(RCM_HAVE_AVX2_PATH)
-  if (cpu_has_avx2_fma()) return gates_avx2(gates, c, h, H);
-#endif
-  gates_generic(gates, c, h, H);
-}
-void tanh_inplace(float* v, int n) {
-#if defined(RCM_HAVE_AVX2_PATH)
-  if (cpu_has_avx2_fma()) return tanh_avx2(v, n);
-#endif
-  tanh_generic(v, n);
-}
-void gemv_accumulate(const float* W, int rows, int cols, const float* x, float* y) {
-#if defined(RCM_HAVE_AVX2_PATH)
-  if (cpu_has_avx2_fma()) return gemv_avx2(W, rows, cols, x, y);
-#endif
-  gemv_generic(W, rows, cols, x, y);
-}
-
-// Panel layout of an R x C matrix with rows padded to a multiple of 8 (zeros).
-Eigen::VectorXf make_panels(const Eigen::MatrixXf& W, int rows_padded) {
-  Eigen::VectorXf p(static_cast<Eigen::Index>(rows_padded) * W.cols());
-  Eigen::Index k = 0;
-  for (int rb = 0; rb < rows_padded; rb += kPanelRows) {
-    const int nb = std::min(kPanelRows, rows_padded - rb);
-    for (Eigen::Index j = 0; j < W.cols(); ++j)
-      for (int i = 0; i < nb; ++i) p[k++] = rb + i < W.rows() ? W(rb + i, j) : 0.0f;
+const kernels::KernelTable& kernels_for(KernelIsa isa) {
+  if (isa == KernelIsa::avx2_fma) {
+    if (!kernel_isa_available(isa))
+      throw std::invalid_argument("network kernels: AVX2/FMA kernels are not available on this CPU or build");
+    return *kernels::avx2_fma_kernels();
   }
-  return p;
+  return kernels::portable_kernels();
 }
 
-void apply_activation(Activation a, float* v, int n) {
+const kernels::KernelTable& best_kernels() {
+  static const kernels::KernelTable& table = kernels_for(best_kernel_isa());
+  return table;
+}
+
+int activation_code(Activation a) {
   switch (a) {
-    case Activation::identity: return;
-    case Activation::tanh: tanh_inplace(v, n); return;
-    case Activation::relu:
-      for (int i = 0; i < n; ++i) v[i] = std::max(v[i], 0.0f);
-      return;
+    case Activation::identity: return kernels::kIdentity;
+    case Activation::tanh: return kernels::kTanh;
+    case Activation::relu: return kernels::kRelu;
   }
+  return kernels::kIdentity;
 }
 
 std::string to_string(Activation a) {
@@ -358,17 +207,88 @@ void LstmNetwork::check() const {
   if (head.input_size() != H) throw std::invalid_argument("LSTM head: input size must equal hidden size");
 }
 
-LstmKernel::LstmKernel(const LstmNetwork& network) : network_(network) {
+// ---------------------------------------------------------------------------- kernels
+
+bool kernel_isa_available(KernelIsa isa) {
+  if (isa == KernelIsa::portable) return true;
+  return kernels::avx2_fma_kernels() != nullptr && cpu_has_avx2_fma();
+}
+
+KernelIsa best_kernel_isa() {
+  return kernel_isa_available(KernelIsa::avx2_fma) ? KernelIsa::avx2_fma : KernelIsa::portable;
+}
+
+const char* to_string(KernelIsa isa) { return isa == KernelIsa::avx2_fma ? "avx2_fma" : "portable"; }
+
+AlignedFloats::AlignedFloats(std::size_t size) : size_(size) {
+  if (size == 0) return;
+  const std::size_t bytes =
+      (size * sizeof(float) + kernels::kAlignment - 1) / kernels::kAlignment * kernels::kAlignment;
+  auto* p = static_cast<float*>(std::aligned_alloc(kernels::kAlignment, bytes));
+  if (p == nullptr) throw std::bad_alloc();
+  std::memset(p, 0, bytes);
+  data_.reset(p);
+}
+
+AlignedFloats::AlignedFloats(const AlignedFloats& other) : AlignedFloats(other.size_) {
+  if (size_ > 0) std::memcpy(data_.get(), other.data_.get(), size_ * sizeof(float));
+}
+
+AlignedFloats& AlignedFloats::operator=(const AlignedFloats& other) {
+  if (this != &other) *this = AlignedFloats(other);
+  return *this;
+}
+
+void AlignedFloats::Free::operator()(float* p) const noexcept { std::free(p); }
+
+LstmKernel::LstmKernel(const LstmNetwork& network, KernelIsa isa)
+    : network_(network), isa_(isa), kernels_(&kernels_for(isa)) {
   network_.check();
   const int H = network_.hidden_size();
-  rows_padded_ = (4 * H + 7) / 8 * 8;
+  constexpr int U = kernels::kUnitBlock;
+  units_padded_ = (H + U - 1) / U * U;
+  // LSTM layers: panel of unit block u0 = rows (gate, unit) for gate in i, f, g, o
+  // and unit in u0 .. u0 + 15, column after column of [W_ih W_hh].
   for (const auto& l : network_.layers) {
-    Eigen::MatrixXf fused(l.weight_ih.rows(), l.weight_ih.cols() + l.weight_hh.cols());
-    fused << l.weight_ih, l.weight_hh;
-    fused_.push_back(make_panels(fused, rows_padded_));
-    Eigen::VectorXf b = Eigen::VectorXf::Zero(rows_padded_);
-    b.head(4 * H) = l.bias_ih + l.bias_hh;
-    bias_.push_back(std::move(b));
+    const auto in = l.weight_ih.cols();
+    const auto cols = in + H;
+    AlignedFloats panels(static_cast<std::size_t>(4 * units_padded_) * static_cast<std::size_t>(cols));
+    AlignedFloats bias(static_cast<std::size_t>(4 * units_padded_));
+    float* p = panels.data();
+    for (int u0 = 0; u0 < units_padded_; u0 += U) {
+      for (Eigen::Index j = 0; j < cols; ++j)
+        for (int g = 0; g < 4; ++g)
+          for (int k = 0; k < U; ++k) {
+            const int unit = u0 + k, row = g * H + unit;
+            *p++ = unit >= H ? 0.0f : (j < in ? l.weight_ih(row, j) : l.weight_hh(row, j - in));
+          }
+      for (int g = 0; g < 4; ++g)
+        for (int k = 0; k < U; ++k) {
+          const int unit = u0 + k, row = g * H + unit;
+          bias.data()[4 * u0 + g * U + k] = unit >= H ? 0.0f : l.bias_ih[row] + l.bias_hh[row];
+        }
+    }
+    lstm_panels_.push_back(std::move(panels));
+    lstm_bias_.push_back(std::move(bias));
+  }
+  // Head: rows padded to a multiple of 8, blocks of up to 64 rows, column after column.
+  for (const auto& l : network_.head.layers) {
+    DensePanels d;
+    d.rows = static_cast<int>(l.weight.rows());
+    d.rows_padded = (d.rows + 7) / 8 * 8;
+    d.cols = static_cast<int>(l.weight.cols());
+    d.activation = activation_code(l.activation);
+    d.panels = AlignedFloats(static_cast<std::size_t>(d.rows_padded) * static_cast<std::size_t>(d.cols));
+    d.bias = AlignedFloats(static_cast<std::size_t>(d.rows_padded));
+    float* p = d.panels.data();
+    for (int rb = 0; rb < d.rows_padded; rb += kernels::kPanelRows) {
+      const int nb = std::min(kernels::kPanelRows, d.rows_padded - rb);
+      for (int j = 0; j < d.cols; ++j)
+        for (int i = 0; i < nb; ++i) *p++ = rb + i < d.rows ? l.weight(rb + i, j) : 0.0f;
+    }
+    for (int i = 0; i < d.rows; ++i) d.bias.data()[i] = l.bias[i];
+    head_width_ = std::max(head_width_, d.rows_padded);
+    head_.push_back(std::move(d));
   }
 }
 
@@ -376,13 +296,12 @@ LstmKernel::State LstmKernel::create_state() const {
   State s;
   const int H = network_.hidden_size();
   for (std::size_t k = 0; k < network_.layers.size(); ++k) {
-    s.h.push_back(Eigen::VectorXf::Zero(H));
-    s.c.push_back(Eigen::VectorXf::Zero(H));
+    s.h.push_back(Eigen::VectorXf::Zero(units_padded_));
+    s.c.push_back(Eigen::VectorXf::Zero(units_padded_));
   }
-  s.gates = Eigen::VectorXf::Zero(rows_padded_);
   s.xh = Eigen::VectorXf::Zero(std::max(network_.input_size(), H) + H);
-  s.head_a = Eigen::VectorXf::Zero(network_.head.max_width());
-  s.head_b = Eigen::VectorXf::Zero(network_.head.max_width());
+  s.head_a = Eigen::VectorXf::Zero(head_width_);
+  s.head_b = Eigen::VectorXf::Zero(head_width_);
   return s;
 }
 
@@ -396,21 +315,27 @@ void LstmKernel::step(State& s, const float* x, float* y) const {
   const float* in = x;
   int in_size = network_.input_size();
   float* xh = s.xh.data();
-  for (std::size_t k = 0; k < fused_.size(); ++k) {
-    float* gates = s.gates.data();
-    std::copy(bias_[k].data(), bias_[k].data() + rows_padded_, gates);
-    // [W_ih W_hh] [x; h] in one pass over the panels.
+  for (std::size_t k = 0; k < lstm_panels_.size(); ++k) {
+    // [x; h_prev] for one pass over the fused [W_ih W_hh] panels; h is rewritten in place.
     std::copy(in, in + in_size, xh);
     std::copy(s.h[k].data(), s.h[k].data() + H, xh + in_size);
-    panel_gemv(fused_[k].data(), rows_padded_, in_size + H, xh, gates);
-    lstm_gates_and_state(gates, s.c[k].data(), s.h[k].data(), H);
+    kernels_->lstm_layer(lstm_panels_[k].data(), lstm_bias_[k].data(), units_padded_, in_size + H, xh,
+                         s.c[k].data(), s.h[k].data());
     in = s.h[k].data();
     in_size = H;
   }
-  compute_dense_forward(network_.head, in, y, s.head_a.data(), s.head_b.data());
+  float* bufs[2] = {s.head_a.data(), s.head_b.data()};
+  for (std::size_t k = 0; k < head_.size(); ++k) {
+    const auto& d = head_[k];
+    float* out = bufs[k % 2];
+    kernels_->dense_layer(d.panels.data(), d.bias.data(), d.rows_padded, d.cols, in, out, d.activation);
+    in = out;
+  }
+  std::copy(in, in + head_.back().rows, y);
 }
 
 void compute_dense_forward(const DenseStack& stack, const float* x, float* y, float* a, float* b) {
+  const auto& kern = best_kernels();
   const float* in = x;
   const std::size_t L = stack.layers.size();
   for (std::size_t k = 0; k < L; ++k) {
@@ -418,8 +343,8 @@ void compute_dense_forward(const DenseStack& stack, const float* x, float* y, fl
     const int rows = static_cast<int>(l.weight.rows());
     float* out = k + 1 == L ? y : (k % 2 == 0 ? a : b);
     std::copy(l.bias.data(), l.bias.data() + rows, out);
-    gemv_accumulate(l.weight.data(), rows, static_cast<int>(l.weight.cols()), in, out);
-    apply_activation(l.activation, out, rows);
+    kern.gemv_colmajor(l.weight.data(), rows, static_cast<int>(l.weight.cols()), in, out);
+    kern.activate(out, rows, activation_code(l.activation));
     in = out;
   }
 }
@@ -545,6 +470,26 @@ void HybridTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, 
   kernel_.step(ws.state, ws.x.data(), ws.y.data());
   for (int j = 0; j < num_outputs(); ++j)
     tau[j] += static_cast<double>(ws.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
+}
+
+Eigen::MatrixXd HybridTorqueModel::predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
+                                                    const Eigen::MatrixXd& velocity) const {
+  // The base's whole-recording prediction (its residual was trained against
+  // that one, see training), plus the residual network stepped with its state.
+  Eigen::MatrixXd out = base_->predict_sequence(time, position, velocity);
+  auto ws = create_workspace();
+  auto& lw = static_cast<LstmWorkspace&>(*ws);
+  const int N = num_joints();
+  Eigen::VectorXd q(N), qd(N);
+  for (Eigen::Index t = 0; t < time.size(); ++t) {
+    q = position.row(t).head(N).transpose();
+    qd = velocity.row(t).head(N).transpose();
+    normalize_input(normalization_, N, q.data(), qd.data(), lw.x.data());
+    kernel_.step(lw.state, lw.x.data(), lw.y.data());
+    for (int j = 0; j < num_outputs(); ++j)
+      out(t, j) += static_cast<double>(lw.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
+  }
+  return out;
 }
 
 nlohmann::json HybridTorqueModel::save_parameters() const {

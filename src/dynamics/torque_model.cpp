@@ -194,30 +194,43 @@ TorqueModelKind parse_torque_model_kind(const std::string& text, const std::stri
   throw InputError(where, "expected lstm, mlp, linear or hybrid, got " + quote_token(text));
 }
 
-Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& time,
-                               const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity) {
+namespace {
+void check_sizes(const TorqueModel& model, const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
+                 const Eigen::MatrixXd& velocity) {
   const Eigen::Index T = time.size();
   if (position.rows() != T || velocity.rows() != T || position.cols() != velocity.cols())
     throw std::invalid_argument("predict_torque: time, position and velocity sizes differ");
   if (position.cols() < model.num_joints())
     throw std::invalid_argument("predict_torque: fewer joints than the model reads");
+}
+}  // namespace
+
+Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& time,
+                               const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity) {
+  check_sizes(model, time, position, velocity);
   return model.predict_sequence(time, position, velocity);
+}
+
+Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::VectorXd& time,
+                                         const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity) {
+  check_sizes(model, time, position, velocity);
+  const Eigen::Index T = time.size();
+  auto ws = model.create_workspace();
+  const int N = model.num_joints();
+  Eigen::VectorXd q(N), qd(N), tau(model.num_outputs());
+  Eigen::MatrixXd out(T, model.num_outputs());
+  for (Eigen::Index t = 0; t < T; ++t) {
+    q = position.row(t).head(N).transpose();
+    qd = velocity.row(t).head(N).transpose();
+    model.compute_step(*ws, time(t), q.data(), qd.data(), tau.data());
+    out.row(t) = tau.transpose();
+  }
+  return out;
 }
 
 Eigen::MatrixXd TorqueModel::predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
                                               const Eigen::MatrixXd& velocity) const {
-  const Eigen::Index T = time.size();
-  auto ws = create_workspace();
-  const int N = num_joints();
-  Eigen::VectorXd q(N), qd(N), tau(num_outputs());
-  Eigen::MatrixXd out(T, num_outputs());
-  for (Eigen::Index t = 0; t < T; ++t) {
-    q = position.row(t).head(N).transpose();
-    qd = velocity.row(t).head(N).transpose();
-    compute_step(*ws, time(t), q.data(), qd.data(), tau.data());
-    out.row(t) = tau.transpose();
-  }
-  return out;
+  return predict_torque_streaming(*this, time, position, velocity);
 }
 
 Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording) {

@@ -76,6 +76,16 @@ void OnlineEstimator::reset(Workspace& ws) const {
   ws.output.sd_m = sd;
 }
 
+namespace {
+// The filter with the lowest forgotten innovation cost.
+int get_best_hypothesis(const OnlineEstimator::Workspace& ws) {
+  int best = 0;
+  for (int h = 1; h < ws.num_hypotheses; ++h)
+    if (ws.hypotheses[static_cast<std::size_t>(h)].cost < ws.hypotheses[static_cast<std::size_t>(best)].cost) best = h;
+  return best;
+}
+}  // namespace
+
 const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, const Eigen::Vector3d& q,
                                                     const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau) const {
   const OnlineEstimatorOptions& o = options_;
@@ -90,24 +100,21 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
   const double q_drift = o.drift_sd_m_per_sqrt_s * o.drift_sd_m_per_sqrt_s * dt;
   for (int h = 0; h < ws.num_hypotheses; ++h) ws.hypotheses[static_cast<std::size_t>(h)].P.diagonal().array() += q_drift;
 
+  out.at_rest = std::abs(qd[0]) < o.rest_angular_speed && std::abs(qd[1]) < o.rest_angular_speed &&
+                std::abs(qd[2]) < o.rest_linear_speed;
   JointSample sample;
   out.used = compute_joint_sample(incision_, q, qd, dtau, o.max_theta_rad, sample);
   if (out.used) {
     using Jet = ceres::Jet<double, 3>;
-    out.at_rest = std::abs(qd[0]) < o.rest_angular_speed && std::abs(qd[1]) < o.rest_angular_speed &&
-                  std::abs(qd[2]) < o.rest_linear_speed;
     const double rest_factor = out.at_rest ? o.rest_sigma_factor * o.rest_sigma_factor : 1.0;
     const Eigen::Vector3d R = measurement_variance_ * (rest_factor / dt);
     const Eigen::Vector3d inv_sigma = o.torque_sigma.cwiseInverse();
     const double forget = std::exp(-dt / o.hypothesis_memory_s);
     Jet tissue[4];
     for (int k = 0; k < 4; ++k) tissue[k] = Jet(tissue_.parameters[k]);
-    // The filter reported before this sample, and its one-step prediction's
-    // normalized squared innovation: what the onset test scores.
-    int prior_best = 0;
-    for (int h = 1; h < ws.num_hypotheses; ++h)
-      if (ws.hypotheses[static_cast<std::size_t>(h)].cost < ws.hypotheses[static_cast<std::size_t>(prior_best)].cost)
-        prior_best = h;
+    // The filter reported before this sample: the onset test scores its
+    // one-step prediction.
+    const int prior_best = get_best_hypothesis(ws);
     // Huber's rho of a normalized residual norm: the robust log-likelihood that
     // both the hypothesis costs and the onset test use, so that a transient the
     // free-space model misses cannot carry either.
@@ -150,9 +157,8 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
       hyp.p[2] = std::clamp(hyp.p[2], o.D_min, o.D_max);
     }
     // Onset: log-likelihood ratio of that prediction against the aligned
-    // incision, per correlation time, accumulated by a CUSUM.
-    // The null hypothesis is "aligned" (p = 0), not "no force": the shaft still
-    // slides through the tissue with its friction.
+    // incision, per correlation time, accumulated by a CUSUM. "Aligned" is p = 0,
+    // not "no force": the shaft still slides through the tissue with friction.
     double tau_aligned[3];
     const double p_aligned[3] = {0.0, 0.0, 0.0};
     detail::predict_joint_torque(sample, incision_.R_base_inc, tissue_.axial_velocity_scale, p_aligned,
@@ -166,10 +172,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     }
   }
 
-  // The reported filter: lowest forgotten innovation cost.
-  int best = 0;
-  for (int h = 1; h < ws.num_hypotheses; ++h)
-    if (ws.hypotheses[static_cast<std::size_t>(h)].cost < ws.hypotheses[static_cast<std::size_t>(best)].cost) best = h;
+  const int best = get_best_hypothesis(ws);
   const Hypothesis& chosen = ws.hypotheses[static_cast<std::size_t>(best)];
   out.hypothesis = best;
   out.misalignment_m = chosen.p;

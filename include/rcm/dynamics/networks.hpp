@@ -4,6 +4,7 @@
 // and the three network-based TorqueModels (lstm, mlp, hybrid).
 
 #include <Eigen/Core>
+#include <cstddef>
 #include <memory>
 #include <vector>
 
@@ -11,6 +12,10 @@
 #include "rcm/dynamics/torque_model.hpp"
 
 namespace rcm::dynamics {
+
+namespace kernels {
+struct KernelTable;  // src/dynamics/kernels.hpp
+}
 
 enum class Activation { identity, tanh, relu };
 
@@ -55,27 +60,70 @@ struct Normalization {
   Eigen::VectorXf output_mean, output_scale;  // num_outputs
 };
 
+// Instruction set of the per-sample kernels: a portable build for the baseline
+// ISA, and an AVX2/FMA build (one translation unit compiled with -mavx2 -mfma)
+// that is used only when the CPU reports both.
+enum class KernelIsa { portable, avx2_fma };
+// True when this build has kernels for `isa` and this CPU can run them.
+bool kernel_isa_available(KernelIsa isa);
+// avx2_fma when available, else portable: what every kernel uses by default.
+KernelIsa best_kernel_isa();
+const char* to_string(KernelIsa isa);
+
+// Floats starting on a 64-byte boundary (the kernels' weight panels).
+class AlignedFloats {
+ public:
+  AlignedFloats() = default;
+  explicit AlignedFloats(std::size_t size);  // zero-filled
+  AlignedFloats(const AlignedFloats& other);
+  AlignedFloats& operator=(const AlignedFloats& other);
+  AlignedFloats(AlignedFloats&&) noexcept = default;
+  AlignedFloats& operator=(AlignedFloats&&) noexcept = default;
+  float* data() { return data_.get(); }
+  const float* data() const { return data_.get(); }
+  std::size_t size() const { return size_; }
+
+ private:
+  struct Free {
+    void operator()(float* p) const noexcept;
+  };
+  std::unique_ptr<float[], Free> data_;
+  std::size_t size_ = 0;
+};
+
 // Streaming LSTM with its state (h, c per layer) and every buffer preallocated.
-// The kernel fuses [W_ih W_hh] into one matrix stored in 64-row panels read
-// sequentially by an AVX2/FMA GEMV (chosen at run time; a portable loop otherwise).
+// Each layer's [W_ih W_hh] is fused into one weight stream of 64-row panels
+// (gates i, f, g, o of 16 hidden units, column after column) read once per step;
+// the cell update of those 16 units runs on the accumulators right after their
+// panel. The head's layers use the same panel layout.
 class LstmKernel {
  public:
-  explicit LstmKernel(const LstmNetwork& network);
+  // Throws std::invalid_argument when `isa` is not available on this CPU.
+  explicit LstmKernel(const LstmNetwork& network, KernelIsa isa = best_kernel_isa());
   struct State {
-    std::vector<Eigen::VectorXf> h, c;
-    Eigen::VectorXf xh, gates, head_a, head_b;
+    std::vector<Eigen::VectorXf> h, c;  // per layer; hidden units padded to a multiple of 16 (zeros)
+    Eigen::VectorXf xh, head_a, head_b;
   };
   State create_state() const;
   static void reset(State& state);
   // x: input_size values (already normalized); y: output_size values. No allocation.
   void step(State& state, const float* x, float* y) const;
   const LstmNetwork& network() const { return network_; }
+  KernelIsa isa() const { return isa_; }
 
  private:
+  struct DensePanels {
+    int rows = 0, rows_padded = 0, cols = 0, activation = 0;
+    AlignedFloats panels, bias;
+  };
   LstmNetwork network_;
-  int rows_padded_ = 0;                 // 4H rounded up to a multiple of 8
-  std::vector<Eigen::VectorXf> fused_;  // panels of [W_ih W_hh] (4H x (in + H))
-  std::vector<Eigen::VectorXf> bias_;   // b_ih + b_hh, zero-padded
+  KernelIsa isa_;
+  const kernels::KernelTable* kernels_ = nullptr;
+  int units_padded_ = 0;                  // H rounded up to a multiple of 16
+  std::vector<AlignedFloats> lstm_panels_;  // per layer, see src/dynamics/kernels.hpp
+  std::vector<AlignedFloats> lstm_bias_;    // b_ih + b_hh in panel row order
+  std::vector<DensePanels> head_;
+  int head_width_ = 0;                    // largest padded head layer
 };
 
 // Dense stack forward in float; a and b are scratch of max_width() each. No allocation.
@@ -126,6 +174,8 @@ class HybridTorqueModel final : public TorqueModel {
   void reset_state(TorqueModelWorkspace& workspace) const override;
   void compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                     double* tau) const override;
+  Eigen::MatrixXd predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
+                                   const Eigen::MatrixXd& velocity) const override;
   nlohmann::json save_parameters() const override;
   const LinearTorqueModel& base() const { return *base_; }
   const LstmNetwork& residual_network() const { return kernel_.network(); }

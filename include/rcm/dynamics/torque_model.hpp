@@ -88,6 +88,12 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& record
 Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& time,
                                const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);
 
+// What the live robot gets over a recording: compute_step() on every sample
+// from the reset state, causal whatever the model (predict_torque may use later
+// samples). Same size checks.
+Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::VectorXd& time,
+                                         const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);
+
 // Model files: one JSON document, "format": "rcm-torque-model/1"; weights as
 // base64 little-endian arrays so that save -> load is bit-exact.
 nlohmann::json torque_model_to_json(const TorqueModel& model);
