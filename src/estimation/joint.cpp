@@ -91,6 +91,37 @@ void draw_block_bootstrap(const std::vector<Eigen::Vector3d>& fitted, const std:
   }
 }
 
+// Moving-block length (samples): twice the integrated autocorrelation time of the
+// normalized residuals (the slowest joint), summed up to the first non-positive
+// autocorrelation, and at least `min_block`. Blocks shorter than the residuals'
+// memory make a bootstrap too confident; the free-space model's error is
+// correlated over longer than a second when the model is good and the trajectory
+// is slow.
+std::size_t compute_block_length(const std::vector<Eigen::Vector3d>& resid, std::size_t min_block) {
+  const std::size_t n = resid.size();
+  const std::size_t max_lag = n / 10;
+  double worst = 1.0;
+  for (int j = 0; j < 3; ++j) {
+    double mean = 0.0;
+    for (const auto& r : resid) mean += r[j];
+    mean /= static_cast<double>(n);
+    double c0 = 0.0;
+    for (const auto& r : resid) c0 += (r[j] - mean) * (r[j] - mean);
+    if (!(c0 > 0.0)) continue;
+    double tau = 1.0;
+    for (std::size_t lag = 1; lag < max_lag; ++lag) {
+      double c = 0.0;
+      for (std::size_t i = lag; i < n; ++i) c += (resid[i][j] - mean) * (resid[i - lag][j] - mean);
+      const double rho = c / c0;
+      if (rho <= 0.0) break;
+      tau += 2.0 * rho;
+    }
+    worst = std::max(worst, tau);
+  }
+  return std::clamp<std::size_t>(static_cast<std::size_t>(2.0 * worst), std::max<std::size_t>(1, min_block),
+                                 std::max<std::size_t>(1, n / 5));
+}
+
 SolverReport to_report(const ceres::Solver::Summary& s, double seconds) {
   SolverReport r;
   r.converged = s.termination_type == ceres::CONVERGENCE;
@@ -110,6 +141,8 @@ void JointEstimatorOptions::check() const {
   if (!(radial_max > 0)) throw std::invalid_argument("JointEstimatorOptions: radial_max must be > 0");
   if (!(torque_sigma.minCoeff() > 0)) throw std::invalid_argument("JointEstimatorOptions: torque_sigma must be > 0");
   if (!(huber_scale > 0)) throw std::invalid_argument("JointEstimatorOptions: huber_scale must be > 0");
+  if (!(calibration_offset_sd_m >= 0))
+    throw std::invalid_argument("JointEstimatorOptions: calibration_offset_sd_m must be >= 0");
   if (bootstrap_replicates < 0) throw std::invalid_argument("JointEstimatorOptions: bootstrap_replicates must be >= 0");
   if (!(bootstrap_block_s > 0) || !(sample_period_s > 0))
     throw std::invalid_argument("JointEstimatorOptions: bootstrap_block_s and sample_period_s must be > 0");
@@ -205,13 +238,22 @@ JointTissueModel fit_joint_tissue_model(const IncisionFrame& incision, const std
     out.calibration_bias_m = best.p - p;
   }
 
+  if (o.calibration_offset_sd_m > 0) {
+    const Eigen::Vector3d shifted(0.0, 0.0, D_star + o.calibration_offset_sd_m);
+    const Fit f = solve(incision, calibration, nullptr, o, v0, shifted, out.parameters, false, true, stiff);
+    out.dparameters_dD_star = (f.tissue - out.parameters) / o.calibration_offset_sd_m;
+    out.calibration_offset_sd_m = o.calibration_offset_sd_m;
+  }
+
   if (o.calibration_bootstrap_replicates > 1) {
     std::vector<Eigen::Vector3d> fitted(calibration.size()), resid(calibration.size()), dtau;
     for (std::size_t i = 0; i < calibration.size(); ++i) {
       fitted[i] = compute_joint_model_torque(incision, out, calibration[i], p);
       resid[i] = calibration[i].dtau - fitted[i];
     }
-    const std::size_t block = std::max<std::size_t>(1, static_cast<std::size_t>(o.bootstrap_block_s / o.sample_period_s));
+    const std::size_t block =
+        compute_block_length(resid, static_cast<std::size_t>(o.bootstrap_block_s / o.sample_period_s));
+    out.bootstrap_block_s = static_cast<double>(block) * o.sample_period_s;
     std::mt19937_64 rng(o.seed ^ 0x7157u);
     std::vector<Eigen::Vector4d> draws;
     for (int b = 0; b < o.calibration_bootstrap_replicates; ++b) {
@@ -280,7 +322,9 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
       fitted[i] = compute_joint_model_torque(incision, tissue, samples[i], best.p);
       resid[i] = samples[i].dtau - fitted[i];
     }
-    const std::size_t block = std::max<std::size_t>(1, static_cast<std::size_t>(o.bootstrap_block_s / o.sample_period_s));
+    const std::size_t block =
+        compute_block_length(resid, static_cast<std::size_t>(o.bootstrap_block_s / o.sample_period_s));
+    out.bootstrap_block_s = static_cast<double>(block) * o.sample_period_s;
     std::mt19937_64 rng(o.seed);
     std::vector<Eigen::Vector3d> draws;
     for (int b = 0; b < o.bootstrap_replicates; ++b) {
@@ -315,8 +359,13 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
   const Eigen::Matrix3d cov_tissue = S * tissue.covariance * S.transpose();
   out.sd_tissue = cov_tissue.diagonal().cwiseMax(0.0).cwiseSqrt();
   out.sd_systematic = tissue.calibration_bias_m.cwiseAbs();
+  if (tissue.calibration_offset_sd_m > 0) {
+    const Eigen::Vector4d moved = tissue.parameters + tissue.dparameters_dD_star * tissue.calibration_offset_sd_m;
+    out.sd_calibration_offset =
+        (solve(incision, samples, nullptr, o, v0, best.p, moved, true, false, false).p - best.p).cwiseAbs();
+  }
   const Eigen::Vector3d half = 1.96 * (out.sd_bootstrap.array().square() + out.sd_tissue.array().square() +
-                                       out.sd_systematic.array().square())
+                                       out.sd_systematic.array().square() + out.sd_calibration_offset.array().square())
                                           .sqrt()
                                           .matrix();
   out.ci_low = best.p - half;

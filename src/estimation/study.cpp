@@ -343,7 +343,9 @@ nlohmann::json StudyResult::to_json() const {
                                {"parameter_sd", {std::sqrt(joint_tissue->covariance(0, 0)), std::sqrt(joint_tissue->covariance(1, 1)),
                                                  std::sqrt(joint_tissue->covariance(2, 2)), std::sqrt(joint_tissue->covariance(3, 3))}},
                                {"bootstrap_replicates", joint_tissue->bootstrap_replicates},
-                               {"calibration_bias_m", vec_json(joint_tissue->calibration_bias_m)}};
+                               {"calibration_bias_m", vec_json(joint_tissue->calibration_bias_m)},
+                               {"bootstrap_block_s", joint_tissue->bootstrap_block_s},
+                               {"calibration_offset_sd_m", joint_tissue->calibration_offset_sd_m}};
   nlohmann::json trials_json = nlohmann::json::array();
   std::vector<double> e_far, e_near, e3_far, e3_near, eo_far, eo_near;
   double settle_max = 0.0;
@@ -360,7 +362,9 @@ nlohmann::json StudyResult::to_json() const {
                            {"sd_bootstrap_m", vec_json(je.sd_bootstrap)},
                            {"sd_tissue_m", vec_json(je.sd_tissue)},
                            {"sd_systematic_m", vec_json(je.sd_systematic)},
+                           {"sd_calibration_offset_m", vec_json(je.sd_calibration_offset)},
                            {"bootstrap_replicates", je.bootstrap_replicates},
+                           {"bootstrap_block_s", je.bootstrap_block_s},
                            {"samples", je.samples},
                            {"solver", solver_json(je.solver)}};
       if (t.truth_m) {

@@ -58,6 +58,11 @@ struct JointTissueModel {
   // do to an estimate where the truth is known. Neither the covariance nor a
   // residual bootstrap sees such a bias, so every trial's interval includes it.
   Eigen::Vector3d calibration_bias_m = Eigen::Vector3d::Zero();
+  double bootstrap_block_s = 0.0;  // block length the calibration bootstrap used
+  // d(parameters)/dD* by refitting at D* + calibration_offset_sd_m: how the
+  // uncertainty of the known offset moves every trial alike.
+  Eigen::Vector4d dparameters_dD_star = Eigen::Vector4d::Zero();
+  double calibration_offset_sd_m = 0.0;
 };
 
 struct JointEstimatorOptions {
@@ -70,7 +75,12 @@ struct JointEstimatorOptions {
   double huber_scale = 2.0;  // in units of sigma
   int bootstrap_replicates = 60;
   int calibration_bootstrap_replicates = 30;
-  double bootstrap_block_s = 1.0;
+  double bootstrap_block_s = 1.0;  // shortest block; longer when the residuals' memory is (see joint.cpp)
+  // How well the calibration's coaxial offset D* is known (m, one sd). An
+  // estimate cannot be more accurate than its reference: the tissue stiffness
+  // scales with 1/D*, and with it every radial and coaxial estimate. Set it to
+  // the bench's measurement accuracy; 0.1 mm is a careful phantom setup.
+  double calibration_offset_sd_m = 1e-4;
   double sample_period_s = 0.005;
   unsigned seed = 1;
   int max_iterations = 100;
@@ -88,13 +98,15 @@ struct JointEstimate {
   Eigen::Vector3d misalignment_m = Eigen::Vector3d::Zero();  // [dr_x, dr_y, D]
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();      // from Ceres, scaled
   // 95 % interval: the trial's residual bootstrap combined in quadrature with the
-  // tissue parameters' uncertainty propagated through dp/dtissue and with the
-  // systematic error seen on the calibration.
+  // tissue parameters' uncertainty propagated through dp/dtissue, with the
+  // systematic error seen on the calibration and with the uncertainty of D*.
   Eigen::Vector3d ci_low = Eigen::Vector3d::Zero(), ci_high = Eigen::Vector3d::Zero();
   Eigen::Vector3d sd_bootstrap = Eigen::Vector3d::Zero();  // half-width of the bootstrap interval / 1.96
   Eigen::Vector3d sd_tissue = Eigen::Vector3d::Zero();
   Eigen::Vector3d sd_systematic = Eigen::Vector3d::Zero();  // |calibration_bias_m| of the tissue model
+  Eigen::Vector3d sd_calibration_offset = Eigen::Vector3d::Zero();  // through dparameters_dD_star
   int bootstrap_replicates = 0;
+  double bootstrap_block_s = 0.0;  // block length used: twice the residuals' integrated autocorrelation time
   SolverReport solver;
   std::size_t samples = 0;
 };
