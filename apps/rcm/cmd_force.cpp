@@ -56,6 +56,8 @@ void run(const Options& o) {
   robot.check_within_limits(q0, rcm::cli::flag_location("--q0"));
 
   rcm::JacobianCheckOptions check;
+  if (o.max_condition < 0.0 || !std::isfinite(o.max_condition))
+    throw rcm::InputError(rcm::cli::flag_location("--max-condition"), "must be a positive number");
   if (o.max_condition > 0.0) check.max_condition = o.max_condition;
   const rcm::IncisionFrame incision = rcm::make_incision_frame(q0);
   const Eigen::MatrixXd tau_fs = rcm::dynamics::predict_torque(*model, rec);

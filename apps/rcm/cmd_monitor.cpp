@@ -25,7 +25,7 @@ struct Options {
   rcm::cli::FreeSpaceFlags free_space;
   double print_every_s = 1.0;
   double alarm_force_n = 10.0;
-  double onset_threshold = 0.0;
+  double onset_threshold = rcm::OnlineEstimatorOptions{}.onset_threshold;
   double settle_band_m = 0.005;
   bool json = false, quiet = false;
 };
@@ -42,6 +42,7 @@ void run(const Options& o) {
   if (!(o.print_every_s >= 0)) throw rcm::InputError(rcm::cli::flag_location("--print-every"), "must be >= 0");
   if (!(o.alarm_force_n > 0)) throw rcm::InputError(rcm::cli::flag_location("--alarm-force"), "must be > 0");
   if (!(o.settle_band_m > 0)) throw rcm::InputError(rcm::cli::flag_location("--settle-band"), "must be > 0");
+  if (!(o.onset_threshold > 0)) throw rcm::InputError(rcm::cli::flag_location("--onset-threshold"), "must be > 0");
   const rcm::Session session = rcm::load_session(o.session);
   const rcm::StudyOptions options = rcm::cli::make_study_options(o.free_space);
   const rcm::Recording rec = rcm::load_recording(o.recording, options.read);
@@ -51,9 +52,8 @@ void run(const Options& o) {
 
   rcm::OnlineEstimatorOptions online = rcm::make_online_options(setup.joint_options);
   online.alarm_force_n = o.alarm_force_n;
-  if (o.onset_threshold > 0) online.onset_threshold = o.onset_threshold;
+  online.onset_threshold = o.onset_threshold;
   const rcm::OnlinePipeline pipeline(setup.free_space.model, rcm::OnlineEstimator(setup.incision, setup.tissue, online));
-  auto ws = pipeline.create_workspace();
   std::cerr << fmt::format("[rcm] tissue model ({}): k1 {:.1f} N/m, k3 {:.3g} N/m^3, c {:.2f} N s/m, F {:.2f} N\n",
                            setup.tissue.family, setup.tissue.parameters[0], setup.tissue.parameters[1],
                            setup.tissue.parameters[2], setup.tissue.parameters[3]);
