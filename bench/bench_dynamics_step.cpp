@@ -12,12 +12,6 @@
 using namespace rcm::dynamics;
 
 namespace {
-Eigen::MatrixXf rnd(int r, int c, std::mt19937& rng) {
-  std::normal_distribution<float> g(0.0f, 0.2f);
-  Eigen::MatrixXf m(r, c);
-  for (int i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
-  return m;
-}
 LstmNetwork lstm(int in, int H, int L, int out) { return make_random_lstm_network(in, H, L, 64, out, 1, 0.2f); }
 TorqueModelInfo info6() {
   TorqueModelInfo i;
@@ -77,14 +71,7 @@ static void BM_LstmModelStep(benchmark::State& state) {
 BENCHMARK(BM_LstmModelStep);
 
 static void BM_MlpModelStep(benchmark::State& state) {
-  std::mt19937 rng(2);
-  std::vector<DenseStack> stacks;
-  for (int j = 0; j < 6; ++j) {
-    DenseStack s;
-    s.layers.push_back({rnd(100, 12, rng), rnd(100, 1, rng).col(0), Activation::tanh});
-    s.layers.push_back({rnd(1, 100, rng), rnd(1, 1, rng).col(0), Activation::identity});
-    stacks.push_back(s);
-  }
+  const std::vector<DenseStack> stacks = make_random_mlp_stacks(12, 100, 6, 2, 0.2f);
   MlpTorqueModel m(info6(), stacks, norm6());
   run(state, m);
 }

@@ -17,15 +17,6 @@ using rcm::test::g_allocations;
 
 using namespace rcm::dynamics;
 
-namespace {
-Eigen::MatrixXf rnd(int r, int c, std::mt19937& rng) {
-  std::normal_distribution<float> g(0.0f, 0.3f);
-  Eigen::MatrixXf m(r, c);
-  for (int i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
-  return m;
-}
-}  // namespace
-
 TEST(NoAllocation, CountingOperatorNewSeesAllocations) {
   const long before = g_allocations;
   auto* p = new std::vector<int>(10);
@@ -34,7 +25,6 @@ TEST(NoAllocation, CountingOperatorNewSeesAllocations) {
 }
 
 TEST(NoAllocation, ComputeStepOfEveryKind) {
-  std::mt19937 rng(1);
   TorqueModelInfo info;
   info.num_joints = 6;
   info.num_outputs = 6;
@@ -46,13 +36,7 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
   auto base = std::make_shared<const LinearTorqueModel>(info, lp);
   std::vector<std::unique_ptr<TorqueModel>> models;
   models.push_back(std::make_unique<LstmTorqueModel>(info, make_random_lstm_network(12, 128, 2, 16, 6, 1), norm));
-  std::vector<DenseStack> stacks;
-  for (int j = 0; j < 6; ++j) {
-    DenseStack s;
-    s.layers.push_back({rnd(100, 12, rng), rnd(100, 1, rng).col(0), Activation::tanh});
-    s.layers.push_back({rnd(1, 100, rng), rnd(1, 1, rng).col(0), Activation::identity});
-    stacks.push_back(s);
-  }
+  const std::vector<DenseStack> stacks = make_random_mlp_stacks(12, 100, 6, 2, 0.3f);
   models.push_back(std::make_unique<MlpTorqueModel>(info, stacks, norm));
   models.push_back(std::make_unique<LinearTorqueModel>(info, lp));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(12, 32, 1, 16, 6, 2), norm));

@@ -535,15 +535,36 @@ std::unique_ptr<TorqueModel> detail::load_network_parameters(TorqueModelInfo inf
   }
 }
 
+namespace {
+// N(0, stddev^2) matrices drawn in call order from one generator.
+class RandomMatrices {
+ public:
+  RandomMatrices(unsigned seed, float stddev) : rng_(seed), g_(0.0f, stddev) {}
+  Eigen::MatrixXf operator()(int r, int c) {
+    Eigen::MatrixXf m(r, c);
+    for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = g_(rng_);
+    return m;
+  }
+
+ private:
+  std::mt19937 rng_;
+  std::normal_distribution<float> g_;
+};
+}  // namespace
+
+std::vector<DenseStack> make_random_mlp_stacks(int inputs, int hidden, int outputs, unsigned seed, float stddev) {
+  RandomMatrices rnd(seed, stddev);
+  std::vector<DenseStack> stacks(static_cast<std::size_t>(outputs));
+  for (auto& s : stacks) {
+    s.layers.push_back({rnd(hidden, inputs), rnd(hidden, 1).col(0), Activation::tanh});
+    s.layers.push_back({rnd(1, hidden), rnd(1, 1).col(0), Activation::identity});
+  }
+  return stacks;
+}
+
 LstmNetwork make_random_lstm_network(int inputs, int hidden, int layers, int head_hidden, int outputs, unsigned seed,
                                      float stddev) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<float> g(0.0f, stddev);
-  auto rnd = [&](int r, int c) {
-    Eigen::MatrixXf m(r, c);
-    for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = g(rng);
-    return m;
-  };
+  RandomMatrices rnd(seed, stddev);
   const int H = hidden;
   LstmNetwork n;
   for (int k = 0; k < layers; ++k)

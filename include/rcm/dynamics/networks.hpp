@@ -53,6 +53,10 @@ struct LstmNetwork {
 // head layer of head_hidden units: the networks of tests and benchmarks.
 LstmNetwork make_random_lstm_network(int inputs, int hidden, int layers, int head_hidden, int outputs, unsigned seed,
                                      float stddev = 0.3f);
+// One tanh network per output joint (inputs -> hidden -> 1), drawn the same way:
+// the MLP models of tests and benchmarks.
+std::vector<DenseStack> make_random_mlp_stacks(int inputs, int hidden, int outputs, unsigned seed,
+                                               float stddev = 0.3f);
 
 // x_normalized = (x - mean) / scale; y = y_normalized * scale + mean.
 struct Normalization {
