@@ -44,13 +44,22 @@ static void BM_EigenLstmStep(benchmark::State& state) {
 }
 BENCHMARK(BM_EigenLstmStep)->Args({128, 1})->Args({128, 2});
 
-// One Adam update of the default 1 x 128 network on a 32-stream x 100-sample
-// window, 2 threads, as fit_lstm_torque_model runs it.
+// One Adam update of the default 1 x 128 network on a streams x window batch,
+// 2 threads, as fit_lstm_torque_model runs it; samples/s is the training throughput.
 static void BM_LibTorchTrainingStep(benchmark::State& state) {
   torch_threads_for_benchmark();
-  auto step = make_libtorch_training_step(12, 128, 1, 64, 6, 32, 100);
+  const auto streams = static_cast<int>(state.range(0)), window = static_cast<int>(state.range(1));
+  auto step = make_libtorch_training_step(12, 128, 1, 64, 6, streams, window);
   for (auto _ : state) step();
+  state.counters["samples/s"] =
+      benchmark::Counter(static_cast<double>(state.iterations()) * streams * window, benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_LibTorchTrainingStep)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_LibTorchTrainingStep)
+    ->ArgNames({"streams", "window"})
+    ->Args({32, 100})
+    ->Args({128, 25})
+    ->Args({128, 50})
+    ->Args({256, 50})
+    ->Unit(benchmark::kMillisecond);
 
 BENCHMARK_MAIN();

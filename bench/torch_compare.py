@@ -107,7 +107,7 @@ def main():
         rows.append((f"LSTM streaming step, {layers} x 128, 1 sample, state carried, 1 thread", f"{py:.1f} us",
                      f"{lt:.1f} us", f"{eig:.2f} us",
                      f"PyTorch/Eigen {py / eig:.1f}x, LibTorch/Eigen {lt / eig:.1f}x"))
-    py_train, lt_train = python_train_ms(), cpp["BM_LibTorchTrainingStep"] / 1e3
+    py_train, lt_train = python_train_ms(), cpp["BM_LibTorchTrainingStep/streams:32/window:100"] / 1e3
     rows.append(("LSTM training update, 1 x 128, 32 x 100 window, Adam, 2 threads", f"{py_train:.1f} ms",
                  f"{lt_train:.1f} ms", "-", f"PyTorch/LibTorch {py_train / lt_train:.2f}x"))
     table = ["| what | PyTorch (python3-torch) | LibTorch (rcm::torch) | Eigen kernel (rcm::core) | ratio |",
