@@ -1,0 +1,238 @@
+// rcm.dynamics: free-space torque models (load any kind, run, stream, fit the
+// linear one). Nothing here needs LibTorch: the networks run on the library's
+// own kernels, and only the linear model is fitted without it.
+
+#include <cmath>
+
+#include "common.hpp"
+#include "rcm/dynamics/fit.hpp"
+#include "rcm/dynamics/linear_model.hpp"
+#include "rcm/dynamics/metrics.hpp"
+#include "rcm/dynamics/networks.hpp"
+#include "rcm/dynamics/torque_model.hpp"
+
+namespace rcm::python {
+
+namespace {
+
+using dynamics::TorqueModel;
+
+// A workspace remembers the model that made it: compute_step() on another
+// model's workspace would read a buffer of the wrong type or size (undefined
+// behaviour in C++), so here it is an rcm.InputError instead.
+struct TorqueWorkspace {
+  std::shared_ptr<const TorqueModel> model;
+  std::unique_ptr<dynamics::TorqueModelWorkspace> workspace;
+};
+
+void check_owner(const TorqueModel& model, const TorqueWorkspace& ws, const std::string& fn) {
+  if (ws.model.get() != &model)
+    throw InputError(argument_location(fn, "workspace"), "was created by another model; use model.create_workspace()");
+}
+
+struct PyFitResult {
+  std::shared_ptr<TorqueModel> model;
+  dynamics::FitSummary summary;
+};
+
+PyFitResult to_py(dynamics::FitResult&& fit) { return {std::shared_ptr<TorqueModel>(std::move(fit.model)), std::move(fit.summary)}; }
+
+// time (T,), position and velocity (T, N >= model's joints), all finite.
+struct Trajectory {
+  Eigen::VectorXd time;
+  Eigen::MatrixXd position, velocity;
+};
+Trajectory to_trajectory(const TorqueModel& model, py::handle time, py::handle position, py::handle velocity,
+                         const std::string& fn) {
+  Trajectory t;
+  t.time = to_vector(time, argument_location(fn, "time"));
+  t.position = to_matrix(position, argument_location(fn, "position"), t.time.size(), -1);
+  t.velocity = to_matrix(velocity, argument_location(fn, "velocity"), t.time.size(), t.position.cols());
+  if (t.position.cols() < model.num_joints())
+    throw InputError(argument_location(fn, "position"), "the model reads " + std::to_string(model.num_joints()) +
+                                                            " joints, the arrays have " + std::to_string(t.position.cols()));
+  return t;
+}
+
+}  // namespace
+
+void bind_dynamics(py::module_& m, py::module_& d) {
+  (void)m;
+  using namespace rcm::dynamics;
+  py::enum_<TorqueModelKind>(d, "TorqueModelKind")
+      .value("lstm", TorqueModelKind::lstm)
+      .value("mlp", TorqueModelKind::mlp)
+      .value("linear", TorqueModelKind::linear)
+      .value("hybrid", TorqueModelKind::hybrid);
+  d.def("parse_torque_model_kind", &parse_torque_model_kind, py::arg("text"), py::arg("what") = "kind",
+        "'lstm' | 'mlp' | 'linear' | 'hybrid'; rcm.InputError otherwise");
+
+  py::class_<TorqueModelInfo>(d, "TorqueModelInfo")
+      .def_readonly("num_joints", &TorqueModelInfo::num_joints, "joints read: q, qdot of joints 1..num_joints")
+      .def_readonly("num_outputs", &TorqueModelInfo::num_outputs, "joints predicted: 1..num_outputs")
+      .def_readonly("sample_period_s", &TorqueModelInfo::sample_period_s, "the period it was trained at")
+      .def_property_readonly("training", [](const TorqueModelInfo& i) { return to_python(i.training); },
+                             "fit summary (dict, informative only)");
+
+  py::class_<TorqueWorkspace>(d, "TorqueModelWorkspace",
+                              "State (friction memory, LSTM h/c) and buffers of one running model; from model.create_workspace()");
+
+  py::class_<TorqueModel, std::shared_ptr<TorqueModel>>(
+      d, "TorqueModel",
+      "A trained free-space model (lstm, mlp, linear or hybrid), immutable. Run it over a whole recording with\n"
+      "predict_torque(), or sample by sample: ws = model.create_workspace(); tau = model.compute_step(ws, t, q, qd).")
+      .def_property_readonly("kind", &TorqueModel::kind)
+      .def_property_readonly("info", &TorqueModel::info)
+      .def_property_readonly("num_joints", &TorqueModel::num_joints)
+      .def_property_readonly("num_outputs", &TorqueModel::num_outputs)
+      .def("create_workspace", [](std::shared_ptr<TorqueModel> self) {
+        return TorqueWorkspace{self, self->create_workspace()};
+      }, "A workspace for this model, in the reset state")
+      .def("reset_state", [](const TorqueModel& self, TorqueWorkspace& ws) {
+        check_owner(self, ws, "TorqueModel.reset_state");
+        self.reset_state(*ws.workspace);
+      }, py::arg("workspace"), "Forget the history (the state at the start of a recording)")
+      .def("compute_step", [](const TorqueModel& self, TorqueWorkspace& ws, double t, py::handle q, py::handle qd) {
+        const std::string fn = "TorqueModel.compute_step";
+        check_owner(self, ws, fn);
+        to_finite(t, argument_location(fn, "t"));
+        const Eigen::VectorXd qv = to_vector(q, argument_location(fn, "q"));
+        const Eigen::VectorXd qdv = to_vector(qd, argument_location(fn, "qd"));
+        if (qv.size() < self.num_joints() || qdv.size() < self.num_joints())
+          throw InputError(argument_location(fn, qv.size() < self.num_joints() ? "q" : "qd"),
+                           "expected at least " + std::to_string(self.num_joints()) + " values (the joints the model reads)");
+        Eigen::VectorXd tau(self.num_outputs());
+        self.compute_step(*ws.workspace, t, qv.data(), qdv.data(), tau.data());
+        return tau;
+      }, py::arg("workspace"), py::arg("t"), py::arg("q"), py::arg("qd"),
+           "Advance by one sample at time t (s) and return tau_fs of joints 1..num_outputs (N m, N for joint 3).\n"
+           "q, qd: at least num_joints values. Causal: the same as predict_torque_streaming, sample by sample.")
+      .def("to_json", [](const TorqueModel& self) { return to_python(torque_model_to_json(self)); },
+           "The model file's content (rcm-torque-model/1) as a dict")
+      .def("__repr__", [](const TorqueModel& self) {
+        return "<rcm.dynamics.TorqueModel " + to_string(self.kind()) + ": " + std::to_string(self.num_joints()) +
+               " joints in, " + std::to_string(self.num_outputs()) + " out>";
+      });
+
+  py::class_<LinearTorqueParameters>(d, "LinearTorqueParameters", "Coefficients of the linear model (docs/dynamics.md)")
+      .def_readonly("gravity", &LinearTorqueParameters::gravity, "17 shared potential coefficients")
+      .def_readonly("armature", &LinearTorqueParameters::armature)
+      .def_readonly("viscous", &LinearTorqueParameters::viscous)
+      .def_readonly("coulomb", &LinearTorqueParameters::coulomb)
+      .def_readonly("offset", &LinearTorqueParameters::offset)
+      .def_readonly("dahl_displacement", &LinearTorqueParameters::dahl_displacement)
+      .def_readonly("acceleration_window_s", &LinearTorqueParameters::acceleration_window_s)
+      .def_readonly("acceleration_filter_s", &LinearTorqueParameters::acceleration_filter_s)
+      .def_readonly("batch_acceleration_window_s", &LinearTorqueParameters::batch_acceleration_window_s);
+  py::class_<LinearTorqueModel, TorqueModel, std::shared_ptr<LinearTorqueModel>>(
+      d, "LinearTorqueModel", "Rigid-body terms linear in parameters plus friction with a Dahl state")
+      .def_property_readonly("parameters", &LinearTorqueModel::parameters);
+  py::class_<LstmTorqueModel, TorqueModel, std::shared_ptr<LstmTorqueModel>>(d, "LstmTorqueModel", "The paper's LSTM")
+      .def_property_readonly("hidden_size", [](const LstmTorqueModel& s) { return s.network().hidden_size(); })
+      .def_property_readonly("num_layers", [](const LstmTorqueModel& s) { return s.network().layers.size(); });
+  py::class_<MlpTorqueModel, TorqueModel, std::shared_ptr<MlpTorqueModel>>(d, "MlpTorqueModel",
+                                                                           "One tanh network per joint (memoryless)");
+  py::class_<HybridTorqueModel, TorqueModel, std::shared_ptr<HybridTorqueModel>>(
+      d, "HybridTorqueModel", "The linear model plus an LSTM on its residual")
+      .def_property_readonly("hidden_size", [](const HybridTorqueModel& s) { return s.residual_network().hidden_size(); });
+
+  d.def("load_torque_model", [](const std::filesystem::path& path) {
+    py::gil_scoped_release release;
+    return std::shared_ptr<TorqueModel>(load_torque_model(path));
+  }, py::arg("path"), "Read a model file (rcm-torque-model/1) of any kind; rcm.InputError names the file and field");
+  d.def("save_torque_model", [](const std::filesystem::path& path, const TorqueModel& model) {
+    py::gil_scoped_release release;
+    save_torque_model(path, model);
+  }, py::arg("path"), py::arg("model"), "Write a model file atomically; save -> load is bit-exact");
+  d.def("torque_model_from_json", [](py::handle document, const std::string& source) {
+    return std::shared_ptr<TorqueModel>(torque_model_from_json(to_json(document), source));
+  }, py::arg("document"), py::arg("source") = "<dict>", "A model from the dict of TorqueModel.to_json()");
+
+  d.def("predict_torque", [](const TorqueModel& model, const Recording& rec) {
+    py::gil_scoped_release release;
+    return predict_torque(model, rec);
+  }, py::arg("model"), py::arg("recording"),
+        "tau_fs over a whole recording from the reset state, (T, num_outputs). Offline: the linear and hybrid\n"
+        "models may use later samples for qddot (zero-phase); predict_torque_streaming is what a live robot gets.");
+  d.def("predict_torque", [](const TorqueModel& model, py::handle time, py::handle position, py::handle velocity) {
+    const Trajectory t = to_trajectory(model, time, position, velocity, "rcm.dynamics.predict_torque");
+    py::gil_scoped_release release;
+    return predict_torque(model, t.time, t.position, t.velocity);
+  }, py::arg("model"), py::arg("time"), py::arg("position"), py::arg("velocity"),
+        "Same from arrays: time (T,), position and velocity (T, N >= model.num_joints)");
+  d.def("predict_torque_streaming", [](const TorqueModel& model, const Recording& rec) {
+    py::gil_scoped_release release;
+    return predict_torque_streaming(model, rec.time, rec.position, rec.velocity);
+  }, py::arg("model"), py::arg("recording"),
+        "compute_step() on every sample from the reset state (causal whatever the model), (T, num_outputs)");
+  d.def("predict_torque_streaming", [](const TorqueModel& model, py::handle time, py::handle position, py::handle velocity) {
+    const Trajectory t = to_trajectory(model, time, position, velocity, "rcm.dynamics.predict_torque_streaming");
+    py::gil_scoped_release release;
+    return predict_torque_streaming(model, t.time, t.position, t.velocity);
+  }, py::arg("model"), py::arg("time"), py::arg("position"), py::arg("velocity"));
+  d.def("check_sample_period", &check_sample_period, py::arg("model"), py::arg("recording"),
+        "A warning sentence when the recording's rate differs from the training rate by > 10 % (recurrent kinds); '' otherwise");
+
+  py::class_<FitOptions>(d, "FitOptions", "Options of every fit_* (defaults as the CLI)")
+      .def(py::init<>())
+      .def_readwrite("seed", &FitOptions::seed)
+      .def_readwrite("threads", &FitOptions::threads)
+      .def_readwrite("verbose", &FitOptions::verbose, "progress to stderr")
+      .def_readwrite("train_fraction", &FitOptions::train_fraction, "time-ordered split: train, validation, test")
+      .def_readwrite("validation_fraction", &FitOptions::validation_fraction)
+      .def_readwrite("num_outputs", &FitOptions::num_outputs, "joints to predict; 0 = every recorded joint")
+      .def_readwrite("max_minutes", &FitOptions::max_minutes, "wall-clock budget")
+      .def("check", &FitOptions::check, "rcm.InputError when a value is out of range");
+  py::class_<JointTorqueError>(d, "JointTorqueError", "Table II: per-joint RMSE and NRMSE")
+      .def_readonly("index", &JointTorqueError::index, "1-based joint number")
+      .def_readonly("rmse", &JointTorqueError::rmse, "N m (N for joint 3)")
+      .def_readonly("nrmse_percent", &JointTorqueError::nrmse_percent, "RMSE / (max - min) x 100")
+      .def_readonly("range", &JointTorqueError::range)
+      .def("__repr__", [](const JointTorqueError& e) {
+        return "<JointTorqueError joint " + std::to_string(e.index) + ": RMSE " + std::to_string(e.rmse) + ", NRMSE " +
+               std::to_string(e.nrmse_percent) + " %>";
+      });
+  py::class_<FitSummary>(d, "FitSummary")
+      .def_readonly("kind", &FitSummary::kind)
+      .def_readonly("train_samples", &FitSummary::train_samples)
+      .def_readonly("validation_samples", &FitSummary::validation_samples)
+      .def_readonly("test_samples", &FitSummary::test_samples)
+      .def_readonly("seconds", &FitSummary::seconds)
+      .def_readonly("test_errors", &FitSummary::test_errors, "on the held-out last 10 %")
+      .def_readonly("warnings", &FitSummary::warnings)
+      .def("brief_report", &FitSummary::brief_report)
+      .def("to_dict", [](const FitSummary& s) { return to_python(s.to_json()); });
+  py::class_<PyFitResult>(d, "FitResult")
+      .def_readonly("model", &PyFitResult::model)
+      .def_readonly("summary", &PyFitResult::summary);
+  d.def("fit_linear_torque_model", [](const std::vector<Recording>& recordings, const FitOptions& options) {
+    py::gil_scoped_release release;
+    return to_py(fit_linear_torque_model(recordings, options));
+  }, py::arg("recordings"), py::arg("options") = FitOptions{},
+        "Fit the linear model on free-space recordings (least squares; deterministic). The same fit as\n"
+        "`rcm dynamics fit --model linear`. Returns FitResult(model, summary).");
+  d.def("fit_torque_model", [](TorqueModelKind kind, const std::vector<Recording>& recordings, const FitOptions& options) {
+    if (kind != TorqueModelKind::linear)
+      throw InputError(argument_location("rcm.dynamics.fit_torque_model", "kind"),
+                       "the Python module has no LibTorch: only the linear model can be fitted here; fit " +
+                           to_string(kind) + " with `rcm dynamics fit` and load it with load_torque_model()");
+    py::gil_scoped_release release;
+    return to_py(fit_linear_torque_model(recordings, options));
+  }, py::arg("kind"), py::arg("recordings"), py::arg("options") = FitOptions{},
+        "fit_linear_torque_model for kind linear; other kinds need LibTorch (rcm.InputError)");
+
+  d.def("compute_torque_errors", [](py::handle measured, py::handle predicted) {
+    const std::string fn = "rcm.dynamics.compute_torque_errors";
+    const Eigen::MatrixXd a = to_matrix(measured, argument_location(fn, "measured"));
+    const Eigen::MatrixXd b = to_matrix(predicted, argument_location(fn, "predicted"), a.rows(), a.cols());
+    return compute_torque_errors(a, b);
+  }, py::arg("measured"), py::arg("predicted"), "Per-joint RMSE / NRMSE of two (T, M) arrays");
+  d.def("evaluate_torque_model", [](const TorqueModel& model, const std::vector<Recording>& recordings, double first_fraction) {
+    py::gil_scoped_release release;
+    return evaluate_torque_model(model, recordings, first_fraction);
+  }, py::arg("model"), py::arg("recordings"), py::arg("first_fraction") = 0.0,
+        "Run over every recording (reset at each start) and score samples from first_fraction of each on\n"
+        "(what `rcm dynamics eval` reports)");
+}
+
+}  // namespace rcm::python
