@@ -26,7 +26,9 @@ nlohmann::json summary_json(const rcm::Recording& r) {
     return a;
   };
   nlohmann::json j = {{"file", r.source},
-                      {"layout", r.layout == rcm::RecordingLayout::rostopic_csv ? "rostopic" : "rcm"},
+                      {"layout", r.layout == rcm::RecordingLayout::rostopic_csv ? "rostopic"
+                                : r.layout == rcm::RecordingLayout::rosbag     ? "rosbag"
+                                                                                : "rcm"},
                       {"samples", s.samples},
                       {"joints", s.joints},
                       {"duration_s", s.duration_s},

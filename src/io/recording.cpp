@@ -4,6 +4,7 @@
 #include <charconv>
 #include <cmath>
 #include <map>
+#include <mutex>
 #include <string_view>
 
 #include "rcm/common/error.hpp"
@@ -302,7 +303,30 @@ Recording parse_recording(const std::string& text, const std::string& source,
   return rec;
 }
 
+namespace {
+std::mutex& reader_mutex() {
+  static std::mutex m;
+  return m;
+}
+std::map<std::string, RecordingFileReader>& readers() {
+  static std::map<std::string, RecordingFileReader> r;  // function-local: safe across TUs
+  return r;
+}
+}  // namespace
+
+void register_recording_reader(const std::string& extension, RecordingFileReader reader) {
+  const std::lock_guard<std::mutex> lock(reader_mutex());
+  readers()[extension] = std::move(reader);
+}
+
 Recording load_recording(const std::filesystem::path& path, const RecordingReadOptions& options) {
+  RecordingFileReader reader;
+  {
+    const std::lock_guard<std::mutex> lock(reader_mutex());
+    const auto it = readers().find(path.extension().string());
+    if (it != readers().end()) reader = it->second;
+  }
+  if (reader) return reader(path, options);
   return parse_recording(read_text_file(path), path.string(), options);
 }
 

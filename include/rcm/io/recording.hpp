@@ -9,13 +9,14 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
 
 namespace rcm {
 
-enum class RecordingLayout { rcm_csv, rostopic_csv, in_memory };
+enum class RecordingLayout { rcm_csv, rostopic_csv, in_memory, rosbag };
 
 struct Recording {
   std::string source;             // file path (for messages) or a description
@@ -59,6 +60,13 @@ struct RecordingReadOptions {
 // non-increasing time, too few joints, empty file.
 Recording load_recording(const std::filesystem::path& path,
                          const RecordingReadOptions& options = {});
+
+// Readers of other file formats, chosen by the file's extension (".bag"):
+// load_recording, and so everything that loads a session's files, hands such a
+// file to its reader. rcm::core reads CSV only; the ROS library registers ".bag"
+// (ros/, register_bag_recording_reader). Registering an extension again replaces its reader.
+using RecordingFileReader = std::function<Recording(const std::filesystem::path&, const RecordingReadOptions&)>;
+void register_recording_reader(const std::string& extension, RecordingFileReader reader);
 
 // Same, from text already in memory; `source` names it in messages.
 Recording parse_recording(const std::string& text, const std::string& source,

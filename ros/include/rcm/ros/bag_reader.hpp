@@ -1,0 +1,65 @@
+#pragma once
+// Rosbag recordings: the sensor_msgs/JointState topic of a bag (the dVRK's CRTK
+// /PSM1/measured_js) read into an rcm::Recording, held to the CSV reader's
+// rules (JointStateMap for each message; time strictly increasing; --dedupe
+// drops repeated samples), and optionally a geometry_msgs/WrenchStamped topic
+// as the evaluation-only force columns.
+//
+// Time: header.stamp of each message. Only when the topic's first message has a
+// zero stamp (a publisher that never sets it) is the bag's receive time used,
+// and then for every message of that topic; a topic that mixes zero and
+// non-zero stamps is an error. Recording::time is in seconds from the first
+// sample's stamp (computed in integer nanoseconds, so differences are exact to
+// 1 ns); the absolute origin is in BagReadInfo.
+//
+// Force (optional): WrenchStamped.wrench.force, taken as the force at the
+// incision in the robot base frame (the session format's convention; no frame
+// is transformed, header.frame_id is only reported), linearly interpolated at
+// the joint samples' times. Joint samples up to one force period outside the
+// force topic's span take its end value; beyond that it is an error.
+//
+// Every defect throws InputError naming the bag, the topic, the message index
+// (0-based, in bag order, on that topic) and the field:
+//   run.bag: /PSM1/measured_js message 1204 (t = 6.02 s): effort[2] ('outer_insertion'): expected a finite number, got nan
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "rcm/io/recording.hpp"
+
+namespace rcm {
+
+inline constexpr const char* kDefaultJointStateTopic = "/PSM1/measured_js";
+
+struct BagReadOptions {
+  std::string topic = kDefaultJointStateTopic;  // sensor_msgs/JointState
+  std::string force_topic;                      // geometry_msgs/WrenchStamped; empty: no force columns
+  // Joint order of the recording by name; empty: the first message's order
+  // (by its names, or positional when it has none).
+  std::vector<std::string> joint_names;
+  RecordingReadOptions read;  // dedupe and min_joints apply; assumed_rate_hz is ignored (bags carry time)
+};
+
+struct BagReadInfo {
+  std::vector<std::string> joint_names;  // the recording's joint order; empty when the messages carry no names
+  std::int64_t time_origin_ns = 0;       // absolute time of sample 0 (header stamp or bag time)
+  bool bag_time = false;                 // true: stamps were zero, the bag's receive time was used
+  std::size_t messages = 0;              // JointState messages on the topic
+  std::size_t force_messages = 0;
+  std::string force_frame_id;
+  bool force_bag_time = false;
+};
+
+// Throws InputError as described above (also for a file that is not a bag, a
+// topic that is absent or of another type).
+Recording load_bag_recording(const std::filesystem::path& path, const BagReadOptions& options = {},
+                             BagReadInfo* info = nullptr);
+
+// Makes load_recording() (and so every command, and sessions whose manifest
+// names .bag files) read files ending in ".bag" with these options; the
+// RecordingReadOptions of each call replace `options.read`.
+void register_bag_recording_reader(const BagReadOptions& options = {});
+
+}  // namespace rcm

@@ -1,0 +1,77 @@
+#pragma once
+// The per-message path of rcm_monitor_node without the node: one
+// sensor_msgs/JointState in, checked (joint order by name, finite values,
+// lengths, time strictly increasing), the online pipeline of `rcm monitor`
+// stepped once. Bad messages are rejected and counted, never thrown on, so a
+// live stream survives them.
+//
+// Time: header.stamp, or the receive time when the stream's first accepted
+// message has a zero stamp (then for every message). The estimator sees seconds
+// from the first accepted sample, computed in integer nanoseconds, as the bag
+// reader does, so that a bag and its live replay give the same numbers.
+//
+// No allocation per message once the first message has been accepted (the
+// joint order and the buffers are set up then).
+
+#include <sensor_msgs/JointState.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "rcm/estimation/online.hpp"
+#include "rcm/ros/joint_state_map.hpp"
+
+namespace rcm {
+
+class LiveMonitor {
+ public:
+  enum class Verdict {
+    accepted,
+    duplicate_stamp,   // the same time as the last accepted sample
+    out_of_order,      // earlier than the last accepted sample
+    bad_stamp,         // zero stamp in a stream that has stamps
+    malformed,         // see get_last_defect()
+    too_few_joints,    // the first message has fewer joints than the model reads
+  };
+  struct Counters {
+    std::uint64_t accepted = 0, duplicate_stamp = 0, out_of_order = 0, bad_stamp = 0, malformed = 0,
+                  too_few_joints = 0;
+    std::uint64_t get_rejected() const { return duplicate_stamp + out_of_order + bad_stamp + malformed + too_few_joints; }
+  };
+
+  // `pipeline` must outlive the monitor. `joint_names`: the joint order the
+  // free-space model was trained on, by name; empty: the first message's order.
+  LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string> joint_names = {});
+
+  // One message; `receive_time_ns` is used only when the stream carries no stamps.
+  Verdict compute_message(const sensor_msgs::JointState& message, std::int64_t receive_time_ns);
+
+  const OnlineOutput& get_output() const { return get_online_output(workspace_.estimator); }
+  const Counters& get_counters() const { return counters_; }
+  bool started() const { return started_; }
+  bool uses_receive_time() const { return receive_time_; }
+  std::int64_t get_time_origin_ns() const { return origin_ns_; }
+  // The absolute time (ns) of the last accepted sample: the stamp to publish with.
+  std::int64_t get_last_time_ns() const { return origin_ns_ + last_ns_; }
+  const JointStateMap& get_joint_map() const { return map_; }
+  const JointStateDefect& get_last_defect() const { return defect_; }
+
+  // A sentence for a log line about the last rejection (allocates).
+  std::string describe_rejection(Verdict verdict, const sensor_msgs::JointState& message) const;
+
+ private:
+  const OnlinePipeline& pipeline_;
+  OnlinePipeline::Workspace workspace_;
+  std::vector<std::string> wanted_names_;
+  JointStateMap map_;
+  JointStateMap::Workspace map_ws_;
+  bool started_ = false, receive_time_ = false;
+  std::int64_t origin_ns_ = 0, last_ns_ = 0;
+  Counters counters_;
+  JointStateDefect defect_;
+};
+
+const char* to_string(LiveMonitor::Verdict verdict);
+
+}  // namespace rcm

@@ -1,0 +1,104 @@
+#include "rcm/ros/live_monitor.hpp"
+
+#include <stdexcept>
+
+namespace rcm {
+
+LiveMonitor::LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string> joint_names)
+    : pipeline_(pipeline), workspace_(pipeline.create_workspace()), wanted_names_(std::move(joint_names)) {
+  if (!wanted_names_.empty()) {
+    map_ = JointStateMap(wanted_names_);  // throws std::invalid_argument on empty or repeated names
+    if (map_.num_joints() < pipeline_.model().num_joints())
+      throw std::invalid_argument("LiveMonitor: " + std::to_string(map_.num_joints()) +
+                                  " joint names given, the free-space model reads " +
+                                  std::to_string(pipeline_.model().num_joints()) + " joints");
+    map_ws_ = map_.create_workspace();
+  }
+}
+
+LiveMonitor::Verdict LiveMonitor::compute_message(const sensor_msgs::JointState& m, std::int64_t receive_time_ns) {
+  if (map_.num_joints() == 0) {
+    // The first message that can define the joint order (allocates, once).
+    try {
+      map_ = JointStateMap::make_from_message(m, pipeline_.model().num_joints());
+    } catch (const std::invalid_argument&) {  // no joints, or empty or repeated names
+      defect_ = {};
+      ++counters_.malformed;
+      return Verdict::malformed;
+    }
+    if (map_.num_joints() < pipeline_.model().num_joints()) {
+      map_ = JointStateMap();
+      ++counters_.too_few_joints;
+      return Verdict::too_few_joints;
+    }
+    map_ws_ = map_.create_workspace();
+  }
+  defect_ = map_.compute_sample(map_ws_, m);
+  if (defect_) {
+    ++counters_.malformed;
+    return Verdict::malformed;
+  }
+
+  std::int64_t t_ns = 0;
+  if (!started_) {
+    receive_time_ = m.header.stamp.isZero();
+    origin_ns_ = receive_time_ ? receive_time_ns : static_cast<std::int64_t>(m.header.stamp.toNSec());
+  } else {
+    if (!receive_time_ && m.header.stamp.isZero()) {
+      ++counters_.bad_stamp;
+      return Verdict::bad_stamp;
+    }
+    t_ns = (receive_time_ ? receive_time_ns : static_cast<std::int64_t>(m.header.stamp.toNSec())) - origin_ns_;
+    if (t_ns == last_ns_) {
+      ++counters_.duplicate_stamp;
+      return Verdict::duplicate_stamp;
+    }
+    if (t_ns < last_ns_) {
+      ++counters_.out_of_order;
+      return Verdict::out_of_order;
+    }
+  }
+  started_ = true;
+  last_ns_ = t_ns;
+  pipeline_.compute_sample(workspace_, static_cast<double>(t_ns) * 1e-9, map_ws_.position.data(),
+                           map_ws_.velocity.data(), map_ws_.effort.data());
+  ++counters_.accepted;
+  return Verdict::accepted;
+}
+
+std::string LiveMonitor::describe_rejection(Verdict v, const sensor_msgs::JointState& m) const {
+  const double stamp = m.header.stamp.toSec();
+  switch (v) {
+    case Verdict::accepted:
+      return "accepted";
+    case Verdict::duplicate_stamp:
+      return "stamp " + std::to_string(stamp) + " s repeats the last accepted sample's";
+    case Verdict::out_of_order:
+      return "stamp " + std::to_string(stamp) + " s is earlier than the last accepted sample's (" +
+             std::to_string(static_cast<double>(get_last_time_ns()) * 1e-9) + " s)";
+    case Verdict::bad_stamp:
+      return "header.stamp is zero in a stream whose first message had a stamp";
+    case Verdict::too_few_joints:
+      return "the message has " + std::to_string(m.position.size()) + " joints, the free-space model reads " +
+             std::to_string(pipeline_.model().num_joints());
+    case Verdict::malformed:
+      if (map_.num_joints() == 0)
+        return m.name.empty() ? "position: missing (empty array)" : "name: joint names must be unique and non-empty";
+      return map_.describe(defect_, m);
+  }
+  return "unknown";
+}
+
+const char* to_string(LiveMonitor::Verdict v) {
+  switch (v) {
+    case LiveMonitor::Verdict::accepted: return "accepted";
+    case LiveMonitor::Verdict::duplicate_stamp: return "duplicate stamp";
+    case LiveMonitor::Verdict::out_of_order: return "out of order";
+    case LiveMonitor::Verdict::bad_stamp: return "zero stamp";
+    case LiveMonitor::Verdict::malformed: return "malformed";
+    case LiveMonitor::Verdict::too_few_joints: return "too few joints";
+  }
+  return "unknown";
+}
+
+}  // namespace rcm

@@ -1,0 +1,333 @@
+// rcm_monitor_node end to end: a private ROS master on 127.0.0.1 and a free
+// port, the node started on the fixture's quick simulated session and linear
+// model, one trial published as the dVRK would (joints now and then in another
+// order, plus a duplicate, an out-of-order, a NaN and a short message), and the
+// node's last published estimate compared with `rcm monitor --json` on the
+// same recording; the alarm and onset topics must follow the monitor's events.
+// The joint order is given as ~joint_names (a comma-separated string).
+// Every process is stopped on every path (RAII, and PR_SET_PDEATHSIG should the
+// test itself die); every wait has a timeout.
+
+#include <gtest/gtest.h>
+
+#include <geometry_msgs/Vector3Stamped.h>
+#include <geometry_msgs/WrenchStamped.h>
+#include <ros/ros.h>
+#include <std_msgs/Bool.h>
+#include <std_msgs/UInt64.h>
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/prctl.h>
+#include <sys/socket.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <functional>
+#include <limits>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "rcm/io/recording.hpp"
+#include "ros_test_util.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+
+std::string read_text(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// A child process in its own process group, output to a log file, stopped
+// (SIGINT, then SIGKILL after a grace period) when this object goes away.
+class ChildProcess {
+ public:
+  ChildProcess(const std::vector<std::string>& args, const fs::path& log) : log_(log) {
+    std::vector<char*> argv;
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    const std::string log_path = log.string();
+    const pid_t parent = ::getpid();
+    pid_ = ::fork();
+    if (pid_ == 0) {  // only async-signal-safe calls until exec
+      ::setpgid(0, 0);
+      ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+      if (::getppid() != parent) ::_exit(127);
+      const int fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd >= 0) {
+        ::dup2(fd, 1);
+        ::dup2(fd, 2);
+      }
+      ::execv(argv[0], argv.data());
+      ::_exit(127);
+    }
+    if (pid_ > 0) ::setpgid(pid_, pid_);
+  }
+  ChildProcess(const ChildProcess&) = delete;
+  ChildProcess& operator=(const ChildProcess&) = delete;
+  ~ChildProcess() { stop(2s); }
+
+  bool started() const { return pid_ > 0; }
+  bool alive() {
+    if (pid_ <= 0 || exited_) return false;
+    int status = 0;
+    if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+      exited_ = true;
+      status_ = status;
+      return false;
+    }
+    return true;
+  }
+  // SIGINT to the group, SIGKILL after `grace`; the exit code, or -signal.
+  int stop(std::chrono::milliseconds grace) {
+    if (pid_ <= 0) return -1;
+    if (alive()) {
+      ::kill(-pid_, SIGINT);
+      const auto deadline = Clock::now() + grace;
+      while (alive() && Clock::now() < deadline) std::this_thread::sleep_for(20ms);
+      if (alive()) {
+        ::kill(-pid_, SIGKILL);
+        ::waitpid(pid_, &status_, 0);
+        exited_ = true;
+      }
+    }
+    return WIFEXITED(status_) ? WEXITSTATUS(status_) : -WTERMSIG(status_);
+  }
+  std::string log() const { return read_text(log_); }
+
+ private:
+  fs::path log_;
+  pid_t pid_ = -1;
+  bool exited_ = false;
+  int status_ = 0;
+};
+
+int find_free_port() {
+  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  addr.sin_port = 0;
+  socklen_t len = sizeof addr;
+  if (s < 0 || ::bind(s, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0 ||
+      ::getsockname(s, reinterpret_cast<sockaddr*>(&addr), &len) != 0)
+    return -1;
+  const int port = ntohs(addr.sin_port);
+  ::close(s);
+  return port;
+}
+
+bool wait_for(const std::function<bool()>& done, std::chrono::milliseconds timeout) {
+  const auto deadline = Clock::now() + timeout;
+  while (!done()) {
+    if (Clock::now() > deadline) return false;
+    std::this_thread::sleep_for(20ms);
+  }
+  return true;
+}
+
+// What the node published, as received.
+struct Received {
+  std::mutex mutex;
+  std::size_t estimates = 0, sds = 0, forces = 0;
+  geometry_msgs::Vector3Stamped last_estimate, last_sd;
+  geometry_msgs::WrenchStamped last_force;
+  std::vector<bool> onset, alarm;
+  std::uint64_t rejected = 0;
+  std::size_t rejected_messages = 0;
+};
+
+TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
+  ASSERT_TRUE(rcm::test::fixture_present()) << rcm::test::kFixtureHint;
+  ASSERT_STRNE(RCM_ROSMASTER_PATH, "") << "rosmaster not found at configure time: install python3-rosmaster "
+                                          "(make deps) and re-run cmake";
+  const rcm::Recording rec = rcm::load_recording(rcm::test::get_trial_csv());
+  ASSERT_TRUE(rec.has_force());
+  ASSERT_GT(rec.force->rowwise().norm().maxCoeff(), 10.0) << "the trial's force must exceed the 10 N alarm threshold";
+
+  // What `rcm monitor` says on the same recording (the reference).
+  const auto monitor = rcm::test::run_cli("monitor --session " + rcm::test::get_session_manifest().string() +
+                                          " --model-file " + rcm::test::get_model_file().string() + " --json " +
+                                          rcm::test::get_trial_csv().string());
+  ASSERT_EQ(monitor.status, 0) << monitor.err;
+  const nlohmann::json expected = nlohmann::json::parse(monitor.out);
+  ASSERT_FALSE(expected["alarms"].empty()) << "the trial must raise the alarm";
+
+  const fs::path dir = fs::temp_directory_path() / ("rcm_test_ros_node_" + std::to_string(::getpid()));
+  fs::create_directories(dir / "ros_log");
+  struct RemoveDir {
+    fs::path p;
+    bool keep = false;
+    ~RemoveDir() {
+      if (!keep) fs::remove_all(p);
+    }
+  } remove_dir{dir};
+
+  // A private master; the environment is this test process's (children inherit it).
+  const int port = find_free_port();
+  ASSERT_GT(port, 0);
+  ::setenv("ROS_MASTER_URI", ("http://127.0.0.1:" + std::to_string(port)).c_str(), 1);
+  ::setenv("ROS_IP", "127.0.0.1", 1);
+  ::unsetenv("ROS_HOSTNAME");
+  ::unsetenv("ROS_NAMESPACE");
+  ::setenv("ROS_HOME", dir.c_str(), 1);
+  ::setenv("ROS_LOG_DIR", (dir / "ros_log").c_str(), 1);
+  ChildProcess master({RCM_ROSMASTER_PATH, "--core", "-p", std::to_string(port), "-w", "3"}, dir / "master.log");
+  ASSERT_TRUE(master.started());
+
+  int argc = 1;
+  char arg0[] = "test_ros_monitor_node";
+  char* argv[] = {arg0, nullptr};
+  ros::init(argc, argv, "rcm_test_player", ros::init_options::NoSigintHandler | ros::init_options::AnonymousName);
+  struct Shutdown {
+    ~Shutdown() { ros::shutdown(); }
+  } shutdown_ros_first;  // destroyed before the children: unregister while the master lives
+  ASSERT_TRUE(wait_for([&] { return ros::master::check() || !master.alive(); }, 15s)) << master.log();
+  ASSERT_TRUE(master.alive()) << master.log();
+
+  ros::NodeHandle nh;
+  Received got;
+  auto sub_estimate = nh.subscribe<geometry_msgs::Vector3Stamped>(
+      "/PSM1/rcm/misalignment", 100000, [&](const geometry_msgs::Vector3Stamped::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(got.mutex);
+        ++got.estimates;
+        got.last_estimate = *m;
+      });
+  auto sub_sd = nh.subscribe<geometry_msgs::Vector3Stamped>(
+      "/PSM1/rcm/misalignment_sd", 100000, [&](const geometry_msgs::Vector3Stamped::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(got.mutex);
+        ++got.sds;
+        got.last_sd = *m;
+      });
+  auto sub_force = nh.subscribe<geometry_msgs::WrenchStamped>(
+      "/PSM1/rcm/incision_force", 100000, [&](const geometry_msgs::WrenchStamped::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(got.mutex);
+        ++got.forces;
+        got.last_force = *m;
+      });
+  auto sub_onset = nh.subscribe<std_msgs::Bool>("/PSM1/rcm/onset", 1000, [&](const std_msgs::Bool::ConstPtr& m) {
+    std::lock_guard<std::mutex> lock(got.mutex);
+    got.onset.push_back(m->data);
+  });
+  auto sub_alarm = nh.subscribe<std_msgs::Bool>("/PSM1/rcm/alarm", 1000, [&](const std_msgs::Bool::ConstPtr& m) {
+    std::lock_guard<std::mutex> lock(got.mutex);
+    got.alarm.push_back(m->data);
+  });
+  auto sub_rejected = nh.subscribe<std_msgs::UInt64>("/PSM1/rcm/rejected_samples", 1000,
+                                                     [&](const std_msgs::UInt64::ConstPtr& m) {
+                                                       std::lock_guard<std::mutex> lock(got.mutex);
+                                                       got.rejected = m->data;
+                                                       ++got.rejected_messages;
+                                                     });
+  const Eigen::Index T = rec.time.size();
+  ros::Publisher pub = nh.advertise<sensor_msgs::JointState>("/PSM1/measured_js", static_cast<std::uint32_t>(T + 100));
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+
+  ChildProcess node({RCM_NODE_PATH, "__name:=rcm_monitor_test", "_session:=" + rcm::test::get_session_manifest().string(),
+                     "_model_file:=" + rcm::test::get_model_file().string(), "_queue_size:=100000",
+                     "_status_period_s:=0", "_joint_names:=outer_yaw,outer_pitch,outer_insertion"},
+                    dir / "node.log");
+  ASSERT_TRUE(node.started());
+  const bool connected = wait_for(
+      [&] {
+        std::lock_guard<std::mutex> lock(got.mutex);
+        return !node.alive() || (pub.getNumSubscribers() > 0 && sub_estimate.getNumPublishers() > 0 &&
+                                 sub_sd.getNumPublishers() > 0 && sub_force.getNumPublishers() > 0 &&
+                                 !got.onset.empty() && !got.alarm.empty() && got.rejected_messages > 0);
+      },
+      60s);
+  remove_dir.keep = !connected;
+  ASSERT_TRUE(connected && node.alive()) << "the node did not come up:\n" << node.log();
+
+  // The trial, as the robot publishes it, with bad messages among the samples.
+  const auto start = Clock::now();
+  std::size_t injected = 0;
+  for (Eigen::Index k = 0; k < T; ++k) {
+    // The order is given by ~joint_names: even the first message may come in another.
+    pub.publish(rcm::test::make_joint_state(rec, k, k % 5 == 0 ? std::vector<int>{2, 0, 1} : std::vector<int>{}));
+    sensor_msgs::JointState bad;
+    if (k == 100) bad = rcm::test::make_joint_state(rec, k);  // the same stamp again
+    if (k == 200) bad = rcm::test::make_joint_state(rec, k - 50);  // an old one
+    if (k == 300 || k == 400) {
+      bad = rcm::test::make_joint_state(rec, k);
+      bad.header.stamp += ros::Duration(0.001);
+      if (k == 300) bad.effort[1] = std::numeric_limits<double>::quiet_NaN();
+      if (k == 400) bad.velocity.pop_back();
+    }
+    if (!bad.position.empty()) {
+      pub.publish(bad);
+      ++injected;
+    }
+  }
+  const ros::Time last_stamp = rcm::test::make_joint_state(rec, T - 1).header.stamp;
+  const bool finished = wait_for(
+      [&] {
+        std::lock_guard<std::mutex> lock(got.mutex);
+        return !node.alive() || (got.estimates > 0 && got.last_estimate.header.stamp == last_stamp &&
+                                 got.last_sd.header.stamp == last_stamp && got.last_force.header.stamp == last_stamp);
+      },
+      60s);
+  const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  std::this_thread::sleep_for(200ms);  // the latched topics' last changes
+  const int node_exit = node.stop(10s);
+  const std::string node_log = node.log();
+  remove_dir.keep = !finished;
+  ASSERT_TRUE(finished) << "no estimate for the last sample within 60 s:\n" << node_log;
+  EXPECT_EQ(node_exit, 0) << node_log;
+
+  std::lock_guard<std::mutex> lock(got.mutex);
+  std::cout << "[ node     ] " << T << " samples + " << injected << " bad messages published and answered in " << seconds
+            << " s\n";
+  for (const char* key : {"samples accepted", "per sample:"}) {
+    const auto p = node_log.find(key);
+    if (p != std::string::npos) {
+      const auto b = node_log.rfind('\n', p) + 1, e = node_log.find('\n', p);
+      std::cout << "[ node log ] " << node_log.substr(b, e - b) << "\n";
+    }
+  }
+  // Every sample answered once, the bad ones rejected and counted.
+  EXPECT_EQ(got.estimates, static_cast<std::size_t>(T));
+  EXPECT_EQ(got.forces, static_cast<std::size_t>(T));
+  EXPECT_EQ(got.rejected, injected);
+  EXPECT_NE(node_log.find(std::to_string(T) + " samples accepted, " + std::to_string(injected) + " rejected"),
+            std::string::npos)
+      << node_log;
+  EXPECT_NE(node_log.find("3 joints by name: outer_yaw, outer_pitch, outer_insertion; time from header.stamp"),
+            std::string::npos);
+  EXPECT_EQ(got.last_estimate.header.frame_id, "PSM1_incision");
+  EXPECT_EQ(got.last_force.header.frame_id, "PSM1_base");
+
+  // The same pipeline: the same final estimate as rcm monitor.
+  const auto& fin = expected["final"];
+  const double estimate[3] = {got.last_estimate.vector.x, got.last_estimate.vector.y, got.last_estimate.vector.z};
+  const double sd[3] = {got.last_sd.vector.x, got.last_sd.vector.y, got.last_sd.vector.z};
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(estimate[i], fin["misalignment_m"][i].get<double>(), 1e-9) << "offset " << i;
+    EXPECT_NEAR(sd[i], fin["sd_m"][i].get<double>(), 1e-9) << "sd " << i;
+  }
+
+  // Alarm: false at start, then raised and cleared as rcm monitor reports.
+  std::vector<bool> expected_alarm = {false};
+  for (const auto& a : expected["alarms"]) {
+    expected_alarm.push_back(true);
+    if (!a["cleared_s"].is_null()) expected_alarm.push_back(false);
+  }
+  EXPECT_EQ(got.alarm, expected_alarm);
+  // Onset: false at start, true once.
+  const std::vector<bool> expected_onset =
+      expected["onset_s"].is_null() ? std::vector<bool>{false} : std::vector<bool>{false, true};
+  EXPECT_EQ(got.onset, expected_onset);
+  if (::testing::Test::HasFailure()) std::cout << "node log:\n" << node_log;
+}
+
+}  // namespace
