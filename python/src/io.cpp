@@ -70,6 +70,14 @@ py::dict summary_to_dict(const RecordingSummary& s) {
 }  // namespace
 
 void bind_io(py::module_& m) {
+  // The module links rcm::core only; without this a .bag would reach the CSV
+  // parser and fail with a message about its first line.
+  register_recording_reader(".bag", [](const std::filesystem::path& path, const RecordingReadOptions&) -> Recording {
+    InputLocation where;
+    where.file = path.string();
+    throw InputError(where, "a rosbag: the Python module reads CSV recordings only; convert it with "
+                            "`rcm convert FILE.bag FILE.csv [--topic T]` (the rcm CLI built with ROS)");
+  });
   py::enum_<RecordingLayout>(m, "RecordingLayout", "Where a recording came from")
       .value("rcm_csv", RecordingLayout::rcm_csv, "the contract's CSV (time, position_i, velocity_i, effort_i, force_x..z)")
       .value("rostopic_csv", RecordingLayout::rostopic_csv, "`rostopic echo -p /PSM1/measured_js` output")

@@ -116,6 +116,15 @@ class TestInputError(unittest.TestCase):
         self.assertIn(str(cm.exception), proc.stderr)
         self.assertEqual((cm.exception.line, cm.exception.field), (3, "position_2"))
 
+    def test_rosbag_is_refused_with_a_hint(self):
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "run.bag")
+            open(path, "wb").write(b"#ROSBAG V2.0\n")
+            with self.assertRaises(rcm.InputError) as cm:
+                rcm.load_recording(path)
+            self.assertEqual(cm.exception.file, path)
+            self.assertIn("rcm convert", str(cm.exception))
+
     def test_missing_column(self):
         with self.assertRaises(rcm.InputError) as cm:
             rcm.parse_recording("time,position_1,position_2,position_3\n0,0,0,0\n", "short.csv")
