@@ -64,11 +64,16 @@ static void BM_LstmKernelStepPortable(benchmark::State& state) {
 }
 BENCHMARK(BM_LstmKernelStepPortable)->Args({128, 1});
 
+// The default architecture as fitted: [q, qdot] and `direction` tanh(qdot / s)
+// features per joint (3 by default, FitOptions::velocity_tanh_scales).
 static void BM_LstmModelStep(benchmark::State& state) {
-  LstmTorqueModel m(info6(), lstm(12, 128, 1, 6), norm6());  // the default architecture
+  const int features = static_cast<int>(state.range(0));
+  Normalization norm = norm6();
+  norm.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(6 * features, 0.003f, 0.03f);
+  LstmTorqueModel m(info6(), lstm(12 + 6 * features, 128, 1, 6), norm);
   run(state, m);
 }
-BENCHMARK(BM_LstmModelStep);
+BENCHMARK(BM_LstmModelStep)->ArgName("direction")->Arg(3)->Arg(0);
 
 static void BM_MlpModelStep(benchmark::State& state) {
   const std::vector<DenseStack> stacks = make_random_mlp_stacks(12, 100, 6, 2, 0.2f);

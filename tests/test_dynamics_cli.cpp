@@ -17,8 +17,8 @@ struct Run {
   int status;
   std::string out;
 };
-Run run(const std::string& args) {
-  const std::string cmd = std::string(RCM_CLI_PATH) + " " + args + " 2>/dev/null";
+Run run(const std::string& args, bool with_stderr = false) {
+  const std::string cmd = std::string(RCM_CLI_PATH) + " " + args + (with_stderr ? " 2>&1" : " 2>/dev/null");
   FILE* p = popen(cmd.c_str(), "r");
   std::string out;
   std::array<char, 4096> buf;
@@ -49,5 +49,12 @@ TEST(DynamicsCli, FitLinearThenEvalJson) {
   EXPECT_NE(table.out.find("NRMSE"), std::string::npos);
   EXPECT_NE(run("dynamics fit --model svm --out x.json " + (dir / "free.csv").string()).status, 0);
   EXPECT_NE(run("dynamics eval " + model + " " + (dir / "missing.csv").string()).status, 0);
+  for (const char* bad : {"0.01,abc", "0.01,-0.1", "0.01,,0.1", "0"}) {
+    const auto r = run("dynamics fit --model lstm --direction-features " + std::string(bad) + " --out " + model +
+                           " " + (dir / "free.csv").string(),
+                       true);
+    EXPECT_NE(r.status, 0) << bad;
+    EXPECT_NE(r.out.find("--direction-features"), std::string::npos) << r.out;
+  }
   std::filesystem::remove_all(dir);
 }

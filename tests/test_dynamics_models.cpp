@@ -32,6 +32,23 @@ LstmNetwork random_lstm(int in, int H, int L, int head, int out, unsigned seed) 
   return make_random_lstm_network(in, H, L, head, out, seed);
 }
 
+// Three joints, three outputs at 200 Hz, and a normalization with these input scales.
+TorqueModelInfo info3() {
+  TorqueModelInfo info;
+  info.num_joints = 3;
+  info.num_outputs = 3;
+  info.sample_period_s = 0.005;
+  return info;
+}
+Normalization norm3(const Eigen::VectorXf& input_scale) {
+  Normalization norm;
+  norm.input_mean = Eigen::VectorXf::LinSpaced(6, -0.1f, 0.2f);
+  norm.input_scale = input_scale;
+  norm.output_mean = Eigen::VectorXf::Constant(3, 0.01f);
+  norm.output_scale = Eigen::VectorXf::Constant(3, 0.3f);
+  return norm;
+}
+
 // Plain double LSTM step written from the equations of torch.nn.LSTM.
 struct ReferenceLstm {
   const LstmNetwork& n;
@@ -257,15 +274,8 @@ TEST(ModelFile, LinearRoundTripIsExact) {
 }
 
 TEST(ModelFile, NetworkRoundTripIsExactForEveryKind) {
-  TorqueModelInfo info;
-  info.num_joints = 3;
-  info.num_outputs = 3;
-  info.sample_period_s = 0.005;
-  Normalization norm;
-  norm.input_mean = Eigen::VectorXf::LinSpaced(6, -0.1f, 0.2f);
-  norm.input_scale = Eigen::VectorXf::Constant(6, 0.7f);
-  norm.output_mean = Eigen::VectorXf::Constant(3, 0.01f);
-  norm.output_scale = Eigen::VectorXf::Constant(3, 0.3f);
+  const TorqueModelInfo info = info3();
+  const Normalization norm = norm3(Eigen::VectorXf::Constant(6, 0.7f));
   std::vector<std::unique_ptr<TorqueModel>> models;
   models.push_back(std::make_unique<LstmTorqueModel>(info, random_lstm(6, 8, 2, 4, 3, 1), norm));
   std::vector<DenseStack> stacks;
@@ -282,6 +292,10 @@ TEST(ModelFile, NetworkRoundTripIsExactForEveryKind) {
                             Eigen::VectorXd::Constant(3, 0.1), Eigen::VectorXd::Constant(3, 1e-3)};
   auto base = std::make_shared<const LinearTorqueModel>(info, lp);
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, random_lstm(6, 8, 1, 4, 3, 2), norm));
+  Normalization with_direction = norm;
+  with_direction.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(6, 0.003f, 0.03f);
+  models.push_back(std::make_unique<LstmTorqueModel>(info, random_lstm(12, 8, 1, 4, 3, 3), with_direction));
+  models.push_back(std::make_unique<HybridTorqueModel>(info, base, random_lstm(12, 8, 1, 4, 3, 4), with_direction));
   rcm::test::SyntheticArmOptions so;
   so.duration_s = 5;
   const auto rec = rcm::test::make_synthetic_free_space(so);
@@ -302,6 +316,69 @@ TEST(ModelFile, NetworkRoundTripIsExactForEveryKind) {
         m->compute_step(*ws, rec.time(t), q.data(), qd.data(), tau.data());
         ASSERT_EQ((tau.transpose() - p.row(t)).cwiseAbs().maxCoeff(), 0.0);
       }
+    }
+  }
+}
+
+TEST(DirectionFeatures, NetworkSeesTanhOfVelocityAfterQAndQdot) {
+  const TorqueModelInfo info = info3();
+  Normalization norm = norm3(Eigen::VectorXf::LinSpaced(6, 0.3f, 0.9f));
+  norm.velocity_tanh_scale.resize(6);
+  norm.velocity_tanh_scale << 0.003f, 0.002f, 0.0005f, 0.03f, 0.02f, 0.005f;  // two features, joint-minor
+  const LstmNetwork net = random_lstm(12, 16, 1, 8, 3, 21);
+  const LstmTorqueModel model(info, net, norm);
+  // Reference: the kernel fed inputs built in double from the documented layout.
+  LstmKernel kernel(net);
+  auto state = kernel.create_state();
+  auto ws = model.create_workspace();
+  rcm::test::SyntheticArmOptions so;
+  so.duration_s = 3;
+  const auto rec = rcm::test::make_synthetic_free_space(so);
+  double worst = 0, largest_feature = 0;
+  for (Eigen::Index t = 0; t < rec.time.size(); ++t) {
+    Eigen::VectorXd q = rec.position.row(t).transpose(), qd = rec.velocity.row(t).transpose(), tau(3);
+    Eigen::VectorXf x(12), y(3);
+    for (int k = 0; k < 3; ++k) {
+      x[k] = static_cast<float>((q[k] - norm.input_mean[k]) / norm.input_scale[k]);
+      x[3 + k] = static_cast<float>((qd[k] - norm.input_mean[3 + k]) / norm.input_scale[3 + k]);
+      for (int f = 0; f < 2; ++f) x[6 + 3 * f + k] = static_cast<float>(std::tanh(qd[k] / norm.velocity_tanh_scale[3 * f + k]));
+    }
+    largest_feature = std::max(largest_feature, static_cast<double>(x.tail(6).cwiseAbs().maxCoeff()));
+    kernel.step(state, x.data(), y.data());
+    model.compute_step(*ws, rec.time(t), q.data(), qd.data(), tau.data());
+    for (int j = 0; j < 3; ++j)
+      worst = std::max(worst, std::abs(tau[j] - (static_cast<double>(y[j]) * norm.output_scale[j] + norm.output_mean[j])));
+  }
+  EXPECT_GT(largest_feature, 0.9);  // the motion drives the features into saturation
+  EXPECT_LE(worst, 1e-5);
+  // A network that does not take the features is refused.
+  EXPECT_THROW(LstmTorqueModel(info, random_lstm(6, 16, 1, 8, 3, 21), norm), std::invalid_argument);
+  Normalization odd = norm;
+  odd.velocity_tanh_scale.resize(5);
+  odd.velocity_tanh_scale.setConstant(0.01f);
+  EXPECT_THROW(LstmTorqueModel(info, random_lstm(11, 16, 1, 8, 3, 21), odd), std::invalid_argument);
+
+  // In a file: a scale that is not positive, or a count that is not a multiple
+  // of the joints. Encoded arrays are borrowed from fields that accept them.
+  Normalization carrier = norm;
+  carrier.input_mean << 0.01f, 0.01f, 0.0f, 0.01f, 0.01f, 0.01f;
+  const auto zero_scale = torque_model_to_json(LstmTorqueModel(info, net, carrier))["parameters"]["normalization"]["input_mean"];
+  const auto five_values = torque_model_to_json(LstmTorqueModel(info, random_lstm(12, 16, 1, 5, 3, 2), norm))
+                               ["parameters"]["lstm"]["head"][0]["bias"];
+  const auto good = torque_model_to_json(model);
+  ASSERT_NO_THROW(torque_model_from_json(good, "good.json"));
+  for (const auto& [bad, expect] : {std::pair{zero_scale, std::string("positive")},
+                                    std::pair{five_values, std::string("multiple of 3")}}) {
+    auto broken = good;
+    broken["parameters"]["normalization"]["velocity_tanh_scale"] = bad;
+    try {
+      torque_model_from_json(broken, "broken.json");
+      FAIL() << "expected InputError for " << expect;
+    } catch (const rcm::InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("broken.json"), std::string::npos) << what;
+      EXPECT_NE(what.find("parameters.normalization.velocity_tanh_scale"), std::string::npos) << what;
+      EXPECT_NE(what.find(expect), std::string::npos) << what;
     }
   }
 }

@@ -40,6 +40,12 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
   models.push_back(std::make_unique<MlpTorqueModel>(info, stacks, norm));
   models.push_back(std::make_unique<LinearTorqueModel>(info, lp));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(12, 32, 1, 16, 6, 2), norm));
+  Normalization with_direction = norm;  // the fitted default: three direction features per joint
+  with_direction.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(18, 0.003f, 0.03f);
+  models.push_back(
+      std::make_unique<LstmTorqueModel>(info, make_random_lstm_network(30, 128, 1, 64, 6, 4), with_direction));
+  models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(30, 32, 1, 16, 6, 5),
+                                                       with_direction));
   for (const auto& m : models) {
     auto ws = m->create_workspace();
     double q[6] = {0.1, 0.2, 0.12, 0, 0, 0}, qd[6] = {0.3, -0.2, 0.01, 0, 0, 0}, tau[6];

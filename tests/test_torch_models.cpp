@@ -56,6 +56,10 @@ TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
   EXPECT_EQ(model.num_joints(), 3);
   EXPECT_EQ(model.num_outputs(), 3);
   EXPECT_NEAR(model.info().sample_period_s, 0.005, 1e-12);
+  if (GetParam() == TorqueModelKind::lstm)  // [q, qdot] and three direction features per joint
+    EXPECT_EQ(static_cast<const LstmTorqueModel&>(model).network().input_size(), 15);
+  if (GetParam() == TorqueModelKind::mlp)
+    EXPECT_EQ(static_cast<const MlpTorqueModel&>(model).networks().front().input_size(), 6);
 
   // Predict over the whole recording, and the test split scored as in the summary.
   const Eigen::MatrixXd p = predict_torque(model, rec);
@@ -156,15 +160,21 @@ TEST(TorchScript, ExportThenImportGivesTheSameModel) {
   info.sample_period_s = 0.005;
   Normalization norm{Eigen::VectorXf::LinSpaced(6, -0.1f, 0.1f), Eigen::VectorXf::Constant(6, 0.5f),
                      Eigen::VectorXf::Constant(3, 0.2f), Eigen::VectorXf::Constant(3, 2.0f)};
-  LstmTorqueModel model(info, random_network(6, 16, 2, 3, 8), norm);
-  const auto path = std::filesystem::temp_directory_path() / "rcm_test_lstm.pt";
-  export_torchscript(model, path);
-  const auto imported = import_torchscript(path);  // checks the module's forward internally
-  const auto& rec = synthetic_minute();
-  const Eigen::MatrixXd a = predict_torque(model, rec).topRows(500), b = predict_torque(*imported, rec).topRows(500);
-  EXPECT_EQ((a - b).cwiseAbs().maxCoeff(), 0.0);
-  EXPECT_DOUBLE_EQ(imported->info().sample_period_s, 0.005);
-  std::filesystem::remove(path);
+  // Without and with direction features (two per joint).
+  for (const int features : {0, 2}) {
+    norm.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(3 * features, 0.004f, 0.05f);
+    LstmTorqueModel model(info, random_network(6 + 3 * features, 16, 2, 3, 8), norm);
+    const auto path = std::filesystem::temp_directory_path() / "rcm_test_lstm.pt";
+    export_torchscript(model, path);
+    const auto imported = import_torchscript(path);  // checks the module's forward internally
+    EXPECT_EQ(imported->normalization().velocity_tanh_scale, norm.velocity_tanh_scale);
+    EXPECT_EQ(imported->num_joints(), 3);
+    const auto& rec = synthetic_minute();
+    const Eigen::MatrixXd a = predict_torque(model, rec).topRows(500), b = predict_torque(*imported, rec).topRows(500);
+    EXPECT_EQ((a - b).cwiseAbs().maxCoeff(), 0.0) << features << " features";
+    EXPECT_DOUBLE_EQ(imported->info().sample_period_s, 0.005);
+    std::filesystem::remove(path);
+  }
   EXPECT_THROW(import_torchscript(std::filesystem::temp_directory_path() / "no_such_rcm_model.pt"), rcm::InputError);
 }
 
@@ -201,7 +211,20 @@ class TorqueLstm(torch.nn.Module):
     def forward(self, x):
         out, _ = self.lstm((x - self.input_mean) / self.input_scale)
         return self.head(out) * self.output_scale + self.output_mean
-torch.jit.script(TorqueLstm()).save(sys.argv[1])
+class TorqueLstmWithDirection(TorqueLstm):
+    # Two direction features per joint: tanh(qdot / velocity_tanh_scale), after [q, qdot].
+    def __init__(self):
+        super().__init__()
+        self.lstm = torch.nn.LSTM(12, 20, 2, batch_first=True)
+        self.register_buffer("velocity_tanh_scale", torch.rand(6) * 0.1 + 0.01)
+    def forward(self, x):
+        qd = x[:, :, 3:6]
+        xn = torch.cat([(x - self.input_mean) / self.input_scale, torch.tanh(qd / self.velocity_tanh_scale[0:3]),
+                        torch.tanh(qd / self.velocity_tanh_scale[3:6])], 2)
+        out, _ = self.lstm(xn)
+        return self.head(out) * self.output_scale + self.output_mean
+m = TorqueLstmWithDirection() if len(sys.argv) > 2 else TorqueLstm()
+torch.jit.script(m).save(sys.argv[1])
 )PY";
   const auto script_path = std::filesystem::temp_directory_path() / "rcm_test_make_pytorch_lstm.py";
   { std::ofstream(script_path) << script; }
@@ -211,6 +234,13 @@ torch.jit.script(TorqueLstm()).save(sys.argv[1])
   EXPECT_EQ(model->network().layers.size(), 2u);
   EXPECT_EQ(model->network().head.layers[0].activation, Activation::relu);
   EXPECT_DOUBLE_EQ(model->info().sample_period_s, 0.005);
+  EXPECT_EQ(model->normalization().velocity_tanh_scale.size(), 0);
+  ASSERT_EQ(
+      std::system(("/usr/bin/python3 " + script_path.string() + " " + path.string() + " direction").c_str()), 0);
+  const auto with_direction = import_torchscript(path);
+  EXPECT_EQ(with_direction->num_joints(), 3);
+  EXPECT_EQ(with_direction->network().input_size(), 12);
+  EXPECT_EQ(with_direction->normalization().velocity_tanh_scale.size(), 6);
   std::filesystem::remove(path);
   std::filesystem::remove(script_path);
 }

@@ -5,6 +5,8 @@
 
 #include <iostream>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include "cli_util.hpp"
 #include "command_registry.hpp"
@@ -31,8 +33,20 @@ struct DynamicsArgs {
   double max_minutes = 10.0;
   int hidden = 0, layers = 0, max_epochs = 300, threads = 2, window = 0, streams = 0;
   double learning_rate = 2e-3;
+  std::string direction_features = "0.01,0.03,0.1";
   std::string torchscript_out, torchscript_in, predictions;
 };
+
+// "none" or comma-separated positive numbers.
+std::vector<double> parse_direction_features(const std::string& text) {
+  if (text == "none") return {};
+  std::vector<double> scales = rcm::cli::parse_number_list(text, "--direction-features");
+  for (const double s : scales)
+    if (!(s > 0))
+      throw rcm::InputError(rcm::cli::flag_location("--direction-features"),
+                            "expected 'none' or positive numbers, got " + rcm::quote_token(text));
+  return scales;
+}
 
 std::vector<rcm::Recording> load_all(const std::vector<std::string>& paths, bool dedupe) {
   rcm::RecordingReadOptions ro;
@@ -55,13 +69,12 @@ void run_fit(const DynamicsArgs& a) {
   o.window = a.window;
   o.streams = a.streams;
   o.learning_rate = a.learning_rate;
+  o.velocity_tanh_scales = parse_direction_features(a.direction_features);
   const auto recs = load_all(a.recordings, a.dedupe);
   FitResult fit;
 #if defined(RCM_HAVE_TORCH)
   if (!a.torchscript_out.empty() && kind != TorqueModelKind::lstm) {
-    rcm::InputLocation where;
-    where.field = "--torchscript";
-    throw rcm::InputError(where, "TorchScript export is for --model lstm only");
+    throw rcm::InputError(rcm::cli::flag_location("--torchscript"), "TorchScript export is for --model lstm only");
   }
   fit = fit_torque_model(kind, recs, o);
   if (!a.torchscript_out.empty()) {
@@ -69,9 +82,7 @@ void run_fit(const DynamicsArgs& a) {
   }
 #else
   if (kind != TorqueModelKind::linear) {
-    rcm::InputLocation where;
-    where.field = "--model";
-    throw rcm::InputError(where, "this rcm was built without LibTorch (RCM_WITH_TORCH=OFF); only --model linear "
+    throw rcm::InputError(rcm::cli::flag_location("--model"), "this rcm was built without LibTorch (RCM_WITH_TORCH=OFF); only --model linear "
                                  "can be fitted");
   }
   fit = fit_linear_torque_model(recs, o);
@@ -158,6 +169,9 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->add_option("--window", args->window, "truncated-BPTT window, samples (default 100, or 50 on < 5 min of data)");
   fit->add_option("--streams", args->streams, "contiguous streams per batch (default 32)");
   fit->add_option("--learning-rate", args->learning_rate, "initial Adam learning rate (default 2e-3)");
+  fit->add_option("--direction-features", args->direction_features,
+                  "lstm, hybrid: extra inputs tanh(qdot / (s x velocity sd)) for each s of this comma-separated "
+                  "list, or 'none' (default 0.01,0.03,0.1)");
   fit->add_option("--threads", args->threads, "LibTorch intra-op threads (default 2)");
   fit->add_option("--max-epochs", args->max_epochs, "epoch limit (early stopping usually ends sooner)");
 #if defined(RCM_HAVE_TORCH)

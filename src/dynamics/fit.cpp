@@ -28,6 +28,8 @@ void FitOptions::check() const {
   if (max_epochs < 1) bad_option("max_epochs", "expected >= 1");
   if (!(learning_rate > 0) || !(weight_decay >= 0) || !(max_minutes > 0))
     bad_option("learning_rate/weight_decay/max_minutes", "expected positive values");
+  for (const double s : velocity_tanh_scales)
+    if (!(s > 0) || !std::isfinite(s)) bad_option("velocity_tanh_scales", "expected positive finite values");
 }
 
 TimeSplit split_in_time(const std::vector<Recording>& recordings, double train_fraction,

@@ -139,10 +139,13 @@ LstmNetwork load_lstm(const nlohmann::json& j, const std::string& source, const 
 }
 
 nlohmann::json save_normalization(const Normalization& n) {
-  return {{"input_mean", detail::encode_vector(n.input_mean)},
-          {"input_scale", detail::encode_vector(n.input_scale)},
-          {"output_mean", detail::encode_vector(n.output_mean)},
-          {"output_scale", detail::encode_vector(n.output_scale)}};
+  nlohmann::json j = {{"input_mean", detail::encode_vector(n.input_mean)},
+                      {"input_scale", detail::encode_vector(n.input_scale)},
+                      {"output_mean", detail::encode_vector(n.output_mean)},
+                      {"output_scale", detail::encode_vector(n.output_scale)}};
+  // Absent when empty, so files without direction features keep their old bytes.
+  if (n.velocity_tanh_scale.size() > 0) j["velocity_tanh_scale"] = detail::encode_vector(n.velocity_tanh_scale);
+  return j;
 }
 
 Normalization load_normalization(const nlohmann::json& j, const std::string& source, const std::string& field,
@@ -159,6 +162,14 @@ Normalization load_normalization(const nlohmann::json& j, const std::string& sou
   n.output_scale = get("output_scale", outputs);
   if ((n.input_scale.array() <= 0).any() || (n.output_scale.array() <= 0).any())
     detail::fail(source, field, "scales must be positive");
+  if (j.contains("velocity_tanh_scale")) {
+    const std::string f = field + ".velocity_tanh_scale";
+    n.velocity_tanh_scale = detail::decode_vector_f(j["velocity_tanh_scale"], source, f, -1);
+    if (n.velocity_tanh_scale.size() % (inputs / 2) != 0)
+      detail::fail(source, f, fmt::format("expected a multiple of {} values (features x joints), got {}", inputs / 2,
+                                          n.velocity_tanh_scale.size()));
+    if (!(n.velocity_tanh_scale.array() > 0).all()) detail::fail(source, f, "scales must be positive");
+  }
   return n;
 }
 
@@ -167,6 +178,8 @@ void check_normalization(const Normalization& n, int joints, int outputs) {
     throw std::invalid_argument("normalization: expected 2 x num_joints input entries");
   if (n.output_mean.size() != outputs || n.output_scale.size() != outputs)
     throw std::invalid_argument("normalization: expected num_outputs output entries");
+  if (n.velocity_tanh_scale.size() % joints != 0 || !(n.velocity_tanh_scale.array() > 0).all())
+    throw std::invalid_argument("normalization: velocity_tanh_scale must hold features x num_joints positive values");
 }
 
 // Buffers shared by the recurrent kinds.
@@ -177,11 +190,18 @@ struct LstmWorkspace final : TorqueModelWorkspace {
   std::unique_ptr<TorqueModelWorkspace> base_ws;
 };
 
+// x: n.network_inputs(N) floats.
 void normalize_input(const Normalization& n, int N, const double* q, const double* qd, float* x) {
   for (int k = 0; k < N; ++k) {
     x[k] = static_cast<float>((q[k] - n.input_mean[k]) / n.input_scale[k]);
     x[N + k] = static_cast<float>((qd[k] - n.input_mean[N + k]) / n.input_scale[N + k]);
   }
+  const auto F = n.velocity_tanh_scale.size();
+  if (F == 0) return;
+  for (Eigen::Index f = 0; f < F; ++f) x[2 * N + f] = static_cast<float>(qd[f % N]) / n.velocity_tanh_scale[f];
+  // Eigen's vectorized tanh, as the training's inputs (scalar std::tanh cost 0.5 us for 18 features).
+  Eigen::Map<Eigen::ArrayXf> features(x + 2 * N, F);
+  features = features.tanh();
 }
 
 }  // namespace
@@ -353,15 +373,17 @@ void compute_dense_forward(const DenseStack& stack, const float* x, float* y, fl
 
 LstmTorqueModel::LstmTorqueModel(TorqueModelInfo info, LstmNetwork network, Normalization normalization)
     : TorqueModel(std::move(info)), kernel_(network), normalization_(std::move(normalization)) {
-  if (network.input_size() != 2 * num_joints() || network.output_size() != num_outputs())
-    throw std::invalid_argument("LSTM model: network sizes do not match 2 x num_joints inputs / num_outputs");
   check_normalization(normalization_, num_joints(), num_outputs());
+  if (network.input_size() != normalization_.network_inputs(num_joints()) || network.output_size() != num_outputs())
+    throw std::invalid_argument(
+        "LSTM model: network sizes do not match the normalization's inputs (2 x num_joints + direction features) / "
+        "num_outputs");
 }
 
 std::unique_ptr<TorqueModelWorkspace> LstmTorqueModel::create_workspace() const {
   auto ws = std::make_unique<LstmWorkspace>();
   ws->state = kernel_.create_state();
-  ws->x = Eigen::VectorXf::Zero(2 * num_joints());
+  ws->x = Eigen::VectorXf::Zero(normalization_.network_inputs(num_joints()));
   ws->y = Eigen::VectorXf::Zero(num_outputs());
   return ws;
 }
@@ -398,17 +420,18 @@ MlpTorqueModel::MlpTorqueModel(TorqueModelInfo info, std::vector<DenseStack> per
     throw std::invalid_argument("MLP model: expected one network per output joint");
   for (const auto& s : per_joint_) {
     check_stack(s, "MLP");
-    if (s.input_size() != 2 * num_joints() || s.output_size() != 1)
-      throw std::invalid_argument("MLP model: each network maps 2 x num_joints inputs to 1 output");
   }
   check_normalization(normalization_, num_joints(), num_outputs());
+  for (const auto& s : per_joint_)
+    if (s.input_size() != normalization_.network_inputs(num_joints()) || s.output_size() != 1)
+      throw std::invalid_argument("MLP model: each network maps the normalization's inputs to 1 output");
 }
 
 std::unique_ptr<TorqueModelWorkspace> MlpTorqueModel::create_workspace() const {
   auto ws = std::make_unique<MlpWorkspace>();
   int w = 0;
   for (const auto& s : per_joint_) w = std::max(w, s.max_width());
-  ws->x = Eigen::VectorXf::Zero(2 * num_joints());
+  ws->x = Eigen::VectorXf::Zero(normalization_.network_inputs(num_joints()));
   ws->a = Eigen::VectorXf::Zero(w);
   ws->b = Eigen::VectorXf::Zero(w);
   return ws;
@@ -442,15 +465,15 @@ HybridTorqueModel::HybridTorqueModel(TorqueModelInfo info, std::shared_ptr<const
       normalization_(std::move(residual_normalization)) {
   if (!base_ || base_->num_joints() != num_joints() || base_->num_outputs() != num_outputs())
     throw std::invalid_argument("hybrid model: base model joints differ");
-  if (residual.input_size() != 2 * num_joints() || residual.output_size() != num_outputs())
-    throw std::invalid_argument("hybrid model: residual network sizes do not match");
   check_normalization(normalization_, num_joints(), num_outputs());
+  if (residual.input_size() != normalization_.network_inputs(num_joints()) || residual.output_size() != num_outputs())
+    throw std::invalid_argument("hybrid model: residual network sizes do not match");
 }
 
 std::unique_ptr<TorqueModelWorkspace> HybridTorqueModel::create_workspace() const {
   auto ws = std::make_unique<LstmWorkspace>();
   ws->state = kernel_.create_state();
-  ws->x = Eigen::VectorXf::Zero(2 * num_joints());
+  ws->x = Eigen::VectorXf::Zero(normalization_.network_inputs(num_joints()));
   ws->y = Eigen::VectorXf::Zero(num_outputs());
   ws->base_ws = base_->create_workspace();
   return ws;

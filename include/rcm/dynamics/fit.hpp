@@ -35,6 +35,9 @@ struct FitOptions {
   int plateau_patience = 6;         // epochs before the learning rate is halved
   double min_learning_rate = 1e-5;
   double max_minutes = 10.0;        // wall-clock budget of one fit
+  // lstm and hybrid: direction features tanh(qdot / (s x the training split's
+  // velocity sd)), one per s and joint, after [q, qdot]; empty: none.
+  std::vector<double> velocity_tanh_scales = {0.01, 0.03, 0.1};
   bool prefer_cuda = true;
 
   // Throws InputError when a value is out of range.

@@ -58,10 +58,18 @@ LstmNetwork make_random_lstm_network(int inputs, int hidden, int layers, int hea
 std::vector<DenseStack> make_random_mlp_stacks(int inputs, int hidden, int outputs, unsigned seed,
                                                float stddev = 0.3f);
 
-// x_normalized = (x - mean) / scale; y = y_normalized * scale + mean.
+// Network input: [(q - mean) / scale, (qdot - mean) / scale, tanh(qdot / velocity_tanh_scale)];
+// output: y = y_normalized * scale + mean.
 struct Normalization {
   Eigen::VectorXf input_mean, input_scale;    // 2 num_joints: [q, qdot]
   Eigen::VectorXf output_mean, output_scale;  // num_outputs
+  // F x num_joints scales in joint velocity units, feature f of joint k at
+  // f * num_joints + k; empty: the network sees [q, qdot] only. Direction
+  // features exist because the friction step at qdot = 0 needs input weights of
+  // 1 / (a few encoder counts per sample), which Adam grows only over thousands
+  // of updates (docs/dynamics.md, "Direction features").
+  Eigen::VectorXf velocity_tanh_scale;
+  int network_inputs(int joints) const { return 2 * joints + static_cast<int>(velocity_tanh_scale.size()); }
 };
 
 // Instruction set of the per-sample kernels: a portable build for the baseline

@@ -64,15 +64,16 @@ Eigen::VectorXf to_eigen_vector(const torch::Tensor& t) {
 
 // ---------------------------------------------------------------------------- data
 
-// Inputs [q, qdot] and targets of every recording, normalized with statistics of
-// the training split only (no leakage of validation or test statistics).
+// Inputs [q, qdot, direction features] and targets of every recording,
+// normalized with statistics of the training split only (no leakage of
+// validation or test statistics).
 struct SequenceData {
-  std::vector<torch::Tensor> x, y;  // per recording: [T, 2N], [T, M], normalized
+  std::vector<torch::Tensor> x, y;  // per recording: [T, I], [T, M], normalized
   Normalization norm;
 };
 
 SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<Eigen::MatrixXd>& targets,
-                          const TimeSplit& split, int N, int M) {
+                          const TimeSplit& split, int N, int M, const std::vector<double>& velocity_tanh_scales) {
   Eigen::VectorXd sum = Eigen::VectorXd::Zero(2 * N + M), sum2 = Eigen::VectorXd::Zero(2 * N + M);
   double n = 0;
   for (const auto& seg : split.train)
@@ -93,13 +94,22 @@ SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<
   d.norm.input_scale = sd.head(2 * N).cast<float>();
   d.norm.output_mean = mean.tail(M).cast<float>();
   d.norm.output_scale = sd.tail(M).cast<float>();
+  const auto F = static_cast<Eigen::Index>(velocity_tanh_scales.size());
+  d.norm.velocity_tanh_scale.resize(F * N);
+  for (Eigen::Index f = 0; f < F; ++f)
+    for (int k = 0; k < N; ++k)
+      d.norm.velocity_tanh_scale(f * N + k) = static_cast<float>(velocity_tanh_scales[f] * sd(N + k));
+  const int I = d.norm.network_inputs(N);
   for (std::size_t r = 0; r < recs.size(); ++r) {
     const auto T = static_cast<Eigen::Index>(recs[r].num_samples());
-    Eigen::MatrixXf x(T, 2 * N), y(T, M);
+    Eigen::MatrixXf x(T, I), y(T, M);
     for (int k = 0; k < N; ++k) {
       x.col(k) = ((recs[r].position.col(k).array() - mean(k)) / sd(k)).cast<float>();
       x.col(N + k) = ((recs[r].velocity.col(k).array() - mean(N + k)) / sd(N + k)).cast<float>();
     }
+    // Computed in float as the kernel does (normalize_input in networks.cpp).
+    for (Eigen::Index f = 0; f < F * N; ++f)
+      x.col(2 * N + f) = (recs[r].velocity.col(f % N).cast<float>().array() / d.norm.velocity_tanh_scale(f)).tanh();
     for (int j = 0; j < M; ++j)
       y.col(j) = ((targets[r].col(j).array() - mean(2 * N + j)) / sd(2 * N + j)).cast<float>();
     d.x.push_back(to_tensor(x));
@@ -221,7 +231,7 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
                            const LstmShape& shape, torch::Device device, Clock::time_point t0,
                            const char* label) {
   const int W = shape.window;
-  LstmNet net(2 * N, shape.hidden, shape.layers, o.head_hidden, M);
+  LstmNet net(data.norm.network_inputs(N), shape.hidden, shape.layers, o.head_hidden, M);
   net->to(device);
   torch::optim::Adam opt(net->parameters(),
                          torch::optim::AdamOptions(o.learning_rate).weight_decay(shape.weight_decay));
@@ -388,7 +398,7 @@ FitResult fit_lstm_torque_model(const std::vector<Recording>& recs, const FitOpt
   const TimeSplit split = split_in_time(recs, o.train_fraction, o.validation_fraction);
   FitSummary summary = make_summary(TorqueModelKind::lstm, split);
   const torch::Device device = select_device(o, summary.device);
-  const SequenceData data = prepare_data(recs, effort_targets(recs, M), split, N, M);
+  const SequenceData data = prepare_data(recs, effort_targets(recs, M), split, N, M, o.velocity_tanh_scales);
   const LstmShape shape = choose_shape(o, summary.train_samples);
   if (o.verbose)
     std::cerr << fmt::format("[lstm] {} layers x {} hidden, window {}, {} streams, weight decay {}\n", shape.layers,
@@ -422,7 +432,7 @@ FitResult fit_hybrid_torque_model(const std::vector<Recording>& recs, const FitO
   FitSummary summary = make_summary(TorqueModelKind::hybrid, split);
   summary.warnings = base_fit.summary.warnings;
   const torch::Device device = select_device(o, summary.device);
-  const SequenceData data = prepare_data(recs, residual, split, N, M);
+  const SequenceData data = prepare_data(recs, residual, split, N, M, o.velocity_tanh_scales);
   const LstmShape shape = choose_shape(o, summary.train_samples);
   auto tr = train_lstm(data, split, N, M, o, shape, device, t0, "hybrid");
   record_training(summary, tr);
@@ -442,7 +452,8 @@ FitResult fit_mlp_torque_model(const std::vector<Recording>& recs, const FitOpti
   const TimeSplit split = split_in_time(recs, o.train_fraction, o.validation_fraction);
   FitSummary summary = make_summary(TorqueModelKind::mlp, split);
   const torch::Device device = select_device(o, summary.device);
-  const SequenceData data = prepare_data(recs, effort_targets(recs, M), split, N, M);
+  // Yilmaz et al.'s inputs: [q, qdot] only.
+  const SequenceData data = prepare_data(recs, effort_targets(recs, M), split, N, M, {});
   auto gather = [&](const std::vector<SampleSegment>& segs, bool y) {
     std::vector<torch::Tensor> parts;
     for (const auto& s : segs) parts.push_back((y ? data.y : data.x)[s.recording].slice(0, s.begin, s.end));
@@ -457,7 +468,7 @@ FitResult fit_mlp_torque_model(const std::vector<Recording>& recs, const FitOpti
   for (int j = 0; j < M; ++j) {
     nets.push_back(holder.register_module(
         fmt::format("joint{}", j),
-        torch::nn::Sequential(torch::nn::Linear(2 * N, o.mlp_hidden), torch::nn::Tanh(),
+        torch::nn::Sequential(torch::nn::Linear(data.norm.network_inputs(N), o.mlp_hidden), torch::nn::Tanh(),
                               torch::nn::Linear(o.mlp_hidden, 1))));
   }
   holder.to(device);
@@ -584,6 +595,16 @@ void export_torchscript(const LstmTorqueModel& model, const std::filesystem::pat
   m.register_buffer("input_scale", tensor_of(norm.input_scale));
   m.register_buffer("output_mean", tensor_of(norm.output_mean));
   m.register_buffer("output_scale", tensor_of(norm.output_scale));
+  const int N = static_cast<int>(norm.input_mean.size()) / 2;
+  const int F = static_cast<int>(norm.velocity_tanh_scale.size()) / std::max(1, N);
+  std::string features;
+  if (F > 0) {
+    m.register_buffer("velocity_tanh_scale", tensor_of(norm.velocity_tanh_scale));
+    features = fmt::format("        qd = x[:, :, {}:{}]\n        xn = torch.cat([xn", N, 2 * N);
+    for (int f = 0; f < F; ++f)
+      features += fmt::format(", torch.tanh(qd / self.velocity_tanh_scale[{}:{}])", f * N, (f + 1) * N);
+    features += "], 2)\n";
+  }
   m.register_attribute("head_activations", c10::ListType::ofStrings(), acts);
   m.register_attribute("sample_period_s", c10::FloatType::get(), model.info().sample_period_s);
   m.register_attribute("num_layers", c10::IntType::get(), static_cast<int64_t>(L));
@@ -591,11 +612,11 @@ void export_torchscript(const LstmTorqueModel& model, const std::filesystem::pat
   m.define(fmt::format(R"JIT(
     def forward(self, x: Tensor, h0: Tensor, c0: Tensor) -> Tuple[Tensor, Tensor, Tensor]:
         xn = (x - self.input_mean) / self.input_scale
-        out, hn, cn = torch.lstm(xn, [h0, c0], {0}, True, {1}, 0.0, False, False, True)
+{3}        out, hn, cn = torch.lstm(xn, [h0, c0], {0}, True, {1}, 0.0, False, False, True)
         y = out
 {2}        return y * self.output_scale + self.output_mean, hn, cn
   )JIT",
-                       params, L, head));
+                       params, L, head, features));
   m.save(path.string());
 }
 
@@ -656,14 +677,16 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   norm.input_scale = to_eigen_vector(get("input_scale"));
   norm.output_mean = to_eigen_vector(get("output_mean"));
   norm.output_scale = to_eigen_vector(get("output_scale"));
+  if (p.count("velocity_tanh_scale")) norm.velocity_tanh_scale = to_eigen_vector(p["velocity_tanh_scale"]);
   try {
     net.check();
   } catch (const std::invalid_argument& e) {
     import_error(path, "", e.what());
   }
   TorqueModelInfo info;
-  if (net.input_size() % 2 != 0) import_error(path, "lstm.weight_ih_l0", "input size must be 2 x joints");
-  info.num_joints = net.input_size() / 2;
+  if (norm.input_mean.size() % 2 != 0 || norm.input_mean.size() == 0)
+    import_error(path, "input_mean", "expected 2 x joints values ([q, qdot])");
+  info.num_joints = static_cast<int>(norm.input_mean.size()) / 2;
   info.num_outputs = net.output_size();
   info.sample_period_s = m.hasattr("sample_period_s") ? m.attr("sample_period_s").toDouble() : 0.0;
   info.training = {{"imported_from", path.string()}};
@@ -676,7 +699,7 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   // The module's own forward on a random sequence must agree with the kernel.
   torch::NoGradGuard guard;
   torch::manual_seed(0);
-  const int64_t T = 50, I = net.input_size(), H = net.hidden_size(), L = static_cast<int64_t>(net.layers.size());
+  const int64_t T = 50, I = 2 * info.num_joints, H = net.hidden_size(), L = static_cast<int64_t>(net.layers.size());
   auto x = torch::randn({1, T, I}) * torch::from_blob(norm.input_scale.data(), {I}).clone() +
            torch::from_blob(norm.input_mean.data(), {I}).clone();
   const auto nargs = m.get_method("forward").function().getSchema().arguments().size();
