@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -60,6 +61,8 @@ TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
     EXPECT_EQ(static_cast<const LstmTorqueModel&>(model).network().input_size(), 15);
   if (GetParam() == TorqueModelKind::mlp)
     EXPECT_EQ(static_cast<const MlpTorqueModel&>(model).networks().front().input_size(), 6);
+  if (GetParam() == TorqueModelKind::hybrid)  // none by default (get_default_velocity_tanh_scales)
+    EXPECT_EQ(static_cast<const HybridTorqueModel&>(model).residual_network().input_size(), 6);
 
   // Predict over the whole recording, and the test split scored as in the summary.
   const Eigen::MatrixXd p = predict_torque(model, rec);
@@ -176,6 +179,34 @@ TEST(TorchScript, ExportThenImportGivesTheSameModel) {
     std::filesystem::remove(path);
   }
   EXPECT_THROW(import_torchscript(std::filesystem::temp_directory_path() / "no_such_rcm_model.pt"), rcm::InputError);
+}
+
+TEST(DirectionFeatures, ExplicitScalesReachLstmAndHybridNotMlp) {
+  auto o = tiny_options();
+  o.max_epochs = 1;
+  o.velocity_tanh_scales = std::vector<double>{0.05, 0.2};
+  const auto& rec = synthetic_minute();
+  const auto lstm = fit_lstm_torque_model({rec}, o);
+  const auto& lm = static_cast<const LstmTorqueModel&>(*lstm.model);
+  EXPECT_EQ(lm.network().input_size(), 12);
+  ASSERT_EQ(lm.normalization().velocity_tanh_scale.size(), 6);
+  // s x the training split's velocity sd, feature-major.
+  const Eigen::Index train_end = split_in_time({rec}, 0.7, 0.2).train.back().end;
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::ArrayXd v = rec.velocity.col(k).head(train_end).array();
+    const double sd = std::sqrt((v - v.mean()).square().mean());
+    EXPECT_NEAR(lm.normalization().velocity_tanh_scale[k], 0.05 * sd, 1e-6 * sd);
+    EXPECT_NEAR(lm.normalization().velocity_tanh_scale[3 + k], 0.2 * sd, 1e-6 * sd);
+  }
+  const auto hybrid = fit_hybrid_torque_model({rec}, o);
+  EXPECT_EQ(static_cast<const HybridTorqueModel&>(*hybrid.model).residual_network().input_size(), 12);
+  const auto mlp = fit_mlp_torque_model({rec}, o);
+  EXPECT_EQ(static_cast<const MlpTorqueModel&>(*mlp.model).networks().front().input_size(), 6);
+  o.velocity_tanh_scales = std::vector<double>{};  // explicitly none
+  const auto plain = fit_lstm_torque_model({rec}, o);
+  EXPECT_EQ(static_cast<const LstmTorqueModel&>(*plain.model).network().input_size(), 6);
+  o.velocity_tanh_scales = std::vector<double>{0.1, -1.0};
+  EXPECT_THROW(fit_lstm_torque_model({rec}, o), rcm::InputError);
 }
 
 TEST(FitWarnings, ShortDataSaysTooFewToTrust) {

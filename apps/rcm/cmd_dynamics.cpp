@@ -33,7 +33,7 @@ struct DynamicsArgs {
   double max_minutes = 10.0;
   int hidden = 0, layers = 0, max_epochs = 300, threads = 2, window = 0, streams = 0;
   double learning_rate = 2e-3;
-  std::string direction_features = "0.01,0.03,0.1";
+  std::string direction_features;  // empty: the kind's default
   std::string torchscript_out, torchscript_in, predictions;
 };
 
@@ -69,7 +69,7 @@ void run_fit(const DynamicsArgs& a) {
   o.window = a.window;
   o.streams = a.streams;
   o.learning_rate = a.learning_rate;
-  o.velocity_tanh_scales = parse_direction_features(a.direction_features);
+  if (!a.direction_features.empty()) o.velocity_tanh_scales = parse_direction_features(a.direction_features);
   const auto recs = load_all(a.recordings, a.dedupe);
   FitResult fit;
 #if defined(RCM_HAVE_TORCH)
@@ -171,7 +171,7 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->add_option("--learning-rate", args->learning_rate, "initial Adam learning rate (default 2e-3)");
   fit->add_option("--direction-features", args->direction_features,
                   "lstm, hybrid: extra inputs tanh(qdot / (s x velocity sd)) for each s of this comma-separated "
-                  "list, or 'none' (default 0.01,0.03,0.1)");
+                  "list, or 'none' (default: 0.01,0.03,0.1 for lstm, none for hybrid)");
   fit->add_option("--threads", args->threads, "LibTorch intra-op threads (default 2)");
   fit->add_option("--max-epochs", args->max_epochs, "epoch limit (early stopping usually ends sooner)");
 #if defined(RCM_HAVE_TORCH)

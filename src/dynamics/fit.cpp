@@ -28,8 +28,14 @@ void FitOptions::check() const {
   if (max_epochs < 1) bad_option("max_epochs", "expected >= 1");
   if (!(learning_rate > 0) || !(weight_decay >= 0) || !(max_minutes > 0))
     bad_option("learning_rate/weight_decay/max_minutes", "expected positive values");
-  for (const double s : velocity_tanh_scales)
-    if (!(s > 0) || !std::isfinite(s)) bad_option("velocity_tanh_scales", "expected positive finite values");
+  if (velocity_tanh_scales)
+    for (const double s : *velocity_tanh_scales)
+      if (!(s > 0) || !std::isfinite(s)) bad_option("velocity_tanh_scales", "expected positive finite values");
+}
+
+std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind) {
+  if (kind == TorqueModelKind::lstm) return {0.01, 0.03, 0.1};
+  return {};
 }
 
 TimeSplit split_in_time(const std::vector<Recording>& recordings, double train_fraction,

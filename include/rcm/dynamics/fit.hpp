@@ -4,6 +4,7 @@
 
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -36,8 +37,9 @@ struct FitOptions {
   double min_learning_rate = 1e-5;
   double max_minutes = 10.0;        // wall-clock budget of one fit
   // lstm and hybrid: direction features tanh(qdot / (s x the training split's
-  // velocity sd)), one per s and joint, after [q, qdot]; empty: none.
-  std::vector<double> velocity_tanh_scales = {0.01, 0.03, 0.1};
+  // velocity sd)), one per s and joint, after [q, qdot]; empty: none. Unset:
+  // the kind's default, get_default_velocity_tanh_scales.
+  std::optional<std::vector<double>> velocity_tanh_scales;
   bool prefer_cuda = true;
 
   // Throws InputError when a value is out of range.
@@ -74,6 +76,13 @@ struct TimeSplit {
 // Splits the recordings, taken one after the other, by time: the first
 // train_fraction of all samples, then validation_fraction, then the rest.
 // Segments never straddle two recordings or two splits.
+// Direction-feature scales a fit of `kind` uses when FitOptions leaves them
+// unset: {0.01, 0.03, 0.1} for lstm; none for hybrid, whose residual network
+// with them read the encoder-chatter spikes of long static holds as direction
+// and moved the hold torque (docs/dynamics.md, "Direction features"); none for
+// mlp and linear.
+std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind);
+
 TimeSplit split_in_time(const std::vector<Recording>& recordings, double train_fraction,
                         double validation_fraction);
 

@@ -398,7 +398,9 @@ FitResult fit_lstm_torque_model(const std::vector<Recording>& recs, const FitOpt
   const TimeSplit split = split_in_time(recs, o.train_fraction, o.validation_fraction);
   FitSummary summary = make_summary(TorqueModelKind::lstm, split);
   const torch::Device device = select_device(o, summary.device);
-  const SequenceData data = prepare_data(recs, effort_targets(recs, M), split, N, M, o.velocity_tanh_scales);
+  const SequenceData data =
+      prepare_data(recs, effort_targets(recs, M), split, N, M,
+                   o.velocity_tanh_scales.value_or(get_default_velocity_tanh_scales(TorqueModelKind::lstm)));
   const LstmShape shape = choose_shape(o, summary.train_samples);
   if (o.verbose)
     std::cerr << fmt::format("[lstm] {} layers x {} hidden, window {}, {} streams, weight decay {}\n", shape.layers,
@@ -432,7 +434,9 @@ FitResult fit_hybrid_torque_model(const std::vector<Recording>& recs, const FitO
   FitSummary summary = make_summary(TorqueModelKind::hybrid, split);
   summary.warnings = base_fit.summary.warnings;
   const torch::Device device = select_device(o, summary.device);
-  const SequenceData data = prepare_data(recs, residual, split, N, M, o.velocity_tanh_scales);
+  const SequenceData data =
+      prepare_data(recs, residual, split, N, M,
+                   o.velocity_tanh_scales.value_or(get_default_velocity_tanh_scales(TorqueModelKind::hybrid)));
   const LstmShape shape = choose_shape(o, summary.train_samples);
   auto tr = train_lstm(data, split, N, M, o, shape, device, t0, "hybrid");
   record_training(summary, tr);
