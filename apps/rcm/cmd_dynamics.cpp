@@ -82,8 +82,8 @@ void run_fit(const DynamicsArgs& a) {
   }
 #else
   if (kind != TorqueModelKind::linear) {
-    throw rcm::InputError(rcm::cli::flag_location("--model"), "this rcm was built without LibTorch (RCM_WITH_TORCH=OFF); only --model linear "
-                                 "can be fitted");
+    throw rcm::InputError(rcm::cli::flag_location("--model"),
+                          "this rcm was built without LibTorch (RCM_WITH_TORCH=OFF); only --model linear can be fitted");
   }
   fit = fit_linear_torque_model(recs, o);
 #endif

@@ -199,7 +199,7 @@ void normalize_input(const Normalization& n, int N, const double* q, const doubl
   const auto F = n.velocity_tanh_scale.size();
   if (F == 0) return;
   for (Eigen::Index f = 0; f < F; ++f) x[2 * N + f] = static_cast<float>(qd[f % N]) / n.velocity_tanh_scale[f];
-  // Eigen's vectorized tanh, as the training's inputs (scalar std::tanh cost 0.5 us for 18 features).
+  // Eigen's vectorized tanh, as for the training's inputs; a scalar std::tanh loop was slower.
   Eigen::Map<Eigen::ArrayXf> features(x + 2 * N, F);
   features = features.tanh();
 }

@@ -73,9 +73,6 @@ struct SampleSegment {
 struct TimeSplit {
   std::vector<SampleSegment> train, validation, test;
 };
-// Splits the recordings, taken one after the other, by time: the first
-// train_fraction of all samples, then validation_fraction, then the rest.
-// Segments never straddle two recordings or two splits.
 // Direction-feature scales a fit of `kind` uses when FitOptions leaves them
 // unset: {0.01, 0.03, 0.1} for lstm; none for hybrid, whose residual network
 // with them read the encoder-chatter spikes of long static holds as direction
@@ -83,6 +80,9 @@ struct TimeSplit {
 // mlp and linear.
 std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind);
 
+// Splits the recordings, taken one after the other, by time: the first
+// train_fraction of all samples, then validation_fraction, then the rest.
+// Segments never straddle two recordings or two splits.
 TimeSplit split_in_time(const std::vector<Recording>& recordings, double train_fraction,
                         double validation_fraction);
 

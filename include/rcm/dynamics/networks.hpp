@@ -65,9 +65,10 @@ struct Normalization {
   Eigen::VectorXf output_mean, output_scale;  // num_outputs
   // F x num_joints scales in joint velocity units, feature f of joint k at
   // f * num_joints + k; empty: the network sees [q, qdot] only. Direction
-  // features exist because the friction step at qdot = 0 needs input weights of
-  // 1 / (a few encoder counts per sample), which Adam grows only over thousands
-  // of updates (docs/dynamics.md, "Direction features").
+  // features exist because drawing the friction step at qdot = 0 from
+  // z-normalized qdot needs input weights of ~100, which Adam grows only over
+  // far more updates than a 10-minute fit makes (docs/dynamics.md, "Direction
+  // features").
   Eigen::VectorXf velocity_tanh_scale;
   int network_inputs(int joints) const { return 2 * joints + static_cast<int>(velocity_tanh_scale.size()); }
 };
