@@ -49,7 +49,7 @@ TEST(DynamicsCli, FitLinearThenEvalJson) {
   EXPECT_NE(table.out.find("NRMSE"), std::string::npos);
   EXPECT_NE(run("dynamics fit --model svm --out x.json " + (dir / "free.csv").string()).status, 0);
   EXPECT_NE(run("dynamics eval " + model + " " + (dir / "missing.csv").string()).status, 0);
-  for (const char* bad : {"0.01,abc", "0.01,-0.1", "0.01,,0.1", "0"}) {
+  for (const char* bad : {"0.01,abc", "0.01,-0.1", "0.01,,0.1", "0", "''"}) {
     const auto r = run("dynamics fit --model lstm --direction-features " + std::string(bad) + " --out " + model +
                            " " + (dir / "free.csv").string(),
                        true);

@@ -5,6 +5,7 @@
 
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -33,7 +34,7 @@ struct DynamicsArgs {
   double max_minutes = 10.0;
   int hidden = 0, layers = 0, max_epochs = 300, threads = 2, window = 0, streams = 0;
   double learning_rate = 2e-3;
-  std::string direction_features;  // empty: the kind's default
+  std::optional<std::string> direction_features;  // unset: the kind's default
   std::string torchscript_out, torchscript_in, predictions;
 };
 
@@ -69,7 +70,7 @@ void run_fit(const DynamicsArgs& a) {
   o.window = a.window;
   o.streams = a.streams;
   o.learning_rate = a.learning_rate;
-  if (!a.direction_features.empty()) o.velocity_tanh_scales = parse_direction_features(a.direction_features);
+  if (a.direction_features) o.velocity_tanh_scales = parse_direction_features(*a.direction_features);
   const auto recs = load_all(a.recordings, a.dedupe);
   FitResult fit;
 #if defined(RCM_HAVE_TORCH)
