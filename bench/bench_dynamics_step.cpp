@@ -64,16 +64,20 @@ static void BM_LstmKernelStepPortable(benchmark::State& state) {
 }
 BENCHMARK(BM_LstmKernelStepPortable)->Args({128, 1});
 
-// The default architecture as fitted: [q, qdot] and `direction` tanh(qdot / s)
-// features per joint (3 by default, FitOptions::velocity_tanh_scales).
+// The default architecture as fitted: [q, qdot], `direction` tanh(qdot / s)
+// features per joint (3 by default, FitOptions::velocity_tanh_scales) and
+// `acceleration` filtered qddot features per joint (1 by default,
+// FitOptions::acceleration_filters_s).
 static void BM_LstmModelStep(benchmark::State& state) {
-  const int features = static_cast<int>(state.range(0));
+  const int features = static_cast<int>(state.range(0)), filters = static_cast<int>(state.range(1));
   Normalization norm = norm6();
   norm.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(6 * features, 0.003f, 0.03f);
-  LstmTorqueModel m(info6(), lstm(12 + 6 * features, 128, 1, 6), norm);
+  norm.acceleration_filter_s = Eigen::VectorXf::LinSpaced(filters, 0.03f, 0.05f);
+  norm.acceleration_scale = Eigen::VectorXf::Constant(6 * filters, 2.0f);
+  LstmTorqueModel m(info6(), lstm(12 + 6 * features + 6 * filters, 128, 1, 6), norm);
   run(state, m);
 }
-BENCHMARK(BM_LstmModelStep)->ArgName("direction")->Arg(3)->Arg(0);
+BENCHMARK(BM_LstmModelStep)->ArgNames({"direction", "acceleration"})->Args({3, 1})->Args({3, 0})->Args({0, 0});
 
 static void BM_MlpModelStep(benchmark::State& state) {
   const std::vector<DenseStack> stacks = make_random_mlp_stacks(12, 100, 6, 2, 0.2f);

@@ -56,5 +56,20 @@ TEST(DynamicsCli, FitLinearThenEvalJson) {
     EXPECT_NE(r.status, 0) << bad;
     EXPECT_NE(r.out.find("--direction-features"), std::string::npos) << r.out;
   }
+  for (const char* bad : {"0.03,abc", "-0.03", "0", "''"}) {
+    const auto r = run("dynamics fit --model lstm --acceleration-features " + std::string(bad) + " --out " + model +
+                           " " + (dir / "free.csv").string(),
+                       true);
+    EXPECT_NE(r.status, 0) << bad;
+    EXPECT_NE(r.out.find("--acceleration-features"), std::string::npos) << r.out;
+  }
+  // Only the recurrent kinds read them: asking the others is an error, not ignored.
+  for (const char* flag : {"--acceleration-features 0.03", "--direction-features 0.1"}) {
+    const auto r = run("dynamics fit --model linear " + std::string(flag) + " --out " + model + " " +
+                           (dir / "free.csv").string(),
+                       true);
+    EXPECT_NE(r.status, 0) << flag;
+    EXPECT_NE(r.out.find("lstm or hybrid only"), std::string::npos) << r.out;
+  }
   std::filesystem::remove_all(dir);
 }

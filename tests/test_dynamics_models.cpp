@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <random>
 
 #include "rcm/common/error.hpp"
@@ -296,6 +297,11 @@ TEST(ModelFile, NetworkRoundTripIsExactForEveryKind) {
   with_direction.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(6, 0.003f, 0.03f);
   models.push_back(std::make_unique<LstmTorqueModel>(info, random_lstm(12, 8, 1, 4, 3, 3), with_direction));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, random_lstm(12, 8, 1, 4, 3, 4), with_direction));
+  Normalization with_acceleration = with_direction;
+  with_acceleration.acceleration_filter_s = Eigen::Vector2f(0.01f, 0.05f);
+  with_acceleration.acceleration_scale = Eigen::VectorXf::LinSpaced(6, 0.5f, 3.0f);
+  models.push_back(std::make_unique<LstmTorqueModel>(info, random_lstm(18, 8, 1, 4, 3, 5), with_acceleration));
+  models.push_back(std::make_unique<HybridTorqueModel>(info, base, random_lstm(18, 8, 1, 4, 3, 6), with_acceleration));
   rcm::test::SyntheticArmOptions so;
   so.duration_s = 5;
   const auto rec = rcm::test::make_synthetic_free_space(so);
@@ -320,6 +326,44 @@ TEST(ModelFile, NetworkRoundTripIsExactForEveryKind) {
   }
 }
 
+// Runs `model` and a bare kernel of its network over 3 s of the synthetic arm;
+// the kernel's input is built by `reference_input(t, q, qd, x)` from the
+// documented layout. Returns the largest output difference (joint units) and
+// the largest |value| among the inputs after [q, qdot].
+struct ReferenceComparison {
+  double worst = 0, largest_feature = 0;
+};
+ReferenceComparison compare_with_reference_input(
+    const LstmTorqueModel& model,
+    const std::function<void(Eigen::Index, const Eigen::VectorXd&, const Eigen::VectorXd&, Eigen::VectorXf&)>&
+        reference_input) {
+  const Normalization& norm = model.normalization();
+  LstmKernel kernel(model.network());
+  auto state = kernel.create_state();
+  auto ws = model.create_workspace();
+  rcm::test::SyntheticArmOptions so;
+  so.duration_s = 3;
+  const auto rec = rcm::test::make_synthetic_free_space(so);
+  const int I = model.network().input_size();
+  ReferenceComparison r;
+  for (Eigen::Index t = 0; t < rec.time.size(); ++t) {
+    Eigen::VectorXd q = rec.position.row(t).transpose(), qd = rec.velocity.row(t).transpose(), tau(3);
+    Eigen::VectorXf x(I), y(3);
+    for (int k = 0; k < 3; ++k) {
+      x[k] = static_cast<float>((q[k] - norm.input_mean[k]) / norm.input_scale[k]);
+      x[3 + k] = static_cast<float>((qd[k] - norm.input_mean[3 + k]) / norm.input_scale[3 + k]);
+    }
+    reference_input(t, q, qd, x);
+    r.largest_feature = std::max(r.largest_feature, static_cast<double>(x.tail(I - 6).cwiseAbs().maxCoeff()));
+    kernel.step(state, x.data(), y.data());
+    model.compute_step(*ws, rec.time(t), q.data(), qd.data(), tau.data());
+    for (int j = 0; j < 3; ++j)
+      r.worst = std::max(r.worst, std::abs(tau[j] - (static_cast<double>(y[j]) * norm.output_scale[j] +
+                                                     norm.output_mean[j])));
+  }
+  return r;
+}
+
 TEST(DirectionFeatures, NetworkSeesTanhOfVelocityAfterQAndQdot) {
   const TorqueModelInfo info = info3();
   Normalization norm = norm3(Eigen::VectorXf::LinSpaced(6, 0.3f, 0.9f));
@@ -328,29 +372,14 @@ TEST(DirectionFeatures, NetworkSeesTanhOfVelocityAfterQAndQdot) {
   const LstmNetwork net = random_lstm(12, 16, 1, 8, 3, 21);
   const LstmTorqueModel model(info, net, norm);
   // Reference: the kernel fed inputs built in double from the documented layout.
-  LstmKernel kernel(net);
-  auto state = kernel.create_state();
-  auto ws = model.create_workspace();
-  rcm::test::SyntheticArmOptions so;
-  so.duration_s = 3;
-  const auto rec = rcm::test::make_synthetic_free_space(so);
-  double worst = 0, largest_feature = 0;
-  for (Eigen::Index t = 0; t < rec.time.size(); ++t) {
-    Eigen::VectorXd q = rec.position.row(t).transpose(), qd = rec.velocity.row(t).transpose(), tau(3);
-    Eigen::VectorXf x(12), y(3);
-    for (int k = 0; k < 3; ++k) {
-      x[k] = static_cast<float>((q[k] - norm.input_mean[k]) / norm.input_scale[k]);
-      x[3 + k] = static_cast<float>((qd[k] - norm.input_mean[3 + k]) / norm.input_scale[3 + k]);
-      for (int f = 0; f < 2; ++f) x[6 + 3 * f + k] = static_cast<float>(std::tanh(qd[k] / norm.velocity_tanh_scale[3 * f + k]));
-    }
-    largest_feature = std::max(largest_feature, static_cast<double>(x.tail(6).cwiseAbs().maxCoeff()));
-    kernel.step(state, x.data(), y.data());
-    model.compute_step(*ws, rec.time(t), q.data(), qd.data(), tau.data());
-    for (int j = 0; j < 3; ++j)
-      worst = std::max(worst, std::abs(tau[j] - (static_cast<double>(y[j]) * norm.output_scale[j] + norm.output_mean[j])));
-  }
-  EXPECT_GT(largest_feature, 0.9);  // the motion drives the features into saturation
-  EXPECT_LE(worst, 1e-5);
+  const auto r = compare_with_reference_input(
+      model, [&](Eigen::Index, const Eigen::VectorXd&, const Eigen::VectorXd& qd, Eigen::VectorXf& x) {
+        for (int k = 0; k < 3; ++k)
+          for (int f = 0; f < 2; ++f)
+            x[6 + 3 * f + k] = static_cast<float>(std::tanh(qd[k] / norm.velocity_tanh_scale[3 * f + k]));
+      });
+  EXPECT_GT(r.largest_feature, 0.9);  // the motion drives the features into saturation
+  EXPECT_LE(r.worst, 1e-5);
   // A network that does not take the features is refused.
   EXPECT_THROW(LstmTorqueModel(info, random_lstm(6, 16, 1, 8, 3, 21), norm), std::invalid_argument);
   Normalization odd = norm;
@@ -379,6 +408,128 @@ TEST(DirectionFeatures, NetworkSeesTanhOfVelocityAfterQAndQdot) {
       EXPECT_NE(what.find("broken.json"), std::string::npos) << what;
       EXPECT_NE(what.find("parameters.normalization.velocity_tanh_scale"), std::string::npos) << what;
       EXPECT_NE(what.find(expect), std::string::npos) << what;
+    }
+  }
+}
+
+TEST(AccelerationFeatures, FilterMatchesItsRecurrenceAndFollowsARamp) {
+  const Eigen::VectorXf tau = Eigen::Vector2f(0.01f, 0.04f);
+  AccelerationFilter filter(tau, 2);
+  const double dt = 0.005;
+  // qdot of joint 1 is a ramp of slope 2 rad/s^2, joint 2 of slope -0.5.
+  auto qd_at = [](double t) { return Eigen::Vector2d(2.0 * t + 0.3, -0.5 * t); };
+  Eigen::Vector4d a_ref = Eigen::Vector4d::Zero();
+  for (int k = 0; k < 400; ++k) {
+    const double t = 1.0 + k * dt;
+    const Eigen::Vector2d qd = qd_at(t);
+    filter.update(t, qd.data());
+    if (k > 0) {
+      const Eigen::Vector2d slope(2.0, -0.5);
+      for (int f = 0; f < 2; ++f) {
+        const double alpha = dt / (static_cast<double>(tau[f]) + dt);
+        a_ref.segment<2>(2 * f) += alpha * (slope - a_ref.segment<2>(2 * f));
+      }
+    }
+    ASSERT_LE((filter.values() - a_ref).cwiseAbs().maxCoeff(), 1e-9) << "sample " << k;
+  }
+  EXPECT_NEAR(filter.values()[0], 2.0, 1e-9);  // 2 s of ramp: both filters have settled
+  EXPECT_NEAR(filter.values()[3], -0.5, 1e-9);
+  // A repeated time stamp changes nothing; time going back restarts from zero.
+  const Eigen::VectorXd before = filter.values();
+  const Eigen::Vector2d jump(5.0, 5.0);
+  filter.update(1.0 + 399 * dt, jump.data());
+  EXPECT_EQ(filter.values(), before);
+  filter.update(0.5, jump.data());
+  EXPECT_EQ(filter.values(), Eigen::VectorXd::Zero(4));
+  filter.reset();
+  filter.update(3.0, jump.data());
+  EXPECT_EQ(filter.values(), Eigen::VectorXd::Zero(4));  // the first sample after a reset has no difference
+  // The batch form is the filter run over the recording.
+  Eigen::VectorXd time = Eigen::VectorXd::LinSpaced(50, 0.0, 49 * dt);
+  Eigen::MatrixXd velocity(50, 3);
+  for (int k = 0; k < 50; ++k) velocity.row(k) << std::sin(0.3 * k), 0.1 * k, 1.0;
+  const Eigen::MatrixXd batch = compute_acceleration_features(tau, time, velocity, 2);
+  ASSERT_EQ(batch.rows(), 50);
+  ASSERT_EQ(batch.cols(), 4);
+  AccelerationFilter again(tau, 2);
+  for (int k = 0; k < 50; ++k) {
+    const Eigen::Vector2d qd = velocity.row(k).head<2>().transpose();
+    again.update(time[k], qd.data());
+    EXPECT_EQ(batch.row(k), again.values().transpose());
+  }
+}
+
+TEST(AccelerationFeatures, NetworkSeesScaledAccelerationAfterTheDirectionFeatures) {
+  const TorqueModelInfo info = info3();
+  Normalization norm = norm3(Eigen::VectorXf::LinSpaced(6, 0.3f, 0.9f));
+  norm.velocity_tanh_scale = Eigen::Vector3f(0.003f, 0.002f, 0.0005f);
+  norm.acceleration_filter_s = Eigen::Vector2f(0.02f, 0.06f);
+  norm.acceleration_scale.resize(6);
+  norm.acceleration_scale << 0.5f, 0.4f, 0.02f, 0.3f, 0.3f, 0.01f;
+  const LstmNetwork net = random_lstm(15, 16, 1, 8, 3, 23);
+  const LstmTorqueModel model(info, net, norm);
+  // Reference inputs in double, the acceleration from the recurrence written out
+  // (the synthetic arm is sampled evenly at its default 200 Hz).
+  Eigen::VectorXd a = Eigen::VectorXd::Zero(6), qd_prev(3);
+  const double dt = 1.0 / rcm::test::SyntheticArmOptions{}.rate_hz;
+  const auto r = compare_with_reference_input(
+      model, [&](Eigen::Index t, const Eigen::VectorXd&, const Eigen::VectorXd& qd, Eigen::VectorXf& x) {
+        if (t > 0)
+          for (int f = 0; f < 2; ++f)
+            for (int k = 0; k < 3; ++k)
+              a[3 * f + k] += dt / (norm.acceleration_filter_s[f] + dt) * ((qd[k] - qd_prev[k]) / dt - a[3 * f + k]);
+        qd_prev = qd;
+        for (int k = 0; k < 3; ++k) {
+          x[6 + k] = static_cast<float>(std::tanh(qd[k] / norm.velocity_tanh_scale[k]));
+          for (int f = 0; f < 2; ++f)
+            x[9 + 3 * f + k] = static_cast<float>(a[3 * f + k] / norm.acceleration_scale[3 * f + k]);
+        }
+      });
+  EXPECT_GT(r.largest_feature, 0.5);  // the motion does accelerate
+  EXPECT_LE(r.worst, 1e-5);
+
+  // Sizes that do not chain are refused, and the memoryless MLP takes none.
+  EXPECT_THROW(LstmTorqueModel(info, random_lstm(9, 16, 1, 8, 3, 23), norm), std::invalid_argument);
+  Normalization short_scale = norm;
+  short_scale.acceleration_scale.conservativeResize(5);
+  EXPECT_THROW(LstmTorqueModel(info, random_lstm(14, 16, 1, 8, 3, 23), short_scale), std::invalid_argument);
+  std::vector<DenseStack> stacks = make_random_mlp_stacks(15, 10, 3, 4);
+  EXPECT_THROW(MlpTorqueModel(info, stacks, norm), std::invalid_argument);
+
+  // In a file: each of the pair missing, a time constant <= 0, a wrong count.
+  const auto good = torque_model_to_json(model);
+  ASSERT_NO_THROW(torque_model_from_json(good, "good.json"));
+  const auto& gn = good["parameters"]["normalization"];
+  Normalization carrier = norm;
+  carrier.input_mean << 0.01f, 0.01f, 0.0f, 0.01f, 0.01f, 0.01f;
+  const auto with_zero =
+      torque_model_to_json(LstmTorqueModel(info, net, carrier))["parameters"]["normalization"]["input_mean"];
+  struct Case {
+    std::string key;
+    nlohmann::json value;  // null: remove the key
+    std::string field, expect;
+  };
+  const std::vector<Case> cases = {
+      {"acceleration_scale", nullptr, "acceleration_scale", "missing"},
+      {"acceleration_filter_s", nullptr, "acceleration_filter_s", "missing"},
+      {"acceleration_scale", with_zero, "acceleration_scale", "positive"},
+      {"acceleration_filter_s", gn["velocity_tanh_scale"], "acceleration_scale", "6"},
+  };
+  for (const auto& c : cases) {
+    auto broken = good;
+    auto& bn = broken["parameters"]["normalization"];
+    if (c.value.is_null())
+      bn.erase(c.key);
+    else
+      bn[c.key] = c.value;
+    try {
+      torque_model_from_json(broken, "broken.json");
+      FAIL() << "expected InputError for " << c.key << " " << c.expect;
+    } catch (const rcm::InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("broken.json"), std::string::npos) << what;
+      EXPECT_NE(what.find(c.field), std::string::npos) << what;
+      EXPECT_NE(what.find(c.expect), std::string::npos) << what;
     }
   }
 }

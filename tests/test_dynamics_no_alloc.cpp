@@ -46,6 +46,13 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
       std::make_unique<LstmTorqueModel>(info, make_random_lstm_network(30, 128, 1, 64, 6, 4), with_direction));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(30, 32, 1, 16, 6, 5),
                                                        with_direction));
+  Normalization with_acceleration = with_direction;  // the fitted lstm default: and one acceleration feature
+  with_acceleration.acceleration_filter_s = Eigen::VectorXf::Constant(1, 0.03f);
+  with_acceleration.acceleration_scale = Eigen::VectorXf::Constant(6, 2.0f);
+  models.push_back(
+      std::make_unique<LstmTorqueModel>(info, make_random_lstm_network(36, 128, 1, 64, 6, 6), with_acceleration));
+  models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(36, 32, 1, 16, 6, 7),
+                                                       with_acceleration));
   for (const auto& m : models) {
     auto ws = m->create_workspace();
     double q[6] = {0.1, 0.2, 0.12, 0, 0, 0}, qd[6] = {0.3, -0.2, 0.01, 0, 0, 0}, tau[6];

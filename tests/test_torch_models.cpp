@@ -57,11 +57,11 @@ TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
   EXPECT_EQ(model.num_joints(), 3);
   EXPECT_EQ(model.num_outputs(), 3);
   EXPECT_NEAR(model.info().sample_period_s, 0.005, 1e-12);
-  if (GetParam() == TorqueModelKind::lstm)  // [q, qdot] and three direction features per joint
-    EXPECT_EQ(static_cast<const LstmTorqueModel&>(model).network().input_size(), 15);
+  if (GetParam() == TorqueModelKind::lstm)  // [q, qdot], three direction and one acceleration feature per joint
+    EXPECT_EQ(static_cast<const LstmTorqueModel&>(model).network().input_size(), 18);
   if (GetParam() == TorqueModelKind::mlp)
     EXPECT_EQ(static_cast<const MlpTorqueModel&>(model).networks().front().input_size(), 6);
-  if (GetParam() == TorqueModelKind::hybrid)  // none by default (get_default_velocity_tanh_scales)
+  if (GetParam() == TorqueModelKind::hybrid)  // none by default (get_default_*)
     EXPECT_EQ(static_cast<const HybridTorqueModel&>(model).residual_network().input_size(), 6);
 
   // Predict over the whole recording, and the test split scored as in the summary.
@@ -163,21 +163,68 @@ TEST(TorchScript, ExportThenImportGivesTheSameModel) {
   info.sample_period_s = 0.005;
   Normalization norm{Eigen::VectorXf::LinSpaced(6, -0.1f, 0.1f), Eigen::VectorXf::Constant(6, 0.5f),
                      Eigen::VectorXf::Constant(3, 0.2f), Eigen::VectorXf::Constant(3, 2.0f)};
-  // Without and with direction features (two per joint).
-  for (const int features : {0, 2}) {
+  // Without and with direction features (two per joint), and with both
+  // direction and acceleration features (two time constants).
+  for (const auto& [features, filters] : {std::pair{0, 0}, std::pair{2, 0}, std::pair{1, 2}}) {
     norm.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(3 * features, 0.004f, 0.05f);
-    LstmTorqueModel model(info, random_network(6 + 3 * features, 16, 2, 3, 8), norm);
+    norm.acceleration_filter_s = Eigen::VectorXf::LinSpaced(filters, 0.01f, 0.05f);
+    norm.acceleration_scale = Eigen::VectorXf::LinSpaced(3 * filters, 0.5f, 2.0f);
+    LstmTorqueModel model(info, random_network(6 + 3 * features + 3 * filters, 16, 2, 3, 8), norm);
     const auto path = std::filesystem::temp_directory_path() / "rcm_test_lstm.pt";
     export_torchscript(model, path);
     const auto imported = import_torchscript(path);  // checks the module's forward internally
     EXPECT_EQ(imported->normalization().velocity_tanh_scale, norm.velocity_tanh_scale);
+    EXPECT_EQ(imported->normalization().acceleration_filter_s, norm.acceleration_filter_s);
+    EXPECT_EQ(imported->normalization().acceleration_scale, norm.acceleration_scale);
     EXPECT_EQ(imported->num_joints(), 3);
     const auto& rec = synthetic_minute();
     const Eigen::MatrixXd a = predict_torque(model, rec).topRows(500), b = predict_torque(*imported, rec).topRows(500);
     EXPECT_EQ((a - b).cwiseAbs().maxCoeff(), 0.0) << features << " features";
     EXPECT_DOUBLE_EQ(imported->info().sample_period_s, 0.005);
+    if (filters > 0 && std::system("/usr/bin/python3 -c 'import torch' > /dev/null 2>&1") == 0) {
+      // The exported forward carries z = [qdot_prev, a] like (h, c): in PyTorch,
+      // two calls over halves of the recording equal the kernel over the whole.
+      const int T = 400;
+      const auto csv = std::filesystem::temp_directory_path() / "rcm_test_lstm_io.csv";
+      {
+        std::ofstream out(csv);
+        out.precision(17);
+        for (int t = 0; t < T; ++t) {
+          for (int k = 0; k < 3; ++k) out << static_cast<float>(rec.position(t, k)) << ",";
+          for (int k = 0; k < 3; ++k) out << static_cast<float>(rec.velocity(t, k)) << ",";
+          out << a(t, 0) << "," << a(t, 1) << "," << a(t, 2) << "\n";
+        }
+      }
+      const std::string check = R"PY(
+import sys, torch
+m = torch.jit.load(sys.argv[1])
+d = torch.tensor([[float(v) for v in line.split(',')] for line in open(sys.argv[2])])
+x, ref = d[None, :, :6], d[:, 6:]
+h = torch.zeros(2, 1, 16)
+y1, h1, c1, z1 = m(x[:, :200], h, h)
+y2, _, _, _ = m(x[:, 200:], h1, c1, z1)
+err = (torch.cat([y1, y2], 1)[0].double() - ref).abs().max().item()
+print('max difference', err)
+sys.exit(0 if z1.shape == (1, 3 + 3 * int(sys.argv[3])) and err <= 1e-4 else 1)
+)PY";
+      const auto check_path = std::filesystem::temp_directory_path() / "rcm_test_check_carry.py";
+      { std::ofstream(check_path) << check; }
+      EXPECT_EQ(std::system(("/usr/bin/python3 " + check_path.string() + " " + path.string() + " " + csv.string() +
+                             " " + std::to_string(filters))
+                                .c_str()),
+                0);
+      std::filesystem::remove(csv);
+      std::filesystem::remove(check_path);
+    }
     std::filesystem::remove(path);
   }
+  // Acceleration features are filtered at the model's sample period: a model
+  // without one cannot be exported.
+  TorqueModelInfo no_period = info;
+  no_period.sample_period_s = 0.0;
+  EXPECT_THROW(export_torchscript(LstmTorqueModel(no_period, random_network(6 + 3 + 6, 16, 2, 3, 8), norm),
+                                  std::filesystem::temp_directory_path() / "rcm_test_never.pt"),
+               std::invalid_argument);
   EXPECT_THROW(import_torchscript(std::filesystem::temp_directory_path() / "no_such_rcm_model.pt"), rcm::InputError);
 }
 
@@ -186,6 +233,7 @@ TEST(DirectionFeatures, ExplicitScalesReachLstmAndHybridNotMlp) {
   o.max_epochs = 1;
   o.velocity_tanh_scales = std::vector<double>{0.05, 0.2};
   const auto& rec = synthetic_minute();
+  o.acceleration_filters_s = std::vector<double>{};
   const auto lstm = fit_lstm_torque_model({rec}, o);
   const auto& lm = static_cast<const LstmTorqueModel&>(*lstm.model);
   EXPECT_EQ(lm.network().input_size(), 12);
@@ -209,6 +257,38 @@ TEST(DirectionFeatures, ExplicitScalesReachLstmAndHybridNotMlp) {
   EXPECT_THROW(fit_lstm_torque_model({rec}, o), rcm::InputError);
 }
 
+TEST(AccelerationFeatures, ExplicitFiltersReachLstmAndHybridNotMlp) {
+  auto o = tiny_options();
+  o.max_epochs = 1;
+  o.velocity_tanh_scales = std::vector<double>{};
+  const auto& rec = synthetic_minute();
+  // Default for lstm: one filter of 0.03 s, scaled by the root mean square of
+  // the filtered signal over the training split.
+  const auto lstm = fit_lstm_torque_model({rec}, o);
+  const auto& lm = static_cast<const LstmTorqueModel&>(*lstm.model);
+  EXPECT_EQ(lm.network().input_size(), 9);
+  ASSERT_EQ(lm.normalization().acceleration_filter_s.size(), 1);
+  EXPECT_FLOAT_EQ(lm.normalization().acceleration_filter_s[0], 0.03f);
+  const Eigen::Index train_end = split_in_time({rec}, 0.7, 0.2).train.back().end;
+  const Eigen::MatrixXd a = compute_acceleration_features(lm.normalization().acceleration_filter_s, rec.time,
+                                                          rec.velocity, 3);
+  ASSERT_EQ(lm.normalization().acceleration_scale.size(), 3);
+  for (int k = 0; k < 3; ++k) {
+    const double rms = std::sqrt(a.col(k).head(train_end).squaredNorm() / static_cast<double>(train_end));
+    EXPECT_GT(rms, 0.0);
+    EXPECT_NEAR(lm.normalization().acceleration_scale[k], rms, 1e-5 * rms);
+  }
+  o.acceleration_filters_s = std::vector<double>{0.01, 0.1};
+  const auto two = fit_lstm_torque_model({rec}, o);
+  EXPECT_EQ(static_cast<const LstmTorqueModel&>(*two.model).network().input_size(), 12);
+  const auto hybrid = fit_hybrid_torque_model({rec}, o);
+  EXPECT_EQ(static_cast<const HybridTorqueModel&>(*hybrid.model).residual_network().input_size(), 12);
+  const auto mlp = fit_mlp_torque_model({rec}, o);
+  EXPECT_EQ(static_cast<const MlpTorqueModel&>(*mlp.model).networks().front().input_size(), 6);
+  o.acceleration_filters_s = std::vector<double>{0.0};
+  EXPECT_THROW(fit_lstm_torque_model({rec}, o), rcm::InputError);
+}
+
 TEST(FitWarnings, ShortDataSaysTooFewToTrust) {
   rcm::test::SyntheticArmOptions so;
   so.duration_s = 40;
@@ -228,6 +308,7 @@ TEST(TorchScript, ImportsAModuleScriptedInPyTorch) {
   const auto path = std::filesystem::temp_directory_path() / "rcm_test_pytorch_lstm.pt";
   const std::string script = R"PY(
 import sys, torch
+from typing import List, Optional
 torch.manual_seed(3)
 class TorqueLstm(torch.nn.Module):
     def __init__(self):
@@ -254,7 +335,37 @@ class TorqueLstmWithDirection(TorqueLstm):
                         torch.tanh(qd / self.velocity_tanh_scale[3:6])], 2)
         out, _ = self.lstm(xn)
         return self.head(out) * self.output_scale + self.output_mean
-m = TorqueLstmWithDirection() if len(sys.argv) > 2 else TorqueLstm()
+class TorqueLstmWithAcceleration(TorqueLstm):
+    # One acceleration feature per joint: qdot differences low-passed at the
+    # module's sample period, state z = [qdot_prev, a] (None: the reset state).
+    def __init__(self, alpha_of_tau: bool = True):
+        super().__init__()
+        self.lstm = torch.nn.LSTM(9, 20, 2, batch_first=True)
+        self.register_buffer("acceleration_filter_s", torch.tensor([0.03]))
+        self.register_buffer("acceleration_scale", torch.rand(3) + 0.5)
+        self.alpha_of_tau = alpha_of_tau
+    def forward(self, x, h0, c0, z0: Optional[torch.Tensor] = None):
+        qd = x[:, :, 3:6]
+        dt = self.sample_period_s
+        if z0 is None:
+            prev = qd[:, 0]
+            a = torch.zeros(x.size(0), 3)
+        else:
+            prev = z0[:, 0:3]
+            a = z0[:, 3:6]
+        # The documented filter, or (alpha_of_tau False) one that is not it.
+        alpha = dt / (self.acceleration_filter_s + dt) if self.alpha_of_tau else dt / self.acceleration_filter_s
+        acc: List[torch.Tensor] = []
+        for t in range(x.size(1)):
+            a = a + alpha * ((qd[:, t] - prev) / dt - a)
+            acc.append(a)
+            prev = qd[:, t]
+        xn = torch.cat([(x - self.input_mean) / self.input_scale, torch.stack(acc, 1) / self.acceleration_scale], 2)
+        out, (hn, cn) = self.lstm(xn, (h0, c0))
+        return self.head(out) * self.output_scale + self.output_mean, hn, cn, torch.cat([prev, a], 1)
+kind = sys.argv[2] if len(sys.argv) > 2 else ""
+m = {"direction": TorqueLstmWithDirection, "": TorqueLstm}.get(kind, None)
+m = m() if m is not None else TorqueLstmWithAcceleration(kind == "acceleration")
 torch.jit.script(m).save(sys.argv[1])
 )PY";
   const auto script_path = std::filesystem::temp_directory_path() / "rcm_test_make_pytorch_lstm.py";
@@ -272,6 +383,20 @@ torch.jit.script(m).save(sys.argv[1])
   EXPECT_EQ(with_direction->num_joints(), 3);
   EXPECT_EQ(with_direction->network().input_size(), 12);
   EXPECT_EQ(with_direction->normalization().velocity_tanh_scale.size(), 6);
+  ASSERT_EQ(
+      std::system(("/usr/bin/python3 " + script_path.string() + " " + path.string() + " acceleration").c_str()), 0);
+  const auto with_acceleration = import_torchscript(path);
+  EXPECT_EQ(with_acceleration->network().input_size(), 9);
+  EXPECT_EQ(with_acceleration->normalization().acceleration_scale.size(), 3);
+  // A module whose filter is not the documented one is refused, not imported.
+  ASSERT_EQ(
+      std::system(("/usr/bin/python3 " + script_path.string() + " " + path.string() + " other-filter").c_str()), 0);
+  try {
+    import_torchscript(path);
+    ADD_FAILURE() << "a module with another filter was imported";
+  } catch (const rcm::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("disagrees"), std::string::npos) << e.what();
+  }
   std::filesystem::remove(path);
   std::filesystem::remove(script_path);
 }

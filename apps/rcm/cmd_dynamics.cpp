@@ -34,19 +34,25 @@ struct DynamicsArgs {
   double max_minutes = 10.0;
   int hidden = 0, layers = 0, max_epochs = 300, threads = 2, window = 0, streams = 0;
   double learning_rate = 2e-3;
-  std::optional<std::string> direction_features;  // unset: the kind's default
+  std::optional<std::string> direction_features;     // unset: the kind's default
+  std::optional<std::string> acceleration_features;  // unset: the kind's default
   std::string torchscript_out, torchscript_in, predictions;
 };
 
-// "none" or comma-separated positive numbers.
-std::vector<double> parse_direction_features(const std::string& text) {
+// "none" or comma-separated positive numbers, for the network-input flags
+// (--direction-features, --acceleration-features), which only the recurrent
+// kinds read.
+std::vector<double> parse_feature_list(const std::string& text, const std::string& flag,
+                                       rcm::dynamics::TorqueModelKind kind) {
   if (text == "none") return {};
-  std::vector<double> scales = rcm::cli::parse_number_list(text, "--direction-features");
-  for (const double s : scales)
+  std::vector<double> values = rcm::cli::parse_number_list(text, flag);
+  for (const double s : values)
     if (!(s > 0))
-      throw rcm::InputError(rcm::cli::flag_location("--direction-features"),
+      throw rcm::InputError(rcm::cli::flag_location(flag),
                             "expected 'none' or positive numbers, got " + rcm::quote_token(text));
-  return scales;
+  if (kind != rcm::dynamics::TorqueModelKind::lstm && kind != rcm::dynamics::TorqueModelKind::hybrid)
+    throw rcm::InputError(rcm::cli::flag_location(flag), "is for --model lstm or hybrid only");
+  return values;
 }
 
 std::vector<rcm::Recording> load_all(const std::vector<std::string>& paths, bool dedupe) {
@@ -70,7 +76,10 @@ void run_fit(const DynamicsArgs& a) {
   o.window = a.window;
   o.streams = a.streams;
   o.learning_rate = a.learning_rate;
-  if (a.direction_features) o.velocity_tanh_scales = parse_direction_features(*a.direction_features);
+  if (a.direction_features)
+    o.velocity_tanh_scales = parse_feature_list(*a.direction_features, "--direction-features", kind);
+  if (a.acceleration_features)
+    o.acceleration_filters_s = parse_feature_list(*a.acceleration_features, "--acceleration-features", kind);
   const auto recs = load_all(a.recordings, a.dedupe);
   FitResult fit;
 #if defined(RCM_HAVE_TORCH)
@@ -173,6 +182,9 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->add_option("--direction-features", args->direction_features,
                   "lstm, hybrid: extra inputs tanh(qdot / (s x velocity sd)) for each s of this comma-separated "
                   "list, or 'none' (default: 0.01,0.03,0.1 for lstm, none for hybrid)");
+  fit->add_option("--acceleration-features", args->acceleration_features,
+                  "lstm, hybrid: extra inputs, the difference of consecutive qdot low-passed with each time "
+                  "constant (s) of this comma-separated list, or 'none' (default: 0.03 for lstm, none for hybrid)");
   fit->add_option("--threads", args->threads, "LibTorch intra-op threads (default 2)");
   fit->add_option("--max-epochs", args->max_epochs, "epoch limit (early stopping usually ends sooner)");
 #if defined(RCM_HAVE_TORCH)

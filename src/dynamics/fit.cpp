@@ -31,10 +31,18 @@ void FitOptions::check() const {
   if (velocity_tanh_scales)
     for (const double s : *velocity_tanh_scales)
       if (!(s > 0) || !std::isfinite(s)) bad_option("velocity_tanh_scales", "expected positive finite values");
+  if (acceleration_filters_s)
+    for (const double s : *acceleration_filters_s)
+      if (!(s > 0) || !std::isfinite(s)) bad_option("acceleration_filters_s", "expected positive finite values");
 }
 
 std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind) {
   if (kind == TorqueModelKind::lstm) return {0.01, 0.03, 0.1};
+  return {};
+}
+
+std::vector<double> get_default_acceleration_filters_s(TorqueModelKind kind) {
+  if (kind == TorqueModelKind::lstm) return {0.03};
   return {};
 }
 

@@ -145,6 +145,10 @@ nlohmann::json save_normalization(const Normalization& n) {
                       {"output_scale", detail::encode_vector(n.output_scale)}};
   // Absent when empty, so files without direction features keep their old bytes.
   if (n.velocity_tanh_scale.size() > 0) j["velocity_tanh_scale"] = detail::encode_vector(n.velocity_tanh_scale);
+  if (n.has_acceleration()) {
+    j["acceleration_filter_s"] = detail::encode_vector(n.acceleration_filter_s);
+    j["acceleration_scale"] = detail::encode_vector(n.acceleration_scale);
+  }
   return j;
 }
 
@@ -170,6 +174,17 @@ Normalization load_normalization(const nlohmann::json& j, const std::string& sou
                                           n.velocity_tanh_scale.size()));
     if (!(n.velocity_tanh_scale.array() > 0).all()) detail::fail(source, f, "scales must be positive");
   }
+  if (j.contains("acceleration_filter_s") || j.contains("acceleration_scale")) {
+    // One without the other would shift every later input: both or neither.
+    const std::string ff = field + ".acceleration_filter_s", fs = field + ".acceleration_scale";
+    n.acceleration_filter_s =
+        detail::decode_vector_f(detail::require(j, "acceleration_filter_s", source, field), source, ff, -1);
+    if (n.acceleration_filter_s.size() == 0) detail::fail(source, ff, "expected at least one time constant");
+    if (!(n.acceleration_filter_s.array() > 0).all()) detail::fail(source, ff, "time constants must be positive");
+    n.acceleration_scale = detail::decode_vector_f(detail::require(j, "acceleration_scale", source, field), source, fs,
+                                                   static_cast<int>(n.acceleration_filter_s.size()) * (inputs / 2));
+    if (!(n.acceleration_scale.array() > 0).all()) detail::fail(source, fs, "scales must be positive");
+  }
   return n;
 }
 
@@ -180,31 +195,86 @@ void check_normalization(const Normalization& n, int joints, int outputs) {
     throw std::invalid_argument("normalization: expected num_outputs output entries");
   if (n.velocity_tanh_scale.size() % joints != 0 || !(n.velocity_tanh_scale.array() > 0).all())
     throw std::invalid_argument("normalization: velocity_tanh_scale must hold features x num_joints positive values");
+  if (!(n.acceleration_filter_s.array() > 0).all() || !(n.acceleration_scale.array() > 0).all() ||
+      n.acceleration_scale.size() != n.acceleration_filter_s.size() * joints)
+    throw std::invalid_argument(
+        "normalization: acceleration_filter_s (K positive time constants) and acceleration_scale (K x num_joints "
+        "positive values) do not match");
 }
 
 // Buffers shared by the recurrent kinds.
 struct LstmWorkspace final : TorqueModelWorkspace {
   LstmKernel::State state;
+  AccelerationFilter acceleration;
   Eigen::VectorXf x, y;
   Eigen::VectorXd base;  // hybrid: model-based part
   std::unique_ptr<TorqueModelWorkspace> base_ws;
 };
 
-// x: n.network_inputs(N) floats.
-void normalize_input(const Normalization& n, int N, const double* q, const double* qd, float* x) {
+// x: n.network_inputs(N) floats; acceleration: the AccelerationFilter's values
+// (read only when n has acceleration features).
+void normalize_input(const Normalization& n, int N, const double* q, const double* qd, const double* acceleration,
+                     float* x) {
   for (int k = 0; k < N; ++k) {
     x[k] = static_cast<float>((q[k] - n.input_mean[k]) / n.input_scale[k]);
     x[N + k] = static_cast<float>((qd[k] - n.input_mean[N + k]) / n.input_scale[N + k]);
   }
   const auto F = n.velocity_tanh_scale.size();
-  if (F == 0) return;
-  for (Eigen::Index f = 0; f < F; ++f) x[2 * N + f] = static_cast<float>(qd[f % N]) / n.velocity_tanh_scale[f];
-  // Eigen's vectorized tanh, as for the training's inputs; a scalar std::tanh loop was slower.
-  Eigen::Map<Eigen::ArrayXf> features(x + 2 * N, F);
-  features = features.tanh();
+  if (F > 0) {
+    for (Eigen::Index f = 0; f < F; ++f) x[2 * N + f] = static_cast<float>(qd[f % N]) / n.velocity_tanh_scale[f];
+    // Eigen's vectorized tanh, as for the training's inputs; a scalar std::tanh loop was slower.
+    Eigen::Map<Eigen::ArrayXf> features(x + 2 * N, F);
+    features = features.tanh();
+  }
+  float* xa = x + 2 * N + F;
+  for (Eigen::Index f = 0; f < n.acceleration_scale.size(); ++f)
+    xa[f] = static_cast<float>(acceleration[f]) / n.acceleration_scale[f];
 }
 
 }  // namespace
+
+AccelerationFilter::AccelerationFilter(const Eigen::VectorXf& filter_s, int joints)
+    : tau_(filter_s.cast<double>()),
+      qd_prev_(Eigen::VectorXd::Zero(joints)),
+      a_(Eigen::VectorXd::Zero(filter_s.size() * joints)) {}
+
+void AccelerationFilter::reset() {
+  a_.setZero();
+  started_ = false;
+}
+
+void AccelerationFilter::update(double t, const double* qd) {
+  const Eigen::Index N = qd_prev_.size();
+  const double dt = t - t_prev_;
+  if (started_ && dt == 0.0) return;  // a repeated time stamp carries no new difference
+  if (!started_ || !(dt > 0)) {
+    a_.setZero();
+  } else {
+    for (Eigen::Index f = 0; f < tau_.size(); ++f) {
+      const double alpha = dt / (tau_[f] + dt);
+      for (Eigen::Index k = 0; k < N; ++k) {
+        double& a = a_[f * N + k];
+        a += alpha * ((qd[k] - qd_prev_[k]) / dt - a);
+      }
+    }
+  }
+  for (Eigen::Index k = 0; k < N; ++k) qd_prev_[k] = qd[k];
+  t_prev_ = t;
+  started_ = true;
+}
+
+Eigen::MatrixXd compute_acceleration_features(const Eigen::VectorXf& filter_s, const Eigen::VectorXd& time,
+                                              const Eigen::MatrixXd& velocity, int joints) {
+  AccelerationFilter filter(filter_s, joints);
+  Eigen::MatrixXd out(time.size(), filter_s.size() * joints);
+  Eigen::VectorXd qd(joints);
+  for (Eigen::Index t = 0; t < time.size(); ++t) {
+    qd = velocity.row(t).head(joints).transpose();
+    filter.update(time[t], qd.data());
+    out.row(t) = filter.values().transpose();
+  }
+  return out;
+}
 
 int DenseStack::max_width() const {
   int w = input_size();
@@ -376,26 +446,30 @@ LstmTorqueModel::LstmTorqueModel(TorqueModelInfo info, LstmNetwork network, Norm
   check_normalization(normalization_, num_joints(), num_outputs());
   if (network.input_size() != normalization_.network_inputs(num_joints()) || network.output_size() != num_outputs())
     throw std::invalid_argument(
-        "LSTM model: network sizes do not match the normalization's inputs (2 x num_joints + direction features) / "
-        "num_outputs");
+        "LSTM model: network sizes do not match the normalization's inputs (2 x num_joints + direction and "
+        "acceleration features) / num_outputs");
 }
 
 std::unique_ptr<TorqueModelWorkspace> LstmTorqueModel::create_workspace() const {
   auto ws = std::make_unique<LstmWorkspace>();
   ws->state = kernel_.create_state();
+  ws->acceleration = AccelerationFilter(normalization_.acceleration_filter_s, num_joints());
   ws->x = Eigen::VectorXf::Zero(normalization_.network_inputs(num_joints()));
   ws->y = Eigen::VectorXf::Zero(num_outputs());
   return ws;
 }
 
 void LstmTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
-  LstmKernel::reset(static_cast<LstmWorkspace&>(workspace).state);
+  auto& ws = static_cast<LstmWorkspace&>(workspace);
+  LstmKernel::reset(ws.state);
+  ws.acceleration.reset();
 }
 
-void LstmTorqueModel::compute_step(TorqueModelWorkspace& workspace, double, const double* q, const double* qd,
+void LstmTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                                    double* tau) const {
   auto& ws = static_cast<LstmWorkspace&>(workspace);
-  normalize_input(normalization_, num_joints(), q, qd, ws.x.data());
+  if (normalization_.has_acceleration()) ws.acceleration.update(t, qd);
+  normalize_input(normalization_, num_joints(), q, qd, ws.acceleration.values().data(), ws.x.data());
   kernel_.step(ws.state, ws.x.data(), ws.y.data());
   for (int j = 0; j < num_outputs(); ++j)
     tau[j] = static_cast<double>(ws.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
@@ -422,6 +496,8 @@ MlpTorqueModel::MlpTorqueModel(TorqueModelInfo info, std::vector<DenseStack> per
     check_stack(s, "MLP");
   }
   check_normalization(normalization_, num_joints(), num_outputs());
+  if (normalization_.has_acceleration())
+    throw std::invalid_argument("MLP model: acceleration features need a state, and the MLP is memoryless");
   for (const auto& s : per_joint_)
     if (s.input_size() != normalization_.network_inputs(num_joints()) || s.output_size() != 1)
       throw std::invalid_argument("MLP model: each network maps the normalization's inputs to 1 output");
@@ -442,7 +518,7 @@ void MlpTorqueModel::reset_state(TorqueModelWorkspace&) const {}
 void MlpTorqueModel::compute_step(TorqueModelWorkspace& workspace, double, const double* q, const double* qd,
                                   double* tau) const {
   auto& ws = static_cast<MlpWorkspace&>(workspace);
-  normalize_input(normalization_, num_joints(), q, qd, ws.x.data());
+  normalize_input(normalization_, num_joints(), q, qd, nullptr, ws.x.data());
   for (int j = 0; j < num_outputs(); ++j) {
     compute_dense_forward(per_joint_[j], ws.x.data(), &ws.y, ws.a.data(), ws.b.data());
     tau[j] = static_cast<double>(ws.y) * normalization_.output_scale[j] + normalization_.output_mean[j];
@@ -473,6 +549,7 @@ HybridTorqueModel::HybridTorqueModel(TorqueModelInfo info, std::shared_ptr<const
 std::unique_ptr<TorqueModelWorkspace> HybridTorqueModel::create_workspace() const {
   auto ws = std::make_unique<LstmWorkspace>();
   ws->state = kernel_.create_state();
+  ws->acceleration = AccelerationFilter(normalization_.acceleration_filter_s, num_joints());
   ws->x = Eigen::VectorXf::Zero(normalization_.network_inputs(num_joints()));
   ws->y = Eigen::VectorXf::Zero(num_outputs());
   ws->base_ws = base_->create_workspace();
@@ -482,6 +559,7 @@ std::unique_ptr<TorqueModelWorkspace> HybridTorqueModel::create_workspace() cons
 void HybridTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   auto& ws = static_cast<LstmWorkspace&>(workspace);
   LstmKernel::reset(ws.state);
+  ws.acceleration.reset();
   base_->reset_state(*ws.base_ws);
 }
 
@@ -489,7 +567,8 @@ void HybridTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, 
                                      double* tau) const {
   auto& ws = static_cast<LstmWorkspace&>(workspace);
   base_->compute_step(*ws.base_ws, t, q, qd, tau);
-  normalize_input(normalization_, num_joints(), q, qd, ws.x.data());
+  if (normalization_.has_acceleration()) ws.acceleration.update(t, qd);
+  normalize_input(normalization_, num_joints(), q, qd, ws.acceleration.values().data(), ws.x.data());
   kernel_.step(ws.state, ws.x.data(), ws.y.data());
   for (int j = 0; j < num_outputs(); ++j)
     tau[j] += static_cast<double>(ws.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
@@ -507,7 +586,8 @@ Eigen::MatrixXd HybridTorqueModel::predict_sequence(const Eigen::VectorXd& time,
   for (Eigen::Index t = 0; t < time.size(); ++t) {
     q = position.row(t).head(N).transpose();
     qd = velocity.row(t).head(N).transpose();
-    normalize_input(normalization_, N, q.data(), qd.data(), lw.x.data());
+    if (normalization_.has_acceleration()) lw.acceleration.update(time[t], qd.data());
+    normalize_input(normalization_, N, q.data(), qd.data(), lw.acceleration.values().data(), lw.x.data());
     kernel_.step(lw.state, lw.x.data(), lw.y.data());
     for (int j = 0; j < num_outputs(); ++j)
       out(t, j) += static_cast<double>(lw.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];

@@ -40,6 +40,10 @@ struct FitOptions {
   // velocity sd)), one per s and joint, after [q, qdot]; empty: none. Unset:
   // the kind's default, get_default_velocity_tanh_scales.
   std::optional<std::vector<double>> velocity_tanh_scales;
+  // lstm and hybrid: acceleration features, the backward difference of qdot
+  // low-passed with each of these time constants (s), per joint, after the
+  // direction features; empty: none. Unset: get_default_acceleration_filters_s.
+  std::optional<std::vector<double>> acceleration_filters_s;
   bool prefer_cuda = true;
 
   // Throws InputError when a value is out of range.
@@ -79,6 +83,11 @@ struct TimeSplit {
 // and moved the hold torque (docs/dynamics.md, "Direction features"); none for
 // mlp and linear.
 std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind);
+// Acceleration-feature time constants when FitOptions leaves them unset: {0.03}
+// (s) for lstm, whose test error on yaw and pitch they halve; none for hybrid,
+// whose model-based part has its own qddot (docs/dynamics.md, "Acceleration
+// features"); none for mlp (memoryless) and linear.
+std::vector<double> get_default_acceleration_filters_s(TorqueModelKind kind);
 
 // Splits the recordings, taken one after the other, by time: the first
 // train_fraction of all samples, then validation_fraction, then the rest.

@@ -58,8 +58,8 @@ LstmNetwork make_random_lstm_network(int inputs, int hidden, int layers, int hea
 std::vector<DenseStack> make_random_mlp_stacks(int inputs, int hidden, int outputs, unsigned seed,
                                                float stddev = 0.3f);
 
-// Network input: [(q - mean) / scale, (qdot - mean) / scale, tanh(qdot / velocity_tanh_scale)];
-// output: y = y_normalized * scale + mean.
+// Network input: [(q - mean) / scale, (qdot - mean) / scale, tanh(qdot / velocity_tanh_scale),
+// acceleration / acceleration_scale]; output: y = y_normalized * scale + mean.
 struct Normalization {
   Eigen::VectorXf input_mean, input_scale;    // 2 num_joints: [q, qdot]
   Eigen::VectorXf output_mean, output_scale;  // num_outputs
@@ -70,8 +70,44 @@ struct Normalization {
   // far more updates than a 10-minute fit makes (docs/dynamics.md, "Direction
   // features").
   Eigen::VectorXf velocity_tanh_scale;
-  int network_inputs(int joints) const { return 2 * joints + static_cast<int>(velocity_tanh_scale.size()); }
+  // K time constants (s) of the causal acceleration signals (AccelerationFilter)
+  // and their K x num_joints scales (feature f of joint k at f * num_joints + k);
+  // both empty: none. They exist because the inertial torque needs qddot, which
+  // the LSTM would otherwise have to learn to differentiate from noisy qdot; the
+  // raw difference of consecutive samples is mostly encoder noise
+  // (docs/dynamics.md, "Acceleration features").
+  Eigen::VectorXf acceleration_filter_s;
+  Eigen::VectorXf acceleration_scale;
+  int network_inputs(int joints) const {
+    return 2 * joints + static_cast<int>(velocity_tanh_scale.size() + acceleration_scale.size());
+  }
+  bool has_acceleration() const { return acceleration_filter_s.size() > 0; }
 };
+
+// The causal acceleration signals behind Normalization::acceleration_*: for each
+// time constant tau and joint, the backward difference of qdot low-passed with
+// a <- a + dt / (tau + dt) * ((qdot - qdot_prev) / dt - a), starting from a = 0
+// at the first sample. A sample no later than the previous one restarts the
+// filter (as at the first sample). Sized once; update() does not allocate.
+class AccelerationFilter {
+ public:
+  AccelerationFilter() = default;
+  AccelerationFilter(const Eigen::VectorXf& filter_s, int joints);
+  void reset();
+  // qd: num_joints values; the new values are in values().
+  void update(double t, const double* qd);
+  // K x num_joints, feature f of joint k at f * num_joints + k.
+  const Eigen::VectorXd& values() const { return a_; }
+
+ private:
+  Eigen::VectorXd tau_, qd_prev_, a_;
+  double t_prev_ = 0.0;
+  bool started_ = false;
+};
+
+// The filter over a whole recording from the reset state: T x (K num_joints).
+Eigen::MatrixXd compute_acceleration_features(const Eigen::VectorXf& filter_s, const Eigen::VectorXd& time,
+                                              const Eigen::MatrixXd& velocity, int joints);
 
 // Instruction set of the per-sample kernels: a portable build for the baseline
 // ISA, and an AVX2/FMA build (one translation unit compiled with -mavx2 -mfma)

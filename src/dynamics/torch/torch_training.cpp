@@ -64,16 +64,28 @@ Eigen::VectorXf to_eigen_vector(const torch::Tensor& t) {
 
 // ---------------------------------------------------------------------------- data
 
-// Inputs [q, qdot, direction features] and targets of every recording,
-// normalized with statistics of the training split only (no leakage of
-// validation or test statistics).
+// Inputs [q, qdot, direction features, acceleration features] and targets of
+// every recording, normalized with statistics of the training split only (no
+// leakage of validation or test statistics).
 struct SequenceData {
   std::vector<torch::Tensor> x, y;  // per recording: [T, I], [T, M], normalized
   Normalization norm;
 };
 
+// The network's extra inputs; both empty for [q, qdot] only.
+struct InputFeatures {
+  std::vector<double> velocity_tanh_scales;    // multiples of the velocity sd
+  std::vector<double> acceleration_filters_s;  // time constants, s
+};
+
+InputFeatures resolve_input_features(const FitOptions& o, TorqueModelKind kind) {
+  return {o.velocity_tanh_scales.value_or(get_default_velocity_tanh_scales(kind)),
+          o.acceleration_filters_s.value_or(get_default_acceleration_filters_s(kind))};
+}
+
 SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<Eigen::MatrixXd>& targets,
-                          const TimeSplit& split, int N, int M, const std::vector<double>& velocity_tanh_scales) {
+                          const TimeSplit& split, int N, int M, const InputFeatures& features) {
+  const std::vector<double>& velocity_tanh_scales = features.velocity_tanh_scales;
   Eigen::VectorXd sum = Eigen::VectorXd::Zero(2 * N + M), sum2 = Eigen::VectorXd::Zero(2 * N + M);
   double n = 0;
   for (const auto& seg : split.train)
@@ -99,6 +111,23 @@ SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<
   for (Eigen::Index f = 0; f < F; ++f)
     for (int k = 0; k < N; ++k)
       d.norm.velocity_tanh_scale(f * N + k) = static_cast<float>(velocity_tanh_scales[f] * sd(N + k));
+  // Acceleration features: computed over each whole recording from its start
+  // (as a model runs), scaled by their root mean square over the training split.
+  const auto K = static_cast<Eigen::Index>(features.acceleration_filters_s.size());
+  std::vector<Eigen::MatrixXd> acceleration(recs.size());
+  if (K > 0) {
+    d.norm.acceleration_filter_s.resize(K);
+    for (Eigen::Index f = 0; f < K; ++f)
+      d.norm.acceleration_filter_s(f) = static_cast<float>(features.acceleration_filters_s[f]);
+    for (std::size_t r = 0; r < recs.size(); ++r)
+      acceleration[r] = compute_acceleration_features(d.norm.acceleration_filter_s, recs[r].time, recs[r].velocity, N);
+    Eigen::VectorXd sq = Eigen::VectorXd::Zero(K * N);
+    for (const auto& seg : split.train)
+      sq += acceleration[seg.recording].middleRows(seg.begin, seg.size()).colwise().squaredNorm().transpose();
+    d.norm.acceleration_scale = (sq / n).cwiseSqrt().cast<float>();
+    for (Eigen::Index k = 0; k < K * N; ++k)
+      if (!(d.norm.acceleration_scale(k) > 1e-12f)) d.norm.acceleration_scale(k) = 1.0f;  // never accelerated
+  }
   const int I = d.norm.network_inputs(N);
   for (std::size_t r = 0; r < recs.size(); ++r) {
     const auto T = static_cast<Eigen::Index>(recs[r].num_samples());
@@ -110,6 +139,8 @@ SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<
     // Computed in float as the kernel does (normalize_input in networks.cpp).
     for (Eigen::Index f = 0; f < F * N; ++f)
       x.col(2 * N + f) = (recs[r].velocity.col(f % N).cast<float>().array() / d.norm.velocity_tanh_scale(f)).tanh();
+    for (Eigen::Index f = 0; f < K * N; ++f)
+      x.col(2 * N + F * N + f) = acceleration[r].col(f).cast<float>().array() / d.norm.acceleration_scale(f);
     for (int j = 0; j < M; ++j)
       y.col(j) = ((targets[r].col(j).array() - mean(2 * N + j)) / sd(2 * N + j)).cast<float>();
     d.x.push_back(to_tensor(x));
@@ -399,8 +430,7 @@ FitResult fit_lstm_torque_model(const std::vector<Recording>& recs, const FitOpt
   FitSummary summary = make_summary(TorqueModelKind::lstm, split);
   const torch::Device device = select_device(o, summary.device);
   const SequenceData data =
-      prepare_data(recs, effort_targets(recs, M), split, N, M,
-                   o.velocity_tanh_scales.value_or(get_default_velocity_tanh_scales(TorqueModelKind::lstm)));
+      prepare_data(recs, effort_targets(recs, M), split, N, M, resolve_input_features(o, TorqueModelKind::lstm));
   const LstmShape shape = choose_shape(o, summary.train_samples);
   if (o.verbose)
     std::cerr << fmt::format("[lstm] {} layers x {} hidden, window {}, {} streams, weight decay {}\n", shape.layers,
@@ -435,8 +465,7 @@ FitResult fit_hybrid_torque_model(const std::vector<Recording>& recs, const FitO
   summary.warnings = base_fit.summary.warnings;
   const torch::Device device = select_device(o, summary.device);
   const SequenceData data =
-      prepare_data(recs, residual, split, N, M,
-                   o.velocity_tanh_scales.value_or(get_default_velocity_tanh_scales(TorqueModelKind::hybrid)));
+      prepare_data(recs, residual, split, N, M, resolve_input_features(o, TorqueModelKind::hybrid));
   const LstmShape shape = choose_shape(o, summary.train_samples);
   auto tr = train_lstm(data, split, N, M, o, shape, device, t0, "hybrid");
   record_training(summary, tr);
@@ -457,7 +486,7 @@ FitResult fit_mlp_torque_model(const std::vector<Recording>& recs, const FitOpti
   FitSummary summary = make_summary(TorqueModelKind::mlp, split);
   const torch::Device device = select_device(o, summary.device);
   // Yilmaz et al.'s inputs: [q, qdot] only.
-  const SequenceData data = prepare_data(recs, effort_targets(recs, M), split, N, M, {});
+  const SequenceData data = prepare_data(recs, effort_targets(recs, M), split, N, M, InputFeatures{});
   auto gather = [&](const std::vector<SampleSegment>& segs, bool y) {
     std::vector<torch::Tensor> parts;
     for (const auto& s : segs) parts.push_back((y ? data.y : data.x)[s.recording].slice(0, s.begin, s.end));
@@ -609,18 +638,50 @@ void export_torchscript(const LstmTorqueModel& model, const std::filesystem::pat
       features += fmt::format(", torch.tanh(qd / self.velocity_tanh_scale[{}:{}])", f * N, (f + 1) * N);
     features += "], 2)\n";
   }
+  // Acceleration features: the AccelerationFilter of networks.hpp at the model's
+  // sample period, its state z = [qdot_prev, a] carried across calls like (h, c);
+  // z0 = None is the reset state.
+  const int K = static_cast<int>(norm.acceleration_filter_s.size());
+  std::string signature = "x: Tensor, h0: Tensor, c0: Tensor) -> Tuple[Tensor, Tensor, Tensor]";
+  std::string result = ", hn, cn";
+  if (K > 0) {
+    if (!(model.info().sample_period_s > 0))
+      throw std::invalid_argument("TorchScript export: acceleration features need the model's sample period");
+    m.register_buffer("acceleration_filter_s", tensor_of(norm.acceleration_filter_s));
+    m.register_buffer("acceleration_scale", tensor_of(norm.acceleration_scale));
+    signature =
+        "x: Tensor, h0: Tensor, c0: Tensor, z0: Optional[Tensor] = None) -> Tuple[Tensor, Tensor, Tensor, Tensor]";
+    result = ", hn, cn, torch.cat([prev, a], 1)";
+    features += fmt::format(R"JIT(        qd = x[:, :, {0}:{1}]
+        dt = self.sample_period_s
+        if z0 is None:
+            prev = qd[:, 0]
+            a = torch.zeros(x.size(0), {2}, dtype=x.dtype)
+        else:
+            prev = z0[:, 0:{0}]
+            a = z0[:, {0}:]
+        alpha = (dt / (self.acceleration_filter_s + dt)).repeat_interleave({0})
+        acc: List[Tensor] = []
+        for t in range(x.size(1)):
+            a = a + alpha * (((qd[:, t] - prev) / dt).repeat(1, {3}) - a)
+            acc.append(a)
+            prev = qd[:, t]
+        xn = torch.cat([xn, torch.stack(acc, 1) / self.acceleration_scale], 2)
+)JIT",
+                            N, 2 * N, K * N, K);
+  }
   m.register_attribute("head_activations", c10::ListType::ofStrings(), acts);
   m.register_attribute("sample_period_s", c10::FloatType::get(), model.info().sample_period_s);
   m.register_attribute("num_layers", c10::IntType::get(), static_cast<int64_t>(L));
   m.register_attribute("hidden_size", c10::IntType::get(), static_cast<int64_t>(net.hidden_size()));
   m.define(fmt::format(R"JIT(
-    def forward(self, x: Tensor, h0: Tensor, c0: Tensor) -> Tuple[Tensor, Tensor, Tensor]:
+    def forward(self, {4}:
         xn = (x - self.input_mean) / self.input_scale
 {3}        out, hn, cn = torch.lstm(xn, [h0, c0], {0}, True, {1}, 0.0, False, False, True)
         y = out
-{2}        return y * self.output_scale + self.output_mean, hn, cn
+{2}        return y * self.output_scale + self.output_mean{5}
   )JIT",
-                       params, L, head, features));
+                       params, L, head, features, signature, result));
   m.save(path.string());
 }
 
@@ -682,6 +743,10 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   norm.output_mean = to_eigen_vector(get("output_mean"));
   norm.output_scale = to_eigen_vector(get("output_scale"));
   if (p.count("velocity_tanh_scale")) norm.velocity_tanh_scale = to_eigen_vector(p["velocity_tanh_scale"]);
+  if (p.count("acceleration_filter_s") || p.count("acceleration_scale")) {
+    norm.acceleration_filter_s = to_eigen_vector(get("acceleration_filter_s"));
+    norm.acceleration_scale = to_eigen_vector(get("acceleration_scale"));
+  }
   try {
     net.check();
   } catch (const std::invalid_argument& e) {
@@ -693,6 +758,8 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   info.num_joints = static_cast<int>(norm.input_mean.size()) / 2;
   info.num_outputs = net.output_size();
   info.sample_period_s = m.hasattr("sample_period_s") ? m.attr("sample_period_s").toDouble() : 0.0;
+  if (norm.has_acceleration() && !(info.sample_period_s > 0))
+    import_error(path, "sample_period_s", "acceleration features need the module's sample period (s), a float attribute");
   info.training = {{"imported_from", path.string()}};
   std::unique_ptr<LstmTorqueModel> model;
   try {
@@ -704,7 +771,11 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   torch::NoGradGuard guard;
   torch::manual_seed(0);
   const int64_t T = 50, I = 2 * info.num_joints, H = net.hidden_size(), L = static_cast<int64_t>(net.layers.size());
-  auto x = torch::randn({1, T, I}) * torch::from_blob(norm.input_scale.data(), {I}).clone() +
+  // A random walk rather than white noise: white qdot would make accelerations
+  // that saturate every gate and hide a filter that differs from the documented one.
+  auto walk = torch::randn({1, T, I}) * 0.05;
+  walk.select(1, 0).copy_(torch::randn({1, I}));
+  auto x = walk.cumsum(1) * torch::from_blob(norm.input_scale.data(), {I}).clone() +
            torch::from_blob(norm.input_mean.data(), {I}).clone();
   const auto nargs = m.get_method("forward").function().getSchema().arguments().size();
   torch::Tensor y;
@@ -713,12 +784,19 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
     y = out.isTuple() ? out.toTuple()->elements()[0].toTensor() : out.toTensor();
   } else if (nargs == 4) {
     y = m.forward({x, torch::zeros({L, 1, H}), torch::zeros({L, 1, H})}).toTuple()->elements()[0].toTensor();
+  } else if (nargs == 5) {  // forward(x, h0, c0, z0) with z0 = None: the reset state
+    y = m.forward({x, torch::zeros({L, 1, H}), torch::zeros({L, 1, H}), torch::jit::IValue()})
+            .toTuple()
+            ->elements()[0]
+            .toTensor();
   } else {
-    import_error(path, "forward", "expected forward(x) or forward(x, h0, c0)");
+    import_error(path, "forward", "expected forward(x), forward(x, h0, c0) or forward(x, h0, c0, z0)");
   }
   Eigen::MatrixXd xd = to_eigen(x[0]).cast<double>();
-  const Eigen::MatrixXd mine = predict_torque(*model, Eigen::VectorXd::LinSpaced(T, 0, 1), xd.leftCols(I / 2),
-                                              xd.rightCols(I / 2));
+  // At the module's own sample period: what its acceleration features assume.
+  const double dt = info.sample_period_s > 0 ? info.sample_period_s : 1.0;
+  const Eigen::MatrixXd mine = predict_torque(*model, Eigen::VectorXd::LinSpaced(T, 0, dt * (T - 1)),
+                                              xd.leftCols(I / 2), xd.rightCols(I / 2));
   const Eigen::MatrixXd theirs = to_eigen(y[0]).cast<double>();
   const double scale = std::max(1.0, theirs.cwiseAbs().maxCoeff());
   if ((mine - theirs).cwiseAbs().maxCoeff() > 1e-4 * scale)
