@@ -84,9 +84,10 @@ struct TimeSplit {
 // mlp and linear.
 std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind);
 // Acceleration-feature time constants when FitOptions leaves them unset: {0.03}
-// (s) for lstm, whose test error on yaw and pitch they halve; none for hybrid,
-// whose model-based part has its own qddot (docs/dynamics.md, "Acceleration
-// features"); none for mlp (memoryless) and linear.
+// (s) for lstm, whose test error on yaw and pitch they cut by a third to a
+// half; none for hybrid, whose model-based part has its own qddot and whose
+// trials did not gain from them (docs/dynamics.md, "Acceleration features");
+// none for mlp (memoryless) and linear.
 std::vector<double> get_default_acceleration_filters_s(TorqueModelKind kind);
 
 // Splits the recordings, taken one after the other, by time: the first

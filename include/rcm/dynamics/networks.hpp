@@ -87,8 +87,9 @@ struct Normalization {
 // The causal acceleration signals behind Normalization::acceleration_*: for each
 // time constant tau and joint, the backward difference of qdot low-passed with
 // a <- a + dt / (tau + dt) * ((qdot - qdot_prev) / dt - a), starting from a = 0
-// at the first sample. A sample no later than the previous one restarts the
-// filter (as at the first sample). Sized once; update() does not allocate.
+// at the first sample. A sample at the same time as the previous one changes
+// nothing; an earlier one restarts the filter (as at the first sample). Sized
+// once; update() does not allocate.
 class AccelerationFilter {
  public:
   AccelerationFilter() = default;
