@@ -28,7 +28,8 @@ void run(benchmark::State& state, const TorqueModel& m) {
   double q[6] = {0.1, 0.2, 0.12, 0, 0, 0}, qd[6] = {0.3, -0.2, 0.01, 0.1, 0, 0}, tau[6];
   double t = 0;
   for (auto _ : state) {
-    q[0] += 1e-4;
+    // Every joint moves, as in use: a joint at rest would skip its Dahl updates.
+    for (int k = 0; k < 6; ++k) q[k] += 1e-4 * (k + 1);
     t += 0.005;
     m.compute_step(*ws, t, q, qd, tau);
     benchmark::DoNotOptimize(tau);
@@ -65,19 +66,27 @@ static void BM_LstmKernelStepPortable(benchmark::State& state) {
 BENCHMARK(BM_LstmKernelStepPortable)->Args({128, 1});
 
 // The default architecture as fitted: [q, qdot], `direction` tanh(qdot / s)
-// features per joint (3 by default, FitOptions::velocity_tanh_scales) and
+// features per joint (3 by default, FitOptions::velocity_tanh_scales),
 // `acceleration` filtered qddot features per joint (1 by default,
-// FitOptions::acceleration_filters_s).
+// FitOptions::acceleration_filters_s) and `dahl` Dahl states per joint (3 by
+// default, FitOptions::dahl_fractions).
 static void BM_LstmModelStep(benchmark::State& state) {
-  const int features = static_cast<int>(state.range(0)), filters = static_cast<int>(state.range(1));
+  const int features = static_cast<int>(state.range(0)), filters = static_cast<int>(state.range(1)),
+            dahl = static_cast<int>(state.range(2));
   Normalization norm = norm6();
   norm.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(6 * features, 0.003f, 0.03f);
   norm.acceleration_filter_s = Eigen::VectorXf::LinSpaced(filters, 0.03f, 0.05f);
   norm.acceleration_scale = Eigen::VectorXf::Constant(6 * filters, 2.0f);
-  LstmTorqueModel m(info6(), lstm(12 + 6 * features + 6 * filters, 128, 1, 6), norm);
+  norm.dahl_displacement = Eigen::VectorXf::LinSpaced(6 * dahl, 1e-5f, 3e-3f);
+  LstmTorqueModel m(info6(), lstm(12 + 6 * (features + filters + dahl), 128, 1, 6), norm);
   run(state, m);
 }
-BENCHMARK(BM_LstmModelStep)->ArgNames({"direction", "acceleration"})->Args({3, 1})->Args({3, 0})->Args({0, 0});
+BENCHMARK(BM_LstmModelStep)
+    ->ArgNames({"direction", "acceleration", "dahl"})
+    ->Args({3, 1, 3})
+    ->Args({3, 1, 0})
+    ->Args({3, 0, 0})
+    ->Args({0, 0, 0});
 
 static void BM_MlpModelStep(benchmark::State& state) {
   const std::vector<DenseStack> stacks = make_random_mlp_stacks(12, 100, 6, 2, 0.2f);

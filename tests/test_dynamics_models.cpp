@@ -302,6 +302,10 @@ TEST(ModelFile, NetworkRoundTripIsExactForEveryKind) {
   with_acceleration.acceleration_scale = Eigen::VectorXf::LinSpaced(6, 0.5f, 3.0f);
   models.push_back(std::make_unique<LstmTorqueModel>(info, random_lstm(18, 8, 1, 4, 3, 5), with_acceleration));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, random_lstm(18, 8, 1, 4, 3, 6), with_acceleration));
+  Normalization with_dahl = with_acceleration;
+  with_dahl.dahl_displacement = Eigen::VectorXf::LinSpaced(6, 1e-4f, 3e-3f);
+  models.push_back(std::make_unique<LstmTorqueModel>(info, random_lstm(24, 8, 1, 4, 3, 7), with_dahl));
+  models.push_back(std::make_unique<HybridTorqueModel>(info, base, random_lstm(24, 8, 1, 4, 3, 8), with_dahl));
   rcm::test::SyntheticArmOptions so;
   so.duration_s = 5;
   const auto rec = rcm::test::make_synthetic_free_space(so);
@@ -530,6 +534,123 @@ TEST(AccelerationFeatures, NetworkSeesScaledAccelerationAfterTheDirectionFeature
       EXPECT_NE(what.find("broken.json"), std::string::npos) << what;
       EXPECT_NE(what.find(c.field), std::string::npos) << what;
       EXPECT_NE(what.find(c.expect), std::string::npos) << what;
+    }
+  }
+}
+
+TEST(DahlFeatures, FilterFollowsTheLinearModelsDahlState) {
+  const Eigen::VectorXf x_c = (Eigen::VectorXf(4) << 1e-3f, 2e-2f, 5e-3f, 1e-1f).finished();  // 2 features x 2 joints
+  DahlFilter filter(x_c, 2);
+  // Reference values in closed form: after a monotonic displacement d from z0,
+  // z = s + (z0 - s) exp(-|d| / x_c), whatever the steps it was taken in.
+  const Eigen::Vector2d q0(0.3, -1.0);
+  filter.update(q0.data());
+  EXPECT_EQ(filter.values(), Eigen::VectorXd::Zero(4));  // the first sample has no displacement
+  for (int k = 1; k <= 20; ++k) {
+    const Eigen::Vector2d q = q0 + Eigen::Vector2d(0.0005 * k, -0.002 * k);
+    filter.update(q.data());
+  }
+  const Eigen::Vector2d d(0.01, 0.04);
+  for (int f = 0; f < 2; ++f)
+    for (int k = 0; k < 2; ++k) {
+      const double s = k == 0 ? 1.0 : -1.0;
+      EXPECT_NEAR(filter.values()[2 * f + k], s - s * std::exp(-d[k] / x_c[2 * f + k]), 1e-12) << f << " " << k;
+    }
+  // At rest it stays put: the holding friction remembers the last direction.
+  const Eigen::VectorXd held = filter.values();
+  const Eigen::Vector2d q_end = q0 + Eigen::Vector2d(0.01, -0.04);
+  for (int k = 0; k < 100; ++k) filter.update(q_end.data());
+  EXPECT_EQ(filter.values(), held);
+  // A reversal moves every state toward the new direction, each at its own rate.
+  const Eigen::Vector2d back = q_end - Eigen::Vector2d(0.001, -0.001);
+  filter.update(back.data());
+  for (int f = 0; f < 2; ++f)
+    for (int k = 0; k < 2; ++k) {
+      const double s = k == 0 ? -1.0 : 1.0;
+      EXPECT_NEAR(filter.values()[2 * f + k], compute_dahl_state(held[2 * f + k], s * 0.001, x_c[2 * f + k]), 1e-12);
+    }
+  filter.reset();
+  filter.update(q0.data());
+  EXPECT_EQ(filter.values(), Eigen::VectorXd::Zero(4));
+  // The batch form is the filter run over the recording.
+  Eigen::MatrixXd position(60, 3);
+  for (int k = 0; k < 60; ++k) position.row(k) << 0.01 * std::sin(0.2 * k), 0.001 * k, 1.0;
+  const Eigen::MatrixXd batch = compute_dahl_features(x_c, position, 2);
+  ASSERT_EQ(batch.rows(), 60);
+  ASSERT_EQ(batch.cols(), 4);
+  DahlFilter again(x_c, 2);
+  for (int k = 0; k < 60; ++k) {
+    const Eigen::Vector2d q = position.row(k).head<2>().transpose();
+    again.update(q.data());
+    EXPECT_EQ(batch.row(k), again.values().transpose());
+  }
+}
+
+TEST(DahlFeatures, NetworkSeesDahlStatesAfterTheAccelerationFeatures) {
+  const TorqueModelInfo info = info3();
+  Normalization norm = norm3(Eigen::VectorXf::LinSpaced(6, 0.3f, 0.9f));
+  norm.velocity_tanh_scale = Eigen::Vector3f(0.003f, 0.002f, 0.0005f);
+  norm.acceleration_filter_s = Eigen::VectorXf::Constant(1, 0.03f);
+  norm.acceleration_scale = Eigen::Vector3f(0.5f, 0.4f, 0.02f);
+  norm.dahl_displacement.resize(6);
+  norm.dahl_displacement << 1e-4f, 2e-4f, 1e-5f, 3e-3f, 4e-3f, 5e-4f;
+  const LstmNetwork net = random_lstm(18, 16, 1, 8, 3, 29);
+  const LstmTorqueModel model(info, net, norm);
+  // Reference inputs in double: the acceleration and Dahl recurrences written out.
+  Eigen::VectorXd a = Eigen::VectorXd::Zero(3), z = Eigen::VectorXd::Zero(6), qd_prev(3), q_prev(3);
+  const double dt = 1.0 / rcm::test::SyntheticArmOptions{}.rate_hz;
+  const auto r = compare_with_reference_input(
+      model, [&](Eigen::Index t, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Eigen::VectorXf& x) {
+        if (t > 0)
+          for (int k = 0; k < 3; ++k) {
+            a[k] += dt / (0.03 + dt) * ((qd[k] - qd_prev[k]) / dt - a[k]);
+            for (int f = 0; f < 2; ++f) {
+              const double dq = q[k] - q_prev[k], s = dq > 0 ? 1.0 : dq < 0 ? -1.0 : 0.0;
+              double& zf = z[3 * f + k];
+              zf = s + (zf - s) * std::exp(-std::abs(dq) / norm.dahl_displacement[3 * f + k]);
+            }
+          }
+        qd_prev = qd;
+        q_prev = q;
+        for (int k = 0; k < 3; ++k) {
+          x[6 + k] = static_cast<float>(std::tanh(qd[k] / norm.velocity_tanh_scale[k]));
+          x[9 + k] = static_cast<float>(a[k] / norm.acceleration_scale[k]);
+          for (int f = 0; f < 2; ++f) x[12 + 3 * f + k] = static_cast<float>(z[3 * f + k]);
+        }
+      });
+  EXPECT_GT(r.largest_feature, 0.9);  // the motion drives the Dahl states to saturation
+  EXPECT_LE(r.worst, 1e-5);
+
+  // Sizes that do not chain are refused, and the memoryless MLP takes none.
+  EXPECT_THROW(LstmTorqueModel(info, random_lstm(12, 16, 1, 8, 3, 29), norm), std::invalid_argument);
+  Normalization odd = norm;
+  odd.dahl_displacement.conservativeResize(5);
+  EXPECT_THROW(LstmTorqueModel(info, random_lstm(17, 16, 1, 8, 3, 29), odd), std::invalid_argument);
+  Normalization dahl_only = norm3(Eigen::VectorXf::LinSpaced(6, 0.3f, 0.9f));
+  dahl_only.dahl_displacement = Eigen::Vector3f(1e-3f, 1e-3f, 1e-3f);
+  EXPECT_THROW(MlpTorqueModel(info, make_random_mlp_stacks(9, 10, 3, 4), dahl_only), std::invalid_argument);
+
+  // In a file: a displacement <= 0, a count that is not a multiple of the joints.
+  const auto good = torque_model_to_json(model);
+  ASSERT_NO_THROW(torque_model_from_json(good, "good.json"));
+  Normalization carrier = norm;
+  carrier.input_mean << 0.01f, 0.01f, 0.0f, 0.01f, 0.01f, 0.01f;
+  const auto with_zero =
+      torque_model_to_json(LstmTorqueModel(info, net, carrier))["parameters"]["normalization"]["input_mean"];
+  const auto five_values = torque_model_to_json(LstmTorqueModel(info, random_lstm(18, 16, 1, 5, 3, 2), norm))
+                               ["parameters"]["lstm"]["head"][0]["bias"];
+  for (const auto& [bad, expect] : {std::pair{with_zero, std::string("positive")},
+                                    std::pair{five_values, std::string("multiple of 3")}}) {
+    auto broken = good;
+    broken["parameters"]["normalization"]["dahl_displacement"] = bad;
+    try {
+      torque_model_from_json(broken, "broken.json");
+      FAIL() << "expected InputError for " << expect;
+    } catch (const rcm::InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("broken.json"), std::string::npos) << what;
+      EXPECT_NE(what.find("parameters.normalization.dahl_displacement"), std::string::npos) << what;
+      EXPECT_NE(what.find(expect), std::string::npos) << what;
     }
   }
 }

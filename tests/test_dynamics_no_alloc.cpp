@@ -53,6 +53,12 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
       std::make_unique<LstmTorqueModel>(info, make_random_lstm_network(36, 128, 1, 64, 6, 6), with_acceleration));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(36, 32, 1, 16, 6, 7),
                                                        with_acceleration));
+  Normalization with_dahl = with_acceleration;  // the fitted lstm default: and three Dahl states per joint
+  with_dahl.dahl_displacement = Eigen::VectorXf::LinSpaced(18, 1e-5f, 3e-3f);
+  models.push_back(
+      std::make_unique<LstmTorqueModel>(info, make_random_lstm_network(54, 128, 1, 64, 6, 8), with_dahl));
+  models.push_back(
+      std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(54, 32, 1, 16, 6, 9), with_dahl));
   for (const auto& m : models) {
     auto ws = m->create_workspace();
     double q[6] = {0.1, 0.2, 0.12, 0, 0, 0}, qd[6] = {0.3, -0.2, 0.01, 0, 0, 0}, tau[6];

@@ -117,25 +117,31 @@ TEST(FrictionMemory, TrainedLstmHoldsTheApproachDirectionAMemorylessModelCannot)
   so.rate_hz = kRate;
   const auto rec = rcm::test::make_synthetic_free_space(so);
 
-  const auto t0 = std::chrono::steady_clock::now();
-  const auto lstm = fit_lstm_torque_model({rec}, small_fit());
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  ASSERT_TRUE(lstm.model);
   const auto mlp = fit_mlp_torque_model({rec}, small_fit());
   ASSERT_TRUE(mlp.model);
-
-  const auto dl = hold_difference(*lstm.model);
   const auto dm = hold_difference(*mlp.model);
-  std::cout << "LSTM fit " << seconds << " s, " << lstm.summary.epochs << " epochs\n"
-            << "hold difference (from below - from above), N m / N per joint\n"
-            << "  truth " << dl.truth.transpose() << "\n  lstm  " << dl.predicted.transpose() << "\n  mlp   "
-            << dm.predicted.transpose() << "\n";
-  for (int j = 0; j < 3; ++j) {
-    // The probe isolates friction: both holds end at the same q, where gravity is equal.
-    ASSERT_GT(std::abs(dl.truth[j]), 0.05) << "joint " << j + 1;
-    EXPECT_TRUE(keeps_memory(dl, j)) << "joint " << j + 1 << ": lstm " << dl.predicted[j] << " vs truth "
-                                     << dl.truth[j];
-    // Memoryless: f(q, 0) is the same after either approach.
-    EXPECT_FALSE(keeps_memory(dm, j)) << "joint " << j + 1 << ": mlp " << dm.predicted[j];
+  // The default inputs carry the memory in Dahl states as well; without them
+  // the LSTM's own state has to learn it.
+  for (const bool dahl : {true, false}) {
+    auto o = small_fit();
+    if (!dahl) o.dahl_fractions = std::vector<double>{};
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto lstm = fit_lstm_torque_model({rec}, o);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ASSERT_TRUE(lstm.model);
+    const auto dl = hold_difference(*lstm.model);
+    std::cout << "LSTM " << (dahl ? "with" : "without") << " Dahl features: fit " << seconds << " s, "
+              << lstm.summary.epochs << " epochs\n"
+              << "hold difference (from below - from above), N m / N per joint\n"
+              << "  truth " << dl.truth.transpose() << "\n  lstm  " << dl.predicted.transpose() << "\n  mlp   "
+              << dm.predicted.transpose() << "\n";
+    for (int j = 0; j < 3; ++j) {
+      // The probe isolates friction: both holds end at the same q, where gravity is equal.
+      ASSERT_GT(std::abs(dl.truth[j]), 0.05) << "joint " << j + 1;
+      EXPECT_TRUE(keeps_memory(dl, j)) << "joint " << j + 1 << (dahl ? " with" : " without")
+                                       << " Dahl features: lstm " << dl.predicted[j] << " vs truth " << dl.truth[j];
+      // Memoryless: f(q, 0) is the same after either approach.
+      if (dahl) EXPECT_FALSE(keeps_memory(dm, j)) << "joint " << j + 1 << ": mlp " << dm.predicted[j];
+    }
   }
 }

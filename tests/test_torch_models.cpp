@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <tuple>
 
 #include "rcm/common/error.hpp"
 #include "rcm/dynamics/training.hpp"
@@ -57,8 +58,8 @@ TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
   EXPECT_EQ(model.num_joints(), 3);
   EXPECT_EQ(model.num_outputs(), 3);
   EXPECT_NEAR(model.info().sample_period_s, 0.005, 1e-12);
-  if (GetParam() == TorqueModelKind::lstm)  // [q, qdot], three direction and one acceleration feature per joint
-    EXPECT_EQ(static_cast<const LstmTorqueModel&>(model).network().input_size(), 18);
+  if (GetParam() == TorqueModelKind::lstm)  // [q, qdot], three direction, one acceleration, three Dahl per joint
+    EXPECT_EQ(static_cast<const LstmTorqueModel&>(model).network().input_size(), 27);
   if (GetParam() == TorqueModelKind::mlp)
     EXPECT_EQ(static_cast<const MlpTorqueModel&>(model).networks().front().input_size(), 6);
   if (GetParam() == TorqueModelKind::hybrid)  // none by default (get_default_*)
@@ -163,27 +164,33 @@ TEST(TorchScript, ExportThenImportGivesTheSameModel) {
   info.sample_period_s = 0.005;
   Normalization norm{Eigen::VectorXf::LinSpaced(6, -0.1f, 0.1f), Eigen::VectorXf::Constant(6, 0.5f),
                      Eigen::VectorXf::Constant(3, 0.2f), Eigen::VectorXf::Constant(3, 2.0f)};
-  // Without and with direction features (two per joint), and with both
-  // direction and acceleration features (two time constants).
-  for (const auto& [features, filters] : {std::pair{0, 0}, std::pair{2, 0}, std::pair{1, 2}}) {
+  // Without and with direction features (two per joint), with direction and
+  // acceleration features (two time constants), with direction and Dahl
+  // features (two displacements), and with all three.
+  for (const auto& [features, filters, dahl] :
+       {std::tuple{0, 0, 0}, std::tuple{2, 0, 0}, std::tuple{1, 2, 0}, std::tuple{1, 0, 2}, std::tuple{1, 1, 2}}) {
     norm.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(3 * features, 0.004f, 0.05f);
     norm.acceleration_filter_s = Eigen::VectorXf::LinSpaced(filters, 0.01f, 0.05f);
     norm.acceleration_scale = Eigen::VectorXf::LinSpaced(3 * filters, 0.5f, 2.0f);
-    LstmTorqueModel model(info, random_network(6 + 3 * features + 3 * filters, 16, 2, 3, 8), norm);
+    norm.dahl_displacement = Eigen::VectorXf::LinSpaced(3 * dahl, 2e-4f, 5e-3f);
+    LstmTorqueModel model(info, random_network(6 + 3 * (features + filters + dahl), 16, 2, 3, 8), norm);
     const auto path = std::filesystem::temp_directory_path() / "rcm_test_lstm.pt";
     export_torchscript(model, path);
     const auto imported = import_torchscript(path);  // checks the module's forward internally
     EXPECT_EQ(imported->normalization().velocity_tanh_scale, norm.velocity_tanh_scale);
     EXPECT_EQ(imported->normalization().acceleration_filter_s, norm.acceleration_filter_s);
     EXPECT_EQ(imported->normalization().acceleration_scale, norm.acceleration_scale);
+    EXPECT_EQ(imported->normalization().dahl_displacement, norm.dahl_displacement);
     EXPECT_EQ(imported->num_joints(), 3);
     const auto& rec = synthetic_minute();
     const Eigen::MatrixXd a = predict_torque(model, rec).topRows(500), b = predict_torque(*imported, rec).topRows(500);
     EXPECT_EQ((a - b).cwiseAbs().maxCoeff(), 0.0) << features << " features";
     EXPECT_DOUBLE_EQ(imported->info().sample_period_s, 0.005);
-    if (filters > 0 && std::system("/usr/bin/python3 -c 'import torch' > /dev/null 2>&1") == 0) {
-      // The exported forward carries z = [qdot_prev, a] like (h, c): in PyTorch,
-      // two calls over halves of the recording equal the kernel over the whole.
+    if ((filters > 0 || dahl > 0) && std::system("/usr/bin/python3 -c 'import torch' > /dev/null 2>&1") == 0) {
+      // The exported forward carries z = [qdot_prev, a, q_prev, z_dahl] like
+      // (h, c): in PyTorch, two calls over halves of the recording equal the
+      // kernel over the whole.
+      const int z_size = (filters > 0 ? 3 + 3 * filters : 0) + (dahl > 0 ? 3 + 3 * dahl : 0);
       const int T = 400;
       const auto csv = std::filesystem::temp_directory_path() / "rcm_test_lstm_io.csv";
       {
@@ -205,12 +212,12 @@ y1, h1, c1, z1 = m(x[:, :200], h, h)
 y2, _, _, _ = m(x[:, 200:], h1, c1, z1)
 err = (torch.cat([y1, y2], 1)[0].double() - ref).abs().max().item()
 print('max difference', err)
-sys.exit(0 if z1.shape == (1, 3 + 3 * int(sys.argv[3])) and err <= 1e-4 else 1)
+sys.exit(0 if z1.shape == (1, int(sys.argv[3])) and err <= 1e-4 else 1)
 )PY";
       const auto check_path = std::filesystem::temp_directory_path() / "rcm_test_check_carry.py";
       { std::ofstream(check_path) << check; }
       EXPECT_EQ(std::system(("/usr/bin/python3 " + check_path.string() + " " + path.string() + " " + csv.string() +
-                             " " + std::to_string(filters))
+                             " " + std::to_string(z_size))
                                 .c_str()),
                 0);
       std::filesystem::remove(csv);
@@ -234,6 +241,7 @@ TEST(DirectionFeatures, ExplicitScalesReachLstmAndHybridNotMlp) {
   o.velocity_tanh_scales = std::vector<double>{0.05, 0.2};
   const auto& rec = synthetic_minute();
   o.acceleration_filters_s = std::vector<double>{};
+  o.dahl_fractions = std::vector<double>{};
   const auto lstm = fit_lstm_torque_model({rec}, o);
   const auto& lm = static_cast<const LstmTorqueModel&>(*lstm.model);
   EXPECT_EQ(lm.network().input_size(), 12);
@@ -261,6 +269,7 @@ TEST(AccelerationFeatures, ExplicitFiltersReachLstmAndHybridNotMlp) {
   auto o = tiny_options();
   o.max_epochs = 1;
   o.velocity_tanh_scales = std::vector<double>{};
+  o.dahl_fractions = std::vector<double>{};
   const auto& rec = synthetic_minute();
   // Default for lstm: one filter of 0.03 s, scaled by the root mean square of
   // the filtered signal over the training split.
@@ -286,6 +295,44 @@ TEST(AccelerationFeatures, ExplicitFiltersReachLstmAndHybridNotMlp) {
   const auto mlp = fit_mlp_torque_model({rec}, o);
   EXPECT_EQ(static_cast<const MlpTorqueModel&>(*mlp.model).networks().front().input_size(), 6);
   o.acceleration_filters_s = std::vector<double>{0.0};
+  EXPECT_THROW(fit_lstm_torque_model({rec}, o), rcm::InputError);
+}
+
+TEST(DahlFeatures, FractionsOfTheRangeReachLstmAndHybridNotMlp) {
+  auto o = tiny_options();
+  o.max_epochs = 1;
+  o.velocity_tanh_scales = std::vector<double>{};
+  o.acceleration_filters_s = std::vector<double>{};
+  const auto& rec = synthetic_minute();
+  // Default for lstm: three states per joint, x_c = {3e-5, 3e-4, 3e-3} x the
+  // joint's range of motion over the training split.
+  const auto lstm = fit_lstm_torque_model({rec}, o);
+  const auto& lm = static_cast<const LstmTorqueModel&>(*lstm.model);
+  EXPECT_EQ(lm.network().input_size(), 15);
+  ASSERT_EQ(lm.normalization().dahl_displacement.size(), 9);
+  const Eigen::Index train_end = split_in_time({rec}, 0.7, 0.2).train.back().end;
+  const double fractions[3] = {3e-5, 3e-4, 3e-3};
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::VectorXd q = rec.position.col(k).head(train_end);
+    const double range = q.maxCoeff() - q.minCoeff();
+    ASSERT_GT(range, 0.0);
+    for (int f = 0; f < 3; ++f)
+      EXPECT_NEAR(lm.normalization().dahl_displacement[3 * f + k], fractions[f] * range, 1e-6 * fractions[f] * range);
+  }
+  o.dahl_fractions = std::vector<double>{1e-3};
+  const auto one = fit_lstm_torque_model({rec}, o);
+  EXPECT_EQ(static_cast<const LstmTorqueModel&>(*one.model).network().input_size(), 9);
+  const auto hybrid = fit_hybrid_torque_model({rec}, o);
+  EXPECT_EQ(static_cast<const HybridTorqueModel&>(*hybrid.model).residual_network().input_size(), 9);
+  o.dahl_fractions.reset();  // hybrid's default: none
+  EXPECT_EQ(static_cast<const HybridTorqueModel&>(*fit_hybrid_torque_model({rec}, o).model)
+                .residual_network()
+                .input_size(),
+            6);
+  o.dahl_fractions = std::vector<double>{1e-3};
+  const auto mlp = fit_mlp_torque_model({rec}, o);
+  EXPECT_EQ(static_cast<const MlpTorqueModel&>(*mlp.model).networks().front().input_size(), 6);
+  o.dahl_fractions = std::vector<double>{-1e-3};
   EXPECT_THROW(fit_lstm_torque_model({rec}, o), rcm::InputError);
 }
 
@@ -399,4 +446,13 @@ torch.jit.script(m).save(sys.argv[1])
   }
   std::filesystem::remove(path);
   std::filesystem::remove(script_path);
+}
+
+// Training speed rests on which BLAS LibTorch's sgemm_ binds to in a program
+// linked like the rcm CLI (Ceres, SuiteSparse and LibTorch together): OpenBLAS,
+// not ATLAS's or the reference single-threaded one (CMakeLists.txt).
+TEST(LibTorchBlas, IsOpenBlasInAProgramLinkedLikeTheCli) {
+  const std::string blas = get_libtorch_blas_library();
+  ASSERT_FALSE(blas.empty());
+  EXPECT_NE(blas.find("openblas"), std::string::npos) << blas;
 }

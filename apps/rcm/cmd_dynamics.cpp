@@ -36,11 +36,12 @@ struct DynamicsArgs {
   double learning_rate = 2e-3;
   std::optional<std::string> direction_features;     // unset: the kind's default
   std::optional<std::string> acceleration_features;  // unset: the kind's default
+  std::optional<std::string> dahl_features;          // unset: the kind's default
   std::string torchscript_out, torchscript_in, predictions;
 };
 
 // "none" or comma-separated positive numbers, for the network-input flags
-// (--direction-features, --acceleration-features), which only the recurrent
+// (--direction-features, --acceleration-features, --dahl-features), which only the recurrent
 // kinds read.
 std::vector<double> parse_feature_list(const std::string& text, const std::string& flag,
                                        rcm::dynamics::TorqueModelKind kind) {
@@ -80,6 +81,7 @@ void run_fit(const DynamicsArgs& a) {
     o.velocity_tanh_scales = parse_feature_list(*a.direction_features, "--direction-features", kind);
   if (a.acceleration_features)
     o.acceleration_filters_s = parse_feature_list(*a.acceleration_features, "--acceleration-features", kind);
+  if (a.dahl_features) o.dahl_fractions = parse_feature_list(*a.dahl_features, "--dahl-features", kind);
   const auto recs = load_all(a.recordings, a.dedupe);
   FitResult fit;
 #if defined(RCM_HAVE_TORCH)
@@ -185,6 +187,10 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->add_option("--acceleration-features", args->acceleration_features,
                   "lstm, hybrid: extra inputs, the difference of consecutive qdot low-passed with each time "
                   "constant (s) of this comma-separated list, or 'none' (default: 0.03 for lstm, none for hybrid)");
+  fit->add_option("--dahl-features", args->dahl_features,
+                  "lstm, hybrid: extra inputs, Dahl friction states of each joint with characteristic "
+                  "displacement f x its range of motion for each f of this comma-separated list, or 'none' "
+                  "(default: 3e-5,3e-4,3e-3 for lstm, none for hybrid)");
   fit->add_option("--threads", args->threads, "LibTorch intra-op threads (default 2)");
   fit->add_option("--max-epochs", args->max_epochs, "epoch limit (early stopping usually ends sooner)");
 #if defined(RCM_HAVE_TORCH)

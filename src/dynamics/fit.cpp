@@ -34,6 +34,9 @@ void FitOptions::check() const {
   if (acceleration_filters_s)
     for (const double s : *acceleration_filters_s)
       if (!(s > 0) || !std::isfinite(s)) bad_option("acceleration_filters_s", "expected positive finite values");
+  if (dahl_fractions)
+    for (const double f : *dahl_fractions)
+      if (!(f > 0) || !std::isfinite(f)) bad_option("dahl_fractions", "expected positive finite values");
 }
 
 std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind) {
@@ -43,6 +46,11 @@ std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind) {
 
 std::vector<double> get_default_acceleration_filters_s(TorqueModelKind kind) {
   if (kind == TorqueModelKind::lstm) return {0.03};
+  return {};
+}
+
+std::vector<double> get_default_dahl_fractions(TorqueModelKind kind) {
+  if (kind == TorqueModelKind::lstm) return {3e-5, 3e-4, 3e-3};
   return {};
 }
 

@@ -33,13 +33,6 @@ constexpr double kDefaultAccelerationFilter = 0.03;
 constexpr double kFastestSamplePeriod = 1.0 / 2000.0;
 constexpr Eigen::Index kMaxWindowSamples = 4096;
 
-// Exact discretization of the rate-independent Dahl state over a displacement dq.
-inline double advance_dahl(double z, double dq, double x_c) {
-  if (dq == 0.0) return z;
-  const double s = dq > 0 ? 1.0 : -1.0;
-  return s + (z - s) * std::exp(-std::abs(dq) / x_c);
-}
-
 Eigen::Index window_capacity(double window_s, double sample_period_s) {
   if (!(window_s > 0)) return 2;
   const double period = sample_period_s > 0 ? std::min(sample_period_s, kFastestSamplePeriod) : kFastestSamplePeriod;
@@ -228,7 +221,7 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
   const auto& p = parameters_;
   compute_gravity_regressor(q, ws.Y);
   for (int j = 0; j < num_outputs(); ++j) {
-    if (ws.has_previous) ws.z[j] = advance_dahl(ws.z[j], q[j] - ws.prev_q[j], p.dahl_displacement[j]);
+    if (ws.has_previous) ws.z[j] = compute_dahl_state(ws.z[j], q[j] - ws.prev_q[j], p.dahl_displacement[j]);
     double qdd = ws.qdd[j].update(t, qd[j]);
     if (qdd_batch && p.batch_acceleration_window_s[j] > 0) qdd = qdd_batch[j];
     double value = p.armature[j] * qdd + p.viscous[j] * qd[j] + p.coulomb[j] * ws.z[j] + p.offset[j];
@@ -378,7 +371,7 @@ class JointCandidateStats {
       };
       for (Eigen::Index t = 0; t < seg.end; ++t) {
         if (t > 0)
-          for (int k = 0; k < K_; ++k) z[k] = advance_dahl(z[k], rec.position(t, j) - rec.position(t - 1, j), x_c[k]);
+          for (int k = 0; k < K_; ++k) z[k] = compute_dahl_state(z[k], rec.position(t, j) - rec.position(t - 1, j), x_c[k]);
         for (int a = 0; a < causal; ++a) estimators[a].update(rec.time(t), rec.velocity(t, j));
         if (t < seg.begin) continue;
         if (j < 3) {

@@ -149,6 +149,7 @@ nlohmann::json save_normalization(const Normalization& n) {
     j["acceleration_filter_s"] = detail::encode_vector(n.acceleration_filter_s);
     j["acceleration_scale"] = detail::encode_vector(n.acceleration_scale);
   }
+  if (n.has_dahl()) j["dahl_displacement"] = detail::encode_vector(n.dahl_displacement);
   return j;
 }
 
@@ -185,6 +186,15 @@ Normalization load_normalization(const nlohmann::json& j, const std::string& sou
                                                    static_cast<int>(n.acceleration_filter_s.size()) * (inputs / 2));
     if (!(n.acceleration_scale.array() > 0).all()) detail::fail(source, fs, "scales must be positive");
   }
+  if (j.contains("dahl_displacement")) {
+    const std::string f = field + ".dahl_displacement";
+    n.dahl_displacement = detail::decode_vector_f(j["dahl_displacement"], source, f, -1);
+    if (n.dahl_displacement.size() == 0 || n.dahl_displacement.size() % (inputs / 2) != 0)
+      detail::fail(source, f, fmt::format("expected a positive multiple of {} values (features x joints), got {}",
+                                          inputs / 2, n.dahl_displacement.size()));
+    if (!(n.dahl_displacement.array() > 0).all() || !n.dahl_displacement.allFinite())
+      detail::fail(source, f, "displacements must be positive and finite");
+  }
   return n;
 }
 
@@ -200,21 +210,26 @@ void check_normalization(const Normalization& n, int joints, int outputs) {
     throw std::invalid_argument(
         "normalization: acceleration_filter_s (K positive time constants) and acceleration_scale (K x num_joints "
         "positive values) do not match");
+  if (n.dahl_displacement.size() % joints != 0 || !(n.dahl_displacement.array() > 0).all() ||
+      !n.dahl_displacement.allFinite())
+    throw std::invalid_argument(
+        "normalization: dahl_displacement must hold features x num_joints positive finite values");
 }
 
 // Buffers shared by the recurrent kinds.
 struct LstmWorkspace final : TorqueModelWorkspace {
   LstmKernel::State state;
   AccelerationFilter acceleration;
+  DahlFilter dahl;
   Eigen::VectorXf x, y;
   Eigen::VectorXd base;  // hybrid: model-based part
   std::unique_ptr<TorqueModelWorkspace> base_ws;
 };
 
-// x: n.network_inputs(N) floats; acceleration: the AccelerationFilter's values
-// (read only when n has acceleration features).
+// x: n.network_inputs(N) floats; acceleration, dahl: the filters' values (read
+// only when n has those features).
 void normalize_input(const Normalization& n, int N, const double* q, const double* qd, const double* acceleration,
-                     float* x) {
+                     const double* dahl, float* x) {
   for (int k = 0; k < N; ++k) {
     x[k] = static_cast<float>((q[k] - n.input_mean[k]) / n.input_scale[k]);
     x[N + k] = static_cast<float>((qd[k] - n.input_mean[N + k]) / n.input_scale[N + k]);
@@ -229,6 +244,26 @@ void normalize_input(const Normalization& n, int N, const double* q, const doubl
   float* xa = x + 2 * N + F;
   for (Eigen::Index f = 0; f < n.acceleration_scale.size(); ++f)
     xa[f] = static_cast<float>(acceleration[f]) / n.acceleration_scale[f];
+  float* xd = xa + n.acceleration_scale.size();
+  for (Eigen::Index f = 0; f < n.dahl_displacement.size(); ++f) xd[f] = static_cast<float>(dahl[f]);
+}
+
+void init_filters(const Normalization& n, int N, LstmWorkspace& ws) {
+  ws.acceleration = AccelerationFilter(n.acceleration_filter_s, N);
+  ws.dahl = DahlFilter(n.dahl_displacement, N);
+}
+
+void reset_filters(LstmWorkspace& ws) {
+  ws.acceleration.reset();
+  ws.dahl.reset();
+}
+
+// Advances the feature filters by one sample and writes the network input to ws.x.
+void compute_network_input(const Normalization& n, int N, LstmWorkspace& ws, double t, const double* q,
+                           const double* qd) {
+  if (n.has_acceleration()) ws.acceleration.update(t, qd);
+  if (n.has_dahl()) ws.dahl.update(q);
+  normalize_input(n, N, q, qd, ws.acceleration.values().data(), ws.dahl.values().data(), ws.x.data());
 }
 
 }  // namespace
@@ -261,6 +296,38 @@ void AccelerationFilter::update(double t, const double* qd) {
   for (Eigen::Index k = 0; k < N; ++k) qd_prev_[k] = qd[k];
   t_prev_ = t;
   started_ = true;
+}
+
+DahlFilter::DahlFilter(const Eigen::VectorXf& displacement, int joints)
+    : x_c_(displacement.cast<double>()),
+      q_prev_(Eigen::VectorXd::Zero(joints)),
+      z_(Eigen::VectorXd::Zero(displacement.size())) {}
+
+void DahlFilter::reset() {
+  z_.setZero();
+  started_ = false;
+}
+
+void DahlFilter::update(const double* q) {
+  const Eigen::Index N = q_prev_.size();
+  if (started_)
+    for (Eigen::Index f = 0; f < z_.size(); ++f)
+      z_[f] = compute_dahl_state(z_[f], q[f % N] - q_prev_[f % N], x_c_[f]);
+  for (Eigen::Index k = 0; k < N; ++k) q_prev_[k] = q[k];
+  started_ = true;
+}
+
+Eigen::MatrixXd compute_dahl_features(const Eigen::VectorXf& displacement, const Eigen::MatrixXd& position,
+                                      int joints) {
+  DahlFilter filter(displacement, joints);
+  Eigen::MatrixXd out(position.rows(), displacement.size());
+  Eigen::VectorXd q(joints);
+  for (Eigen::Index t = 0; t < position.rows(); ++t) {
+    q = position.row(t).head(joints).transpose();
+    filter.update(q.data());
+    out.row(t) = filter.values().transpose();
+  }
+  return out;
 }
 
 Eigen::MatrixXd compute_acceleration_features(const Eigen::VectorXf& filter_s, const Eigen::VectorXd& time,
@@ -446,14 +513,14 @@ LstmTorqueModel::LstmTorqueModel(TorqueModelInfo info, LstmNetwork network, Norm
   check_normalization(normalization_, num_joints(), num_outputs());
   if (network.input_size() != normalization_.network_inputs(num_joints()) || network.output_size() != num_outputs())
     throw std::invalid_argument(
-        "LSTM model: network sizes do not match the normalization's inputs (2 x num_joints + direction and "
-        "acceleration features) / num_outputs");
+        "LSTM model: network sizes do not match the normalization's inputs (2 x num_joints + direction, "
+        "acceleration and Dahl features) / num_outputs");
 }
 
 std::unique_ptr<TorqueModelWorkspace> LstmTorqueModel::create_workspace() const {
   auto ws = std::make_unique<LstmWorkspace>();
   ws->state = kernel_.create_state();
-  ws->acceleration = AccelerationFilter(normalization_.acceleration_filter_s, num_joints());
+  init_filters(normalization_, num_joints(), *ws);
   ws->x = Eigen::VectorXf::Zero(normalization_.network_inputs(num_joints()));
   ws->y = Eigen::VectorXf::Zero(num_outputs());
   return ws;
@@ -462,14 +529,13 @@ std::unique_ptr<TorqueModelWorkspace> LstmTorqueModel::create_workspace() const 
 void LstmTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   auto& ws = static_cast<LstmWorkspace&>(workspace);
   LstmKernel::reset(ws.state);
-  ws.acceleration.reset();
+  reset_filters(ws);
 }
 
 void LstmTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                                    double* tau) const {
   auto& ws = static_cast<LstmWorkspace&>(workspace);
-  if (normalization_.has_acceleration()) ws.acceleration.update(t, qd);
-  normalize_input(normalization_, num_joints(), q, qd, ws.acceleration.values().data(), ws.x.data());
+  compute_network_input(normalization_, num_joints(), ws, t, q, qd);
   kernel_.step(ws.state, ws.x.data(), ws.y.data());
   for (int j = 0; j < num_outputs(); ++j)
     tau[j] = static_cast<double>(ws.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
@@ -496,8 +562,8 @@ MlpTorqueModel::MlpTorqueModel(TorqueModelInfo info, std::vector<DenseStack> per
     check_stack(s, "MLP");
   }
   check_normalization(normalization_, num_joints(), num_outputs());
-  if (normalization_.has_acceleration())
-    throw std::invalid_argument("MLP model: acceleration features need a state, and the MLP is memoryless");
+  if (normalization_.has_acceleration() || normalization_.has_dahl())
+    throw std::invalid_argument("MLP model: acceleration and Dahl features need a state, and the MLP is memoryless");
   for (const auto& s : per_joint_)
     if (s.input_size() != normalization_.network_inputs(num_joints()) || s.output_size() != 1)
       throw std::invalid_argument("MLP model: each network maps the normalization's inputs to 1 output");
@@ -518,7 +584,7 @@ void MlpTorqueModel::reset_state(TorqueModelWorkspace&) const {}
 void MlpTorqueModel::compute_step(TorqueModelWorkspace& workspace, double, const double* q, const double* qd,
                                   double* tau) const {
   auto& ws = static_cast<MlpWorkspace&>(workspace);
-  normalize_input(normalization_, num_joints(), q, qd, nullptr, ws.x.data());
+  normalize_input(normalization_, num_joints(), q, qd, nullptr, nullptr, ws.x.data());
   for (int j = 0; j < num_outputs(); ++j) {
     compute_dense_forward(per_joint_[j], ws.x.data(), &ws.y, ws.a.data(), ws.b.data());
     tau[j] = static_cast<double>(ws.y) * normalization_.output_scale[j] + normalization_.output_mean[j];
@@ -549,7 +615,7 @@ HybridTorqueModel::HybridTorqueModel(TorqueModelInfo info, std::shared_ptr<const
 std::unique_ptr<TorqueModelWorkspace> HybridTorqueModel::create_workspace() const {
   auto ws = std::make_unique<LstmWorkspace>();
   ws->state = kernel_.create_state();
-  ws->acceleration = AccelerationFilter(normalization_.acceleration_filter_s, num_joints());
+  init_filters(normalization_, num_joints(), *ws);
   ws->x = Eigen::VectorXf::Zero(normalization_.network_inputs(num_joints()));
   ws->y = Eigen::VectorXf::Zero(num_outputs());
   ws->base_ws = base_->create_workspace();
@@ -559,7 +625,7 @@ std::unique_ptr<TorqueModelWorkspace> HybridTorqueModel::create_workspace() cons
 void HybridTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   auto& ws = static_cast<LstmWorkspace&>(workspace);
   LstmKernel::reset(ws.state);
-  ws.acceleration.reset();
+  reset_filters(ws);
   base_->reset_state(*ws.base_ws);
 }
 
@@ -567,8 +633,7 @@ void HybridTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, 
                                      double* tau) const {
   auto& ws = static_cast<LstmWorkspace&>(workspace);
   base_->compute_step(*ws.base_ws, t, q, qd, tau);
-  if (normalization_.has_acceleration()) ws.acceleration.update(t, qd);
-  normalize_input(normalization_, num_joints(), q, qd, ws.acceleration.values().data(), ws.x.data());
+  compute_network_input(normalization_, num_joints(), ws, t, q, qd);
   kernel_.step(ws.state, ws.x.data(), ws.y.data());
   for (int j = 0; j < num_outputs(); ++j)
     tau[j] += static_cast<double>(ws.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
@@ -586,8 +651,7 @@ Eigen::MatrixXd HybridTorqueModel::predict_sequence(const Eigen::VectorXd& time,
   for (Eigen::Index t = 0; t < time.size(); ++t) {
     q = position.row(t).head(N).transpose();
     qd = velocity.row(t).head(N).transpose();
-    if (normalization_.has_acceleration()) lw.acceleration.update(time[t], qd.data());
-    normalize_input(normalization_, N, q.data(), qd.data(), lw.acceleration.values().data(), lw.x.data());
+    compute_network_input(normalization_, N, lw, time[t], q.data(), qd.data());
     kernel_.step(lw.state, lw.x.data(), lw.y.data());
     for (int j = 0; j < num_outputs(); ++j)
       out(t, j) += static_cast<double>(lw.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];

@@ -44,6 +44,11 @@ struct FitOptions {
   // low-passed with each of these time constants (s), per joint, after the
   // direction features; empty: none. Unset: get_default_acceleration_filters_s.
   std::optional<std::vector<double>> acceleration_filters_s;
+  // lstm and hybrid: Dahl features, one Dahl state per joint and per value f,
+  // with characteristic displacement f x the joint's range of motion over the
+  // training split, after the acceleration features; empty: none. Unset:
+  // get_default_dahl_fractions.
+  std::optional<std::vector<double>> dahl_fractions;
   bool prefer_cuda = true;
 
   // Throws InputError when a value is out of range.
@@ -89,6 +94,12 @@ std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind);
 // trials did not gain from them (docs/dynamics.md, "Acceleration features");
 // none for mlp (memoryless) and linear.
 std::vector<double> get_default_acceleration_filters_s(TorqueModelKind kind);
+// Dahl-feature fractions of the range of motion when FitOptions leaves them
+// unset: {3e-5, 3e-4, 3e-3} for lstm, a decade either side of the model-based
+// fit's usual choice, since the bristle displacement of a real joint is not
+// known in advance; none for hybrid, whose model-based part has its own Dahl
+// state; none for mlp (memoryless) and linear (docs/dynamics.md, "Dahl features").
+std::vector<double> get_default_dahl_fractions(TorqueModelKind kind);
 
 // Splits the recordings, taken one after the other, by time: the first
 // train_fraction of all samples, then validation_fraction, then the rest.

@@ -25,12 +25,22 @@
 // Viscous and Coulomb coefficients are kept >= 0 (active set).
 
 #include <Eigen/Core>
+#include <cmath>
 #include <vector>
 
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/dynamics/torque_model.hpp"
 
 namespace rcm::dynamics {
+
+// The Dahl state above after a displacement dq (joint units) over a characteristic
+// displacement x_c > 0, discretized exactly: rate-independent, so it does not
+// depend on the sample period, and dq = 0 leaves it as it is.
+inline double compute_dahl_state(double z, double dq, double x_c) {
+  if (dq == 0.0) return z;
+  const double s = dq > 0 ? 1.0 : -1.0;
+  return s + (z - s) * std::exp(-std::abs(dq) / x_c);
+}
 
 struct LinearTorqueParameters {
   Eigen::VectorXd gravity;            // 17 shared potential coefficients (joints 1-3)

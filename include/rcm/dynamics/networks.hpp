@@ -59,7 +59,7 @@ std::vector<DenseStack> make_random_mlp_stacks(int inputs, int hidden, int outpu
                                                float stddev = 0.3f);
 
 // Network input: [(q - mean) / scale, (qdot - mean) / scale, tanh(qdot / velocity_tanh_scale),
-// acceleration / acceleration_scale]; output: y = y_normalized * scale + mean.
+// acceleration / acceleration_scale, Dahl states]; output: y = y_normalized * scale + mean.
 struct Normalization {
   Eigen::VectorXf input_mean, input_scale;    // 2 num_joints: [q, qdot]
   Eigen::VectorXf output_mean, output_scale;  // num_outputs
@@ -78,10 +78,20 @@ struct Normalization {
   // (docs/dynamics.md, "Acceleration features").
   Eigen::VectorXf acceleration_filter_s;
   Eigen::VectorXf acceleration_scale;
+  // D x num_joints characteristic displacements x_c (joint units, feature f of
+  // joint k at f * num_joints + k) of Dahl states (DahlFilter), fed unscaled
+  // (they lie in [-1, 1]); empty: none. They exist because the friction at rest
+  // and just after a reversal is set by the direction of the last motion and
+  // the displacement since, a memory over arbitrarily long holds that the LSTM's
+  // state did not learn to keep in a 10-minute fit (docs/dynamics.md, "Dahl
+  // features").
+  Eigen::VectorXf dahl_displacement;
   int network_inputs(int joints) const {
-    return 2 * joints + static_cast<int>(velocity_tanh_scale.size() + acceleration_scale.size());
+    return 2 * joints +
+           static_cast<int>(velocity_tanh_scale.size() + acceleration_scale.size() + dahl_displacement.size());
   }
   bool has_acceleration() const { return acceleration_filter_s.size() > 0; }
+  bool has_dahl() const { return dahl_displacement.size() > 0; }
 };
 
 // The causal acceleration signals behind Normalization::acceleration_*: for each
@@ -109,6 +119,29 @@ class AccelerationFilter {
 // The filter over a whole recording from the reset state: T x (K num_joints).
 Eigen::MatrixXd compute_acceleration_features(const Eigen::VectorXf& filter_s, const Eigen::VectorXd& time,
                                               const Eigen::MatrixXd& velocity, int joints);
+
+// The Dahl states behind Normalization::dahl_displacement: for each displacement
+// x_c and joint, z <- compute_dahl_state(z, q - q_prev, x_c) (linear_model.hpp),
+// starting from z = 0 at the first sample. Position-driven, so time stamps play
+// no part. Sized once; update() does not allocate.
+class DahlFilter {
+ public:
+  DahlFilter() = default;
+  // displacement: D x num_joints positive values, feature f of joint k at f * num_joints + k.
+  DahlFilter(const Eigen::VectorXf& displacement, int joints);
+  void reset();
+  // q: num_joints values; the new states are in values().
+  void update(const double* q);
+  const Eigen::VectorXd& values() const { return z_; }
+
+ private:
+  Eigen::VectorXd x_c_, q_prev_, z_;
+  bool started_ = false;
+};
+
+// The filter over a whole recording from the reset state: T x (D num_joints).
+Eigen::MatrixXd compute_dahl_features(const Eigen::VectorXf& displacement, const Eigen::MatrixXd& position,
+                                      int joints);
 
 // Instruction set of the per-sample kernels: a portable build for the baseline
 // ISA, and an AVX2/FMA build (one translation unit compiled with -mavx2 -mfma)

@@ -41,6 +41,7 @@ Eigen::MatrixXf run_lstm_with_libtorch(const LstmNetwork& network, const Eigen::
 }  // namespace rcm::dynamics
 
 #include <functional>
+#include <string>
 
 namespace rcm::dynamics {
 // For benchmarks: a closure that advances a torch::nn::LSTM (+ head) holding the
@@ -53,4 +54,9 @@ std::function<void(const float* x, float* y)> make_libtorch_lstm_stepper(const L
 void set_libtorch_threads(int threads);
 std::function<void()> make_libtorch_training_step(int inputs, int hidden, int layers, int head_hidden, int outputs,
                                                   int batch, int window);
+// The file (symlinks resolved) whose sgemm_ this process's LibTorch calls, or ""
+// when none is loaded. Which BLAS wins depends on the link order of the whole
+// program: Debian's Ceres once put ATLAS's single-threaded one ahead of OpenBLAS
+// (CMakeLists.txt), which a benchmark without Ceres did not show.
+std::string get_libtorch_blas_library();
 }  // namespace rcm::dynamics

@@ -6,8 +6,11 @@
 #include <torch/script.h>
 #include <torch/torch.h>
 
+#include <dlfcn.h>
+
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <iostream>
 #include <limits>
 #include <random>
@@ -64,7 +67,7 @@ Eigen::VectorXf to_eigen_vector(const torch::Tensor& t) {
 
 // ---------------------------------------------------------------------------- data
 
-// Inputs [q, qdot, direction features, acceleration features] and targets of
+// Inputs [q, qdot, direction, acceleration and Dahl features] and targets of
 // every recording, normalized with statistics of the training split only (no
 // leakage of validation or test statistics).
 struct SequenceData {
@@ -76,11 +79,13 @@ struct SequenceData {
 struct InputFeatures {
   std::vector<double> velocity_tanh_scales;    // multiples of the velocity sd
   std::vector<double> acceleration_filters_s;  // time constants, s
+  std::vector<double> dahl_fractions;          // of each joint's range of motion
 };
 
 InputFeatures resolve_input_features(const FitOptions& o, TorqueModelKind kind) {
   return {o.velocity_tanh_scales.value_or(get_default_velocity_tanh_scales(kind)),
-          o.acceleration_filters_s.value_or(get_default_acceleration_filters_s(kind))};
+          o.acceleration_filters_s.value_or(get_default_acceleration_filters_s(kind)),
+          o.dahl_fractions.value_or(get_default_dahl_fractions(kind))};
 }
 
 SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<Eigen::MatrixXd>& targets,
@@ -128,6 +133,27 @@ SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<
     for (Eigen::Index k = 0; k < K * N; ++k)
       if (!(d.norm.acceleration_scale(k) > 1e-12f)) d.norm.acceleration_scale(k) = 1.0f;  // never accelerated
   }
+  // Dahl features: x_c = fraction x the joint's range over the training split,
+  // the states computed over each whole recording from its start.
+  const auto D = static_cast<Eigen::Index>(features.dahl_fractions.size());
+  std::vector<Eigen::MatrixXd> dahl(recs.size());
+  if (D > 0) {
+    Eigen::VectorXd lo = Eigen::VectorXd::Constant(N, std::numeric_limits<double>::infinity()), hi = -lo;
+    for (const auto& seg : split.train) {
+      const auto block = recs[seg.recording].position.middleRows(seg.begin, seg.size()).leftCols(N);
+      lo = lo.cwiseMin(block.colwise().minCoeff().transpose());
+      hi = hi.cwiseMax(block.colwise().maxCoeff().transpose());
+    }
+    d.norm.dahl_displacement.resize(D * N);
+    for (Eigen::Index f = 0; f < D; ++f)
+      for (int k = 0; k < N; ++k) {
+        const double range = hi(k) - lo(k);
+        // A joint that never moved keeps z = 0 whatever x_c is; any positive value does.
+        d.norm.dahl_displacement(f * N + k) = static_cast<float>(features.dahl_fractions[f] * (range > 0 ? range : 1.0));
+      }
+    for (std::size_t r = 0; r < recs.size(); ++r)
+      dahl[r] = compute_dahl_features(d.norm.dahl_displacement, recs[r].position, N);
+  }
   const int I = d.norm.network_inputs(N);
   for (std::size_t r = 0; r < recs.size(); ++r) {
     const auto T = static_cast<Eigen::Index>(recs[r].num_samples());
@@ -141,6 +167,7 @@ SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<
       x.col(2 * N + f) = (recs[r].velocity.col(f % N).cast<float>().array() / d.norm.velocity_tanh_scale(f)).tanh();
     for (Eigen::Index f = 0; f < K * N; ++f)
       x.col(2 * N + F * N + f) = acceleration[r].col(f).cast<float>().array() / d.norm.acceleration_scale(f);
+    for (Eigen::Index f = 0; f < D * N; ++f) x.col(2 * N + (F + K) * N + f) = dahl[r].col(f).cast<float>();
     for (int j = 0; j < M; ++j)
       y.col(j) = ((targets[r].col(j).array() - mean(2 * N + j)) / sd(2 * N + j)).cast<float>();
     d.x.push_back(to_tensor(x));
@@ -369,6 +396,12 @@ void add_network_warnings(FitSummary& s, std::size_t few) {
         s.train_samples, few));
   if (s.best_epoch <= 2 && s.epochs > 4)
     s.warnings.push_back("validation loss was best in the first epochs: the model did not learn beyond its start");
+  // Debian's reference BLAS (blas/) and ATLAS are single-threaded and train 1.5-25x slower.
+  const std::string blas = get_libtorch_blas_library();
+  if (s.device == "cpu" && (blas.find("atlas") != std::string::npos || blas.find("/blas/") != std::string::npos))
+    s.warnings.push_back(fmt::format("LibTorch calls the BLAS of {}, which is single-threaded and slow; install "
+                                     "libopenblas0-openmp (docs/benchmarks.md, \"BLAS\")",
+                                     blas));
 }
 
 std::vector<Eigen::MatrixXd> effort_targets(const std::vector<Recording>& recs, int M) {
@@ -638,20 +671,26 @@ void export_torchscript(const LstmTorqueModel& model, const std::filesystem::pat
       features += fmt::format(", torch.tanh(qd / self.velocity_tanh_scale[{}:{}])", f * N, (f + 1) * N);
     features += "], 2)\n";
   }
-  // Acceleration features: the AccelerationFilter of networks.hpp at the model's
-  // sample period, its state z = [qdot_prev, a] carried across calls like (h, c);
-  // z0 = None is the reset state.
+  // Acceleration and Dahl features: the AccelerationFilter and DahlFilter of
+  // networks.hpp (the former at the model's sample period), their state
+  // z = [qdot_prev, a, q_prev, z_dahl] (the parts of the features present)
+  // carried across calls like (h, c); z0 = None is the reset state.
   const int K = static_cast<int>(norm.acceleration_filter_s.size());
+  const int D = static_cast<int>(norm.dahl_displacement.size()) / std::max(1, N);
   std::string signature = "x: Tensor, h0: Tensor, c0: Tensor) -> Tuple[Tensor, Tensor, Tensor]";
   std::string result = ", hn, cn";
+  if (K > 0 || D > 0) {
+    signature =
+        "x: Tensor, h0: Tensor, c0: Tensor, z0: Optional[Tensor] = None) -> Tuple[Tensor, Tensor, Tensor, Tensor]";
+    result = fmt::format(", hn, cn, torch.cat([{}], 1)", K > 0 && D > 0 ? "prev, a, qprev, zd"
+                                                         : K > 0       ? "prev, a"
+                                                                       : "qprev, zd");
+  }
   if (K > 0) {
     if (!(model.info().sample_period_s > 0))
       throw std::invalid_argument("TorchScript export: acceleration features need the model's sample period");
     m.register_buffer("acceleration_filter_s", tensor_of(norm.acceleration_filter_s));
     m.register_buffer("acceleration_scale", tensor_of(norm.acceleration_scale));
-    signature =
-        "x: Tensor, h0: Tensor, c0: Tensor, z0: Optional[Tensor] = None) -> Tuple[Tensor, Tensor, Tensor, Tensor]";
-    result = ", hn, cn, torch.cat([prev, a], 1)";
     features += fmt::format(R"JIT(        qd = x[:, :, {0}:{1}]
         dt = self.sample_period_s
         if z0 is None:
@@ -659,7 +698,7 @@ void export_torchscript(const LstmTorqueModel& model, const std::filesystem::pat
             a = torch.zeros(x.size(0), {2}, dtype=x.dtype)
         else:
             prev = z0[:, 0:{0}]
-            a = z0[:, {0}:]
+            a = z0[:, {0}:{4}]
         alpha = (dt / (self.acceleration_filter_s + dt)).repeat_interleave({0})
         acc: List[Tensor] = []
         for t in range(x.size(1)):
@@ -668,7 +707,33 @@ void export_torchscript(const LstmTorqueModel& model, const std::filesystem::pat
             prev = qd[:, t]
         xn = torch.cat([xn, torch.stack(acc, 1) / self.acceleration_scale], 2)
 )JIT",
-                            N, 2 * N, K * N, K);
+                            N, 2 * N, K * N, K, N + K * N);
+  }
+  if (D > 0) {
+    // In double, as DahlFilter: x_c can be a few micrometres on a joint whose
+    // position is tenths of a metre, below float resolution of q differences.
+    m.register_buffer("dahl_displacement", tensor_of(norm.dahl_displacement));
+    const int o = K > 0 ? N + K * N : 0;
+    features += fmt::format(R"JIT(        q = x[:, :, 0:{0}].double()
+        if z0 is None:
+            qprev = q[:, 0]
+            zd = torch.zeros(x.size(0), {3}, dtype=x.dtype).double()
+        else:
+            qprev = z0[:, {1}:{2}].double()
+            zd = z0[:, {2}:].double()
+        xc = self.dahl_displacement.double()
+        dahl: List[Tensor] = []
+        for t in range(x.size(1)):
+            dq = (q[:, t] - qprev).repeat(1, {4})
+            sg = torch.sign(dq)
+            zd = sg + (zd - sg) * torch.exp(-torch.abs(dq) / xc)
+            dahl.append(zd)
+            qprev = q[:, t]
+        xn = torch.cat([xn, torch.stack(dahl, 1).to(x.dtype)], 2)
+        qprev = qprev.to(x.dtype)
+        zd = zd.to(x.dtype)
+)JIT",
+                            N, o, o + N, D * N, D);
   }
   m.register_attribute("head_activations", c10::ListType::ofStrings(), acts);
   m.register_attribute("sample_period_s", c10::FloatType::get(), model.info().sample_period_s);
@@ -747,6 +812,7 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
     norm.acceleration_filter_s = to_eigen_vector(get("acceleration_filter_s"));
     norm.acceleration_scale = to_eigen_vector(get("acceleration_scale"));
   }
+  if (p.count("dahl_displacement")) norm.dahl_displacement = to_eigen_vector(p["dahl_displacement"]);
   try {
     net.check();
   } catch (const std::invalid_argument& e) {
@@ -773,7 +839,9 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   const int64_t T = 50, I = 2 * info.num_joints, H = net.hidden_size(), L = static_cast<int64_t>(net.layers.size());
   // A random walk rather than white noise: white qdot would make accelerations
   // that saturate every gate and hide a filter that differs from the documented one.
-  auto walk = torch::randn({1, T, I}) * 0.05;
+  // Its steps span four decades so that some are comparable to any Dahl
+  // displacement (else every Dahl state would sit at +-1, whatever its x_c).
+  auto walk = torch::randn({1, T, I}) * 0.05 * torch::pow(10.0, -4.0 * torch::rand({1, T, 1}));
   walk.select(1, 0).copy_(torch::randn({1, I}));
   auto x = walk.cumsum(1) * torch::from_blob(norm.input_scale.data(), {I}).clone() +
            torch::from_blob(norm.input_mean.data(), {I}).clone();
@@ -853,6 +921,15 @@ std::function<void(const float*, float*)> make_libtorch_lstm_stepper(const LstmN
 }
 
 void set_libtorch_threads(int threads) { torch::set_num_threads(threads); }
+
+std::string get_libtorch_blas_library() {
+  void* symbol = dlsym(RTLD_DEFAULT, "sgemm_");
+  Dl_info info{};
+  if (symbol == nullptr || dladdr(symbol, &info) == 0 || info.dli_fname == nullptr) return "";
+  std::error_code ec;
+  const auto resolved = std::filesystem::canonical(info.dli_fname, ec);
+  return ec ? std::string(info.dli_fname) : resolved.string();
+}
 
 std::function<void()> make_libtorch_training_step(int inputs, int hidden, int layers, int head_hidden, int outputs,
                                                   int batch, int window) {
