@@ -368,6 +368,36 @@ ReferenceComparison compare_with_reference_input(
   return r;
 }
 
+// The per-joint feature array `key` of the model's normalization, replaced in its
+// file by an array holding a 0 or by one whose count is not a multiple of the 3
+// joints: each must be an InputError naming the file and the field. The bad
+// arrays are borrowed from fields that accept them.
+void expect_bad_feature_arrays_located(const LstmTorqueModel& model, const std::string& key) {
+  Normalization carrier = model.normalization();
+  carrier.input_mean << 0.01f, 0.01f, 0.0f, 0.01f, 0.01f, 0.01f;
+  const auto with_zero = torque_model_to_json(LstmTorqueModel(model.info(), model.network(), carrier))
+      ["parameters"]["normalization"]["input_mean"];
+  const auto five_values =
+      torque_model_to_json(LstmTorqueModel(model.info(), random_lstm(model.network().input_size(), 16, 1, 5, 3, 2),
+                                           model.normalization()))["parameters"]["lstm"]["head"][0]["bias"];
+  const auto good = torque_model_to_json(model);
+  ASSERT_NO_THROW(torque_model_from_json(good, "good.json"));
+  for (const auto& [bad, expect] : {std::pair{with_zero, std::string("positive")},
+                                    std::pair{five_values, std::string("multiple of 3")}}) {
+    auto broken = good;
+    broken["parameters"]["normalization"][key] = bad;
+    try {
+      torque_model_from_json(broken, "broken.json");
+      FAIL() << "expected InputError for " << key << " " << expect;
+    } catch (const rcm::InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("broken.json"), std::string::npos) << what;
+      EXPECT_NE(what.find("parameters.normalization." + key), std::string::npos) << what;
+      EXPECT_NE(what.find(expect), std::string::npos) << what;
+    }
+  }
+}
+
 TEST(DirectionFeatures, NetworkSeesTanhOfVelocityAfterQAndQdot) {
   const TorqueModelInfo info = info3();
   Normalization norm = norm3(Eigen::VectorXf::LinSpaced(6, 0.3f, 0.9f));
@@ -391,29 +421,8 @@ TEST(DirectionFeatures, NetworkSeesTanhOfVelocityAfterQAndQdot) {
   odd.velocity_tanh_scale.setConstant(0.01f);
   EXPECT_THROW(LstmTorqueModel(info, random_lstm(11, 16, 1, 8, 3, 21), odd), std::invalid_argument);
 
-  // In a file: a scale that is not positive, or a count that is not a multiple
-  // of the joints. Encoded arrays are borrowed from fields that accept them.
-  Normalization carrier = norm;
-  carrier.input_mean << 0.01f, 0.01f, 0.0f, 0.01f, 0.01f, 0.01f;
-  const auto zero_scale = torque_model_to_json(LstmTorqueModel(info, net, carrier))["parameters"]["normalization"]["input_mean"];
-  const auto five_values = torque_model_to_json(LstmTorqueModel(info, random_lstm(12, 16, 1, 5, 3, 2), norm))
-                               ["parameters"]["lstm"]["head"][0]["bias"];
-  const auto good = torque_model_to_json(model);
-  ASSERT_NO_THROW(torque_model_from_json(good, "good.json"));
-  for (const auto& [bad, expect] : {std::pair{zero_scale, std::string("positive")},
-                                    std::pair{five_values, std::string("multiple of 3")}}) {
-    auto broken = good;
-    broken["parameters"]["normalization"]["velocity_tanh_scale"] = bad;
-    try {
-      torque_model_from_json(broken, "broken.json");
-      FAIL() << "expected InputError for " << expect;
-    } catch (const rcm::InputError& e) {
-      const std::string what = e.what();
-      EXPECT_NE(what.find("broken.json"), std::string::npos) << what;
-      EXPECT_NE(what.find("parameters.normalization.velocity_tanh_scale"), std::string::npos) << what;
-      EXPECT_NE(what.find(expect), std::string::npos) << what;
-    }
-  }
+  // In a file: a scale that is not positive, or a count that is not a multiple of the joints.
+  expect_bad_feature_arrays_located(model, "velocity_tanh_scale");
 }
 
 TEST(AccelerationFeatures, FilterMatchesItsRecurrenceAndFollowsARamp) {
@@ -631,28 +640,7 @@ TEST(DahlFeatures, NetworkSeesDahlStatesAfterTheAccelerationFeatures) {
   EXPECT_THROW(MlpTorqueModel(info, make_random_mlp_stacks(9, 10, 3, 4), dahl_only), std::invalid_argument);
 
   // In a file: a displacement <= 0, a count that is not a multiple of the joints.
-  const auto good = torque_model_to_json(model);
-  ASSERT_NO_THROW(torque_model_from_json(good, "good.json"));
-  Normalization carrier = norm;
-  carrier.input_mean << 0.01f, 0.01f, 0.0f, 0.01f, 0.01f, 0.01f;
-  const auto with_zero =
-      torque_model_to_json(LstmTorqueModel(info, net, carrier))["parameters"]["normalization"]["input_mean"];
-  const auto five_values = torque_model_to_json(LstmTorqueModel(info, random_lstm(18, 16, 1, 5, 3, 2), norm))
-                               ["parameters"]["lstm"]["head"][0]["bias"];
-  for (const auto& [bad, expect] : {std::pair{with_zero, std::string("positive")},
-                                    std::pair{five_values, std::string("multiple of 3")}}) {
-    auto broken = good;
-    broken["parameters"]["normalization"]["dahl_displacement"] = bad;
-    try {
-      torque_model_from_json(broken, "broken.json");
-      FAIL() << "expected InputError for " << expect;
-    } catch (const rcm::InputError& e) {
-      const std::string what = e.what();
-      EXPECT_NE(what.find("broken.json"), std::string::npos) << what;
-      EXPECT_NE(what.find("parameters.normalization.dahl_displacement"), std::string::npos) << what;
-      EXPECT_NE(what.find(expect), std::string::npos) << what;
-    }
-  }
+  expect_bad_feature_arrays_located(model, "dahl_displacement");
 }
 
 TEST(ModelFile, BadFilesAreLocatedInputErrors) {

@@ -135,7 +135,8 @@ class DahlFilter {
   const Eigen::VectorXd& values() const { return z_; }
 
  private:
-  Eigen::VectorXd x_c_, q_prev_, z_;
+  Eigen::ArrayXd inverse_x_c_, q_prev_, dq_, sign_;
+  Eigen::VectorXd z_;
   bool started_ = false;
 };
 
