@@ -450,7 +450,7 @@ torch.jit.script(m).save(sys.argv[1])
 
 // Training speed rests on which BLAS LibTorch's sgemm_ binds to in a program
 // linked like the rcm CLI (Ceres, SuiteSparse and LibTorch together): OpenBLAS,
-// not ATLAS's or the reference single-threaded one (CMakeLists.txt).
+// not ATLAS's or the reference single-threaded one (cmake/rcm_blas.cmake).
 TEST(LibTorchBlas, IsOpenBlasInAProgramLinkedLikeTheCli) {
   const std::string blas = get_libtorch_blas_library();
   ASSERT_FALSE(blas.empty());

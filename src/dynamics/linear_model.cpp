@@ -371,7 +371,8 @@ class JointCandidateStats {
       };
       for (Eigen::Index t = 0; t < seg.end; ++t) {
         if (t > 0)
-          for (int k = 0; k < K_; ++k) z[k] = compute_dahl_state(z[k], rec.position(t, j) - rec.position(t - 1, j), x_c[k]);
+          for (int k = 0; k < K_; ++k)
+            z[k] = compute_dahl_state(z[k], rec.position(t, j) - rec.position(t - 1, j), x_c[k]);
         for (int a = 0; a < causal; ++a) estimators[a].update(rec.time(t), rec.velocity(t, j));
         if (t < seg.begin) continue;
         if (j < 3) {

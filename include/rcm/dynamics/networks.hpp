@@ -121,7 +121,8 @@ Eigen::MatrixXd compute_acceleration_features(const Eigen::VectorXf& filter_s, c
                                               const Eigen::MatrixXd& velocity, int joints);
 
 // The Dahl states behind Normalization::dahl_displacement: for each displacement
-// x_c and joint, z <- compute_dahl_state(z, q - q_prev, x_c) (linear_model.hpp),
+// x_c and joint, z <- compute_dahl_state(z, q - q_prev, x_c) (linear_model.hpp;
+// computed vectorized, equal to it within rounding),
 // starting from z = 0 at the first sample. Position-driven, so time stamps play
 // no part. Sized once; update() does not allocate.
 class DahlFilter {

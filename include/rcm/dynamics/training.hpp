@@ -57,6 +57,6 @@ std::function<void()> make_libtorch_training_step(int inputs, int hidden, int la
 // The file (symlinks resolved) whose sgemm_ this process's LibTorch calls, or ""
 // when none is loaded. Which BLAS wins depends on the link order of the whole
 // program: Debian's Ceres once put ATLAS's single-threaded one ahead of OpenBLAS
-// (CMakeLists.txt), which a benchmark without Ceres did not show.
+// (cmake/rcm_blas.cmake), which a benchmark without Ceres did not show.
 std::string get_libtorch_blas_library();
 }  // namespace rcm::dynamics

@@ -149,7 +149,8 @@ SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<
       for (int k = 0; k < N; ++k) {
         const double range = hi(k) - lo(k);
         // A joint that never moved keeps z = 0 whatever x_c is; any positive value does.
-        d.norm.dahl_displacement(f * N + k) = static_cast<float>(features.dahl_fractions[f] * (range > 0 ? range : 1.0));
+        d.norm.dahl_displacement(f * N + k) =
+            static_cast<float>(features.dahl_fractions[f] * (range > 0 ? range : 1.0));
       }
     for (std::size_t r = 0; r < recs.size(); ++r)
       dahl[r] = compute_dahl_features(d.norm.dahl_displacement, recs[r].position, N);
@@ -396,7 +397,7 @@ void add_network_warnings(FitSummary& s, std::size_t few) {
         s.train_samples, few));
   if (s.best_epoch <= 2 && s.epochs > 4)
     s.warnings.push_back("validation loss was best in the first epochs: the model did not learn beyond its start");
-  // Debian's reference BLAS (blas/) and ATLAS are single-threaded and train 1.5-25x slower.
+  // Debian's reference BLAS (blas/) and ATLAS are single-threaded and train 2.6-25x slower.
   const std::string blas = get_libtorch_blas_library();
   if (s.device == "cpu" && (blas.find("atlas") != std::string::npos || blas.find("/blas/") != std::string::npos))
     s.warnings.push_back(fmt::format("LibTorch calls the BLAS of {}, which is single-threaded and slow; install "
