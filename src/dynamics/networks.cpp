@@ -314,7 +314,8 @@ void DahlFilter::update(const double* q) {
   const Eigen::Index N = q_prev_.size();
   const Eigen::Map<const Eigen::ArrayXd> q_now(q, N);
   if (started_ && z_.size() > 0) {
-    for (Eigen::Index f = 0; f < z_.size() / N; ++f) dq_.segment(f * N, N) = q_now - q_prev_;
+    dq_.head(N) = q_now - q_prev_;  // the same displacement drives every x_c of a joint
+    for (Eigen::Index f = 1; f < z_.size() / N; ++f) dq_.segment(f * N, N) = dq_.head(N);
     // compute_dahl_state for every state at once with Eigen's vectorized exp
     // (scalar std::exp cost 0.3 us of the 4.9 us default step); dq = 0 gives
     // sign 0 and a factor 1, so a joint at rest keeps its state as there.
