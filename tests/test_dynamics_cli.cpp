@@ -3,7 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -45,8 +47,21 @@ TEST(DynamicsCli, FitLinearThenEvalJson) {
   EXPECT_EQ(j["joints"][0]["index"], 1);
   EXPECT_GT(j["joints"][2]["nrmse_percent"].get<double>(), 0.0);
   EXPECT_LT(j["joints"][2]["nrmse_percent"].get<double>(), 10.0);
+  EXPECT_EQ(j["mode"], "batch");
   const auto table = run("dynamics eval " + model + " " + (dir / "free.csv").string());
   EXPECT_NE(table.out.find("NRMSE"), std::string::npos);
+  EXPECT_NE(table.out.find("batch (offline)"), std::string::npos) << table.out;
+  // Streaming: compute_step sample by sample, causal; the linear model's offline
+  // qddot uses later samples (zero phase), so the two must differ.
+  const auto st = run("dynamics eval " + model + " " + (dir / "free.csv").string() + " --streaming --json");
+  ASSERT_EQ(st.status, 0) << st.out;
+  const auto js = nlohmann::json::parse(st.out);
+  EXPECT_EQ(js["mode"], "streaming");
+  double max_change = 0;
+  for (int k = 0; k < 3; ++k)
+    max_change = std::max(max_change, std::abs(js["joints"][k]["rmse"].get<double>() -
+                                               j["joints"][k]["rmse"].get<double>()));
+  EXPECT_GT(max_change, 1e-9);
   EXPECT_NE(run("dynamics fit --model svm --out x.json " + (dir / "free.csv").string()).status, 0);
   EXPECT_NE(run("dynamics eval " + model + " " + (dir / "missing.csv").string()).status, 0);
   for (const char* bad : {"0.01,abc", "0.01,-0.1", "0.01,,0.1", "0", "''"}) {
@@ -63,8 +78,15 @@ TEST(DynamicsCli, FitLinearThenEvalJson) {
     EXPECT_NE(r.status, 0) << bad;
     EXPECT_NE(r.out.find("--acceleration-features"), std::string::npos) << r.out;
   }
+  for (const char* bad : {"1.5", "-0.1", "nan", "abc"}) {
+    const auto r = run("dynamics fit --model lstm --loss-balance " + std::string(bad) + " --out " + model + " " +
+                           (dir / "free.csv").string(),
+                       true);
+    EXPECT_NE(r.status, 0) << bad;
+    EXPECT_NE(r.out.find("--loss-balance"), std::string::npos) << r.out;
+  }
   // Only the recurrent kinds read them: asking the others is an error, not ignored.
-  for (const char* flag : {"--acceleration-features 0.03", "--direction-features 0.1"}) {
+  for (const char* flag : {"--acceleration-features 0.03", "--direction-features 0.1", "--loss-balance 0.5"}) {
     const auto r = run("dynamics fit --model linear " + std::string(flag) + " --out " + model + " " +
                            (dir / "free.csv").string(),
                        true);

@@ -177,6 +177,42 @@ TEST(Metrics, ReferenceValues) {
   EXPECT_THROW(compute_torque_errors(measured, predicted.topRows(3)), std::invalid_argument);
 }
 
+TEST(LossBalance, PowerMeanReferenceValues) {
+  Eigen::ArrayXd mse(3);
+  mse << 4.0, 1.0, 0.25;
+  EXPECT_NEAR(compute_balanced_loss(mse, 0.0), 5.25 / 3.0, 1e-15);  // the mean
+  EXPECT_NEAR(compute_balanced_loss(mse, 1.0), 1.0, 1e-15);         // the geometric mean
+  EXPECT_NEAR(compute_balanced_loss(mse, 0.5), std::pow(3.5 / 3.0, 2), 1e-15);
+  // Scaling every joint's error scales the score alike, whatever p.
+  for (const double p : {0.0, 0.3, 0.5, 1.0})
+    EXPECT_NEAR(compute_balanced_loss(9.0 * mse, p), 9.0 * compute_balanced_loss(mse, p), 1e-12);
+  // A joint predicted exactly leaves a finite, positive geometric mean.
+  mse(1) = 0.0;
+  EXPECT_GT(compute_balanced_loss(mse, 1.0), 0.0);
+  EXPECT_THROW(compute_balanced_loss(Eigen::ArrayXd(0), 0.5), std::invalid_argument);
+}
+
+// What makes the running-mean training loss the right one for this score: the
+// score's sensitivity to joint j is proportional to mse_j^-p (central
+// differences against that claim).
+TEST(LossBalance, ScoreGradientWeighsJointsByTheirMseToThePowerMinusP) {
+  Eigen::ArrayXd mse(3);
+  mse << 0.07, 7e-4, 6e-4;
+  for (const double p : {0.0, 0.5, 1.0}) {
+    Eigen::ArrayXd grad(3);
+    for (int j = 0; j < 3; ++j) {
+      const double h = 1e-6 * mse(j);
+      Eigen::ArrayXd up = mse, down = mse;
+      up(j) += h;
+      down(j) -= h;
+      grad(j) = (compute_balanced_loss(up, p) - compute_balanced_loss(down, p)) / (2 * h);
+    }
+    for (int j = 1; j < 3; ++j)
+      EXPECT_NEAR(grad(j) / grad(0), std::pow(mse(j) / mse(0), -p), 1e-6 * std::pow(mse(j) / mse(0), -p))
+          << "p " << p << ", joint " << j + 1;
+  }
+}
+
 TEST(Split, TimeOrderedWithoutOverlap) {
   std::vector<rcm::Recording> recs(2);
   recs[0].time = Eigen::VectorXd::LinSpaced(100, 0, 99);

@@ -336,6 +336,57 @@ TEST(DahlFeatures, FractionsOfTheRangeReachLstmAndHybridNotMlp) {
   EXPECT_THROW(fit_lstm_torque_model({rec}, o), rcm::InputError);
 }
 
+TEST(LossBalance, DefaultsAndRange) {
+  auto o = tiny_options();
+  o.max_epochs = 1;
+  const auto& rec = synthetic_minute();
+  const auto lstm = fit_lstm_torque_model({rec}, o);
+  EXPECT_EQ(lstm.summary.loss_balance, 0.5);
+  EXPECT_EQ(lstm.summary.to_json()["loss_balance"], 0.5);
+  EXPECT_EQ(lstm.model->info().training["loss_balance"], 0.5);
+  EXPECT_EQ(fit_hybrid_torque_model({rec}, o).summary.loss_balance, 0.0);
+  o.loss_balance = 1.0;
+  EXPECT_EQ(fit_hybrid_torque_model({rec}, o).summary.loss_balance, 1.0);
+  for (const double bad : {-0.1, 1.5, std::nan("")}) {
+    o.loss_balance = bad;
+    EXPECT_THROW(fit_lstm_torque_model({rec}, o), rcm::InputError) << bad;
+  }
+}
+
+// The score early stopping keeps is compute_balanced_loss of the per-joint
+// normalized MSE over the validation pieces (2000 samples after burn_in samples
+// of context, the state fresh), recomputed here with the Eigen kernel.
+TEST(LossBalance, ValidationScoreIsTheBalancedLossOfTheValidationPieces) {
+  const auto& rec = synthetic_minute();
+  auto o = tiny_options();
+  o.max_epochs = 3;
+  // Memoryless features, so that a piece cut out of the recording sees the same inputs.
+  o.acceleration_filters_s = std::vector<double>{};
+  o.dahl_fractions = std::vector<double>{};
+  const auto split = split_in_time({rec}, o.train_fraction, o.validation_fraction);
+  ASSERT_EQ(split.validation.size(), 1u);
+  const Eigen::Index b = split.validation[0].begin, piece = 2000, context = o.burn_in;
+  ASSERT_LT(b + piece, split.validation[0].end);
+  ASSERT_GE(b + 2 * piece, split.validation[0].end);  // exactly one piece
+  for (const double p : {0.0, 1.0}) {
+    o.loss_balance = p;
+    const auto fit = fit_lstm_torque_model({rec}, o);
+    const auto& norm = static_cast<const LstmTorqueModel&>(*fit.model).normalization();
+    const Eigen::MatrixXd pred =
+        predict_torque(*fit.model, rec.time.segment(b - context, piece + context),
+                       rec.position.middleRows(b - context, piece + context),
+                       rec.velocity.middleRows(b - context, piece + context))
+            .bottomRows(piece);
+    Eigen::ArrayXd mse(3);
+    for (int j = 0; j < 3; ++j)
+      mse(j) = ((pred.col(j) - rec.effort.col(j).segment(b, piece)).array() / norm.output_scale(j)).square().mean();
+    EXPECT_NEAR(fit.summary.best_validation_loss, compute_balanced_loss(mse, p),
+                1e-4 * fit.summary.best_validation_loss)
+        << "p " << p;
+    EXPECT_GT(std::abs(compute_balanced_loss(mse, 1.0 - p) / compute_balanced_loss(mse, p) - 1.0), 1e-3);
+  }
+}
+
 TEST(FitWarnings, ShortDataSaysTooFewToTrust) {
   rcm::test::SyntheticArmOptions so;
   so.duration_s = 40;

@@ -30,6 +30,7 @@ struct DynamicsArgs {
   unsigned seed = 1;
   bool dedupe = false;
   bool json = false;
+  bool streaming = false;
   std::string model_path;
   double max_minutes = 10.0;
   int hidden = 0, layers = 0, max_epochs = 300, threads = 2, window = 0, streams = 0;
@@ -37,6 +38,7 @@ struct DynamicsArgs {
   std::optional<std::string> direction_features;     // unset: the kind's default
   std::optional<std::string> acceleration_features;  // unset: the kind's default
   std::optional<std::string> dahl_features;          // unset: the kind's default
+  std::optional<double> loss_balance;                // unset: the kind's default
   std::string torchscript_out, torchscript_in, predictions;
 };
 
@@ -82,6 +84,14 @@ void run_fit(const DynamicsArgs& a) {
   if (a.acceleration_features)
     o.acceleration_filters_s = parse_feature_list(*a.acceleration_features, "--acceleration-features", kind);
   if (a.dahl_features) o.dahl_fractions = parse_feature_list(*a.dahl_features, "--dahl-features", kind);
+  if (a.loss_balance) {
+    if (kind != TorqueModelKind::lstm && kind != TorqueModelKind::hybrid)
+      throw rcm::InputError(rcm::cli::flag_location("--loss-balance"), "is for --model lstm or hybrid only");
+    if (!(*a.loss_balance >= 0 && *a.loss_balance <= 1))
+      throw rcm::InputError(rcm::cli::flag_location("--loss-balance"),
+                            fmt::format("expected a value in [0, 1], got {}", *a.loss_balance));
+    o.loss_balance = a.loss_balance;
+  }
   const auto recs = load_all(a.recordings, a.dedupe);
   FitResult fit;
 #if defined(RCM_HAVE_TORCH)
@@ -124,7 +134,8 @@ void run_eval(const DynamicsArgs& a) {
     if (auto w = check_sample_period(*model, r); !w.empty()) warnings.push_back(w);
   }
   for (const auto& w : warnings) std::cerr << "warning: " << w << "\n";
-  const auto errors = evaluate_torque_model(*model, recs);
+  const auto mode = a.streaming ? PredictionMode::streaming : PredictionMode::batch;
+  const auto errors = evaluate_torque_model(*model, recs, 0.0, mode);
   if (!a.predictions.empty()) {
     // recording index, time, predicted and measured torque of every output joint.
     std::string csv = "recording,time";
@@ -132,7 +143,7 @@ void run_eval(const DynamicsArgs& a) {
     for (int j = 1; j <= model->num_outputs(); ++j) csv += fmt::format(",effort_{}", j);
     csv += "\n";
     for (std::size_t r = 0; r < recs.size(); ++r) {
-      const Eigen::MatrixXd p = predict_torque(*model, recs[r]);
+      const Eigen::MatrixXd p = predict_torque(*model, recs[r], mode);
       for (Eigen::Index t = 0; t < p.rows(); ++t) {
         csv += fmt::format("{},{}", r + 1, recs[r].time(t));
         for (int j = 0; j < model->num_outputs(); ++j) csv += fmt::format(",{}", p(t, j));
@@ -145,6 +156,7 @@ void run_eval(const DynamicsArgs& a) {
   if (a.json) {
     auto j = to_json(errors);
     j["model"] = {{"kind", to_string(model->kind())}, {"path", a.model_path}};
+    j["mode"] = a.streaming ? "streaming" : "batch";
     j["warnings"] = warnings;
     rcm::cli::print_json(j);
     return;
@@ -153,7 +165,8 @@ void run_eval(const DynamicsArgs& a) {
   for (const auto& e : errors)
     rows.push_back({std::to_string(e.index), fmt::format("{:.4g}", e.rmse), fmt::format("{:.2f}", e.nrmse_percent),
                     fmt::format("{:.4g}", e.range)});
-  std::cout << "model: " << to_string(model->kind()) << " (" << a.model_path << ")\n"
+  std::cout << "model: " << to_string(model->kind()) << " (" << a.model_path << "), "
+            << (a.streaming ? "streaming (causal, as live)" : "batch (offline)") << "\n"
             << rcm::cli::format_table({"joint", "RMSE", "NRMSE %", "range"}, rows);
 }
 
@@ -191,6 +204,10 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
                   "lstm, hybrid: extra inputs, Dahl friction states of each joint with characteristic "
                   "displacement f x its range of motion for each f of this comma-separated list, or 'none' "
                   "(default: 3e-5,3e-4,3e-3 for lstm, none for hybrid)");
+  fit->add_option("--loss-balance", args->loss_balance,
+                  "lstm, hybrid: p in [0, 1]; each joint's error in the training loss is divided by its running "
+                  "mean to the power p (0: plain mean over joints, 1: equal weight to every joint's relative "
+                  "improvement; default: 0.5 for lstm, 0 for hybrid)");
   fit->add_option("--threads", args->threads, "LibTorch intra-op threads (default 2)");
   fit->add_option("--max-epochs", args->max_epochs, "epoch limit (early stopping usually ends sooner)");
 #if defined(RCM_HAVE_TORCH)
@@ -204,6 +221,9 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   ev->add_option("model", args->model_path, "model file")->required();
   ev->add_option("recordings", args->recordings, "recordings (CSV)")->required();
   ev->add_option("--predictions", args->predictions, "also write the predicted torque of every sample to this CSV");
+  ev->add_flag("--streaming", args->streaming,
+               "run the model one sample at a time, causally, as the live robot does (default: the offline "
+               "estimate, where linear and hybrid may take qddot from later samples)");
   ev->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   ev->add_flag("--json", args->json, "print {\"joints\": [{\"index\", \"rmse\", \"nrmse_percent\"}]}");
   ev->callback([args] { run_eval(*args); });

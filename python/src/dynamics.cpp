@@ -162,7 +162,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
         "Same from arrays: time (T,), position and velocity (T, N >= model.num_joints)");
   d.def("predict_torque_streaming", [](const TorqueModel& model, const Recording& rec) {
     py::gil_scoped_release release;
-    return predict_torque_streaming(model, rec.time, rec.position, rec.velocity);
+    return predict_torque_streaming(model, rec);
   }, py::arg("model"), py::arg("recording"),
         "compute_step() on every sample from the reset state (causal whatever the model), (T, num_outputs)");
   d.def("predict_torque_streaming", [](const TorqueModel& model, py::handle time, py::handle position, py::handle velocity) {
@@ -227,12 +227,14 @@ void bind_dynamics(py::module_& m, py::module_& d) {
     const Eigen::MatrixXd b = to_matrix(predicted, argument_location(fn, "predicted"), a.rows(), a.cols());
     return compute_torque_errors(a, b);
   }, py::arg("measured"), py::arg("predicted"), "Per-joint RMSE / NRMSE of two (T, M) arrays");
-  d.def("evaluate_torque_model", [](const TorqueModel& model, const std::vector<Recording>& recordings, double first_fraction) {
+  d.def("evaluate_torque_model", [](const TorqueModel& model, const std::vector<Recording>& recordings, double first_fraction,
+                                    bool streaming) {
     py::gil_scoped_release release;
-    return evaluate_torque_model(model, recordings, first_fraction);
-  }, py::arg("model"), py::arg("recordings"), py::arg("first_fraction") = 0.0,
+    return evaluate_torque_model(model, recordings, first_fraction,
+                                 streaming ? PredictionMode::streaming : PredictionMode::batch);
+  }, py::arg("model"), py::arg("recordings"), py::arg("first_fraction") = 0.0, py::arg("streaming") = false,
         "Run over every recording (reset at each start) and score samples from first_fraction of each on\n"
-        "(what `rcm dynamics eval` reports)");
+        "(what `rcm dynamics eval` reports; streaming=True: predict_torque_streaming, as `--streaming`)");
 }
 
 }  // namespace rcm::python

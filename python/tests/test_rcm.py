@@ -344,6 +344,16 @@ class TestDynamics(unittest.TestCase):
             self.assertEqual(e.index, c["index"])
             self.assertAlmostEqual(e.rmse / c["rmse"], 1.0, places=12)
             self.assertAlmostEqual(e.nrmse_percent / c["nrmse_percent"], 1.0, places=12)
+        cli_streaming = run_cli("dynamics", "eval", _state["model_path"], session_file("free_space.csv"), "--json",
+                                "--streaming")
+        self.assertEqual(cli_streaming["mode"], "streaming")
+        streaming = rcm.dynamics.evaluate_torque_model(self.model(), [_state["free"]], streaming=True)
+        for e, c in zip(streaming, cli_streaming["joints"]):
+            self.assertAlmostEqual(e.rmse / c["rmse"], 1.0, places=12)
+        measured = _state["free"].effort[:, :3]
+        streamed = rcm.dynamics.predict_torque_streaming(self.model(), _state["free"])
+        for e, k in zip(streaming, range(3)):
+            self.assertAlmostEqual(e.rmse, float(np.sqrt(np.mean((streamed[:, k] - measured[:, k]) ** 2))), places=12)
         # The held-out split of the fit: the linear model's accuracy on the bench.
         summary = _state["fit"].summary
         self.assertEqual([e.index for e in summary.test_errors], [1, 2, 3])

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "rcm/common/error.hpp"
 
@@ -37,6 +38,8 @@ void FitOptions::check() const {
   if (dahl_fractions)
     for (const double f : *dahl_fractions)
       if (!(f > 0) || !std::isfinite(f)) bad_option("dahl_fractions", "expected positive finite values");
+  if (loss_balance && !(*loss_balance >= 0 && *loss_balance <= 1))
+    bad_option("loss_balance", "expected a value in [0, 1]");
 }
 
 std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind) {
@@ -52,6 +55,17 @@ std::vector<double> get_default_acceleration_filters_s(TorqueModelKind kind) {
 std::vector<double> get_default_dahl_fractions(TorqueModelKind kind) {
   if (kind == TorqueModelKind::lstm) return {3e-5, 3e-4, 3e-3};
   return {};
+}
+
+double get_default_loss_balance(TorqueModelKind kind) { return kind == TorqueModelKind::lstm ? 0.5 : 0.0; }
+
+double compute_balanced_loss(const Eigen::Ref<const Eigen::ArrayXd>& per_joint_mse, double p) {
+  if (per_joint_mse.size() == 0) throw std::invalid_argument("compute_balanced_loss: no joints");
+  // A joint predicted exactly would make the geometric mean 0 whatever the others do.
+  const Eigen::ArrayXd mse = per_joint_mse.max(1e-300);
+  const double order = 1.0 - p;
+  if (std::abs(order) < 1e-9) return std::exp(mse.log().mean());
+  return std::pow(mse.pow(order).mean(), 1.0 / order);
 }
 
 TimeSplit split_in_time(const std::vector<Recording>& recordings, double train_fraction,
@@ -127,6 +141,7 @@ nlohmann::json FitSummary::to_json() const {
   j["epochs"] = epochs;
   j["best_epoch"] = best_epoch;
   j["best_validation_loss"] = best_validation_loss;
+  if (kind == TorqueModelKind::lstm || kind == TorqueModelKind::hybrid) j["loss_balance"] = loss_balance;
   j["seconds"] = seconds;
   j["device"] = device;
   j["test"] = rcm::dynamics::to_json(test_errors)["joints"];

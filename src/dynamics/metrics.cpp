@@ -26,7 +26,7 @@ std::vector<JointTorqueError> compute_torque_errors(const Eigen::MatrixXd& measu
 
 std::vector<JointTorqueError> evaluate_torque_model(const TorqueModel& model,
                                                     const std::vector<Recording>& recordings,
-                                                    double first_fraction) {
+                                                    double first_fraction, PredictionMode mode) {
   Eigen::Index total = 0;
   std::vector<Eigen::Index> start(recordings.size());
   for (std::size_t r = 0; r < recordings.size(); ++r) {
@@ -38,7 +38,7 @@ std::vector<JointTorqueError> evaluate_torque_model(const TorqueModel& model,
   Eigen::MatrixXd measured(total, M), predicted(total, M);
   Eigen::Index row = 0;
   for (std::size_t r = 0; r < recordings.size(); ++r) {
-    const Eigen::MatrixXd p = predict_torque(model, recordings[r]);
+    const Eigen::MatrixXd p = predict_torque(model, recordings[r], mode);
     const Eigen::Index n = p.rows() - start[r];
     predicted.middleRows(row, n) = p.bottomRows(n);
     measured.middleRows(row, n) = recordings[r].effort.leftCols(M).bottomRows(n);

@@ -233,14 +233,30 @@ Eigen::MatrixXd TorqueModel::predict_sequence(const Eigen::VectorXd& time, const
   return predict_torque_streaming(*this, time, position, velocity);
 }
 
-Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording) {
+namespace {
+void check_recording_joints(const TorqueModel& model, const Recording& recording) {
   if (recording.num_joints() < model.num_joints()) {
     InputLocation where;
     where.file = recording.source;
     throw InputError(where, fmt::format("the model reads {} joints, the recording has {}", model.num_joints(),
                                         recording.num_joints()));
   }
+}
+}  // namespace
+
+Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording) {
+  check_recording_joints(model, recording);
   return predict_torque(model, recording.time, recording.position, recording.velocity);
+}
+
+Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Recording& recording) {
+  check_recording_joints(model, recording);
+  return predict_torque_streaming(model, recording.time, recording.position, recording.velocity);
+}
+
+Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording, PredictionMode mode) {
+  return mode == PredictionMode::streaming ? predict_torque_streaming(model, recording)
+                                           : predict_torque(model, recording);
 }
 
 std::string check_sample_period(const TorqueModel& model, const Recording& recording) {

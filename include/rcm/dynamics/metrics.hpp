@@ -6,11 +6,11 @@
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "rcm/dynamics/torque_model.hpp"
 #include "rcm/io/recording.hpp"
 
 namespace rcm::dynamics {
 
-class TorqueModel;
 
 struct JointTorqueError {
   int index = 0;               // 1-based joint number
@@ -23,11 +23,13 @@ struct JointTorqueError {
 std::vector<JointTorqueError> compute_torque_errors(const Eigen::MatrixXd& measured,
                                                     const Eigen::MatrixXd& predicted);
 
-// Runs the model over every recording (state reset at each start) and pools the
-// samples of all recordings, from `first_fraction` of each recording on (0 = all).
+// Runs the model over every recording (state reset at each start; predict_torque
+// or, in streaming mode, predict_torque_streaming) and pools the samples of all
+// recordings, from `first_fraction` of each recording on (0 = all).
 std::vector<JointTorqueError> evaluate_torque_model(const TorqueModel& model,
                                                     const std::vector<Recording>& recordings,
-                                                    double first_fraction = 0.0);
+                                                    double first_fraction = 0.0,
+                                                    PredictionMode mode = PredictionMode::batch);
 
 // {"joints": [{"index": 1, "rmse": r, "nrmse_percent": p}, ...]} (cli.md).
 nlohmann::json to_json(const std::vector<JointTorqueError>& errors);

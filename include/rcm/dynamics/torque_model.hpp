@@ -93,6 +93,11 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& 
 // samples). Same size checks.
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::VectorXd& time,
                                          const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);
+Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Recording& recording);
+
+// Which of the two above a caller wants: the offline estimate or the live one.
+enum class PredictionMode { batch, streaming };
+Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording, PredictionMode mode);
 
 // Model files: one JSON document, "format": "rcm-torque-model/1"; weights as
 // base64 little-endian arrays so that save -> load is bit-exact.

@@ -256,6 +256,34 @@ struct EarlyStopping {
   bool should_stop(const FitOptions& o) const { return since_best >= o.patience; }
 };
 
+// Per-joint sums of squared errors over an epoch, scored by compute_balanced_loss.
+struct JointSquaredErrors {
+  Eigen::ArrayXd sum;
+  double count = 0;
+  explicit JointSquaredErrors(int M) : sum(Eigen::ArrayXd::Zero(M)) {}
+  void add(const torch::Tensor& per_joint_sum, std::int64_t n) {
+    const auto s = per_joint_sum.to(torch::kCPU, torch::kFloat64).contiguous();
+    sum += Eigen::Map<const Eigen::ArrayXd>(s.data_ptr<double>(), sum.size());
+    count += static_cast<double>(n);
+  }
+  double get_balanced_loss(double p) const { return compute_balanced_loss(sum / std::max(1.0, count), p); }
+};
+
+// The training loss of FitOptions::loss_balance: mean_j mse_j / m_j^p, with m_j a
+// running mean of joint j's batch MSE over about 50 batches (an epoch of the
+// default fit is 40), held out of the gradient.
+struct LossBalance {
+  double power;
+  torch::Tensor running_mse;
+  explicit LossBalance(double p) : power(p) {}
+  torch::Tensor compute_loss(const torch::Tensor& mse) {
+    if (power == 0.0) return mse.mean();
+    const auto m = mse.detach().clamp_min(1e-12);
+    running_mse = running_mse.defined() ? 0.98 * running_mse + 0.02 * m : m;
+    return (mse / running_mse.pow(power)).mean();
+  }
+};
+
 struct LstmShape {
   int hidden, layers, window, streams;
   double weight_decay;
@@ -287,10 +315,11 @@ struct LstmTrainResult {
 };
 
 LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int N, int M, const FitOptions& o,
-                           const LstmShape& shape, torch::Device device, Clock::time_point t0,
-                           const char* label) {
+                           const LstmShape& shape, double balance_power, torch::Device device,
+                           Clock::time_point t0, const char* label) {
   const int W = shape.window;
   LstmNet net(data.norm.network_inputs(N), shape.hidden, shape.layers, o.head_hidden, M);
+  LossBalance balance(balance_power);
   net->to(device);
   torch::optim::Adam opt(net->parameters(),
                          torch::optim::AdamOptions(o.learning_rate).weight_decay(shape.weight_decay));
@@ -322,7 +351,7 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
   auto validate = [&]() {
     torch::NoGradGuard guard;
     net->eval();
-    double sum = 0, count = 0;
+    JointSquaredErrors err(M);
     std::size_t k = 0;
     while (k < vx.size()) {
       std::size_t e = k;
@@ -330,12 +359,11 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
       auto x = torch::stack(std::vector<torch::Tensor>(vx.begin() + k, vx.begin() + e)).to(device);
       auto y = torch::stack(std::vector<torch::Tensor>(vy.begin() + k, vy.begin() + e)).to(device);
       auto pred = net->forward(x, c10::nullopt).first.slice(1, o.burn_in);
-      sum += (pred - y).pow(2).sum().item<double>();
-      count += static_cast<double>(y.numel());
+      err.add((pred - y).pow(2).sum(torch::IntArrayRef{0, 1}), y.size(0) * y.size(1));
       k = e;
     }
     net->train();
-    return sum / count;
+    return err.get_balanced_loss(balance.power);
   };
 
   EarlyStopping stop(o.learning_rate);
@@ -353,26 +381,27 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
     if (sx.empty()) throw std::invalid_argument(fmt::format("{}: no training stream fits", label));
     auto X = torch::stack(sx).to(device), Y = torch::stack(sy).to(device);
     c10::optional<std::tuple<torch::Tensor, torch::Tensor>> state;
-    double train_sum = 0, train_count = 0;
+    JointSquaredErrors train_err(M);
     for (Eigen::Index c = 0; c + W <= piece_len; c += W) {
       auto x = X.slice(1, c, c + W), y = Y.slice(1, c, c + W);
       auto [pred, st] = net->forward(x, state);
       state = std::make_tuple(std::get<0>(st).detach(), std::get<1>(st).detach());
       const Eigen::Index skip = std::max<Eigen::Index>(0, std::min<Eigen::Index>(W, o.burn_in - c));
       if (skip >= W) continue;  // still warming up the state
-      auto loss = torch::mse_loss(pred.slice(1, skip), y.slice(1, skip));
+      auto mse = (pred.slice(1, skip) - y.slice(1, skip)).pow(2).mean(torch::IntArrayRef{0, 1});
+      auto loss = balance.compute_loss(mse);
       opt.zero_grad();
       loss.backward();
       torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
       opt.step();
-      train_sum += loss.item<double>();
-      train_count += 1;
+      train_err.add(mse.detach(), 1);
     }
     const double val = validate();
     if (stop.update(val, epoch, o, opt)) best_params = clone_parameters(*net);
     if (o.verbose)
       std::cerr << fmt::format("[{}] epoch {:3d}  train {:.5f}  validation {:.5f}  lr {:.1e}  {:.0f} s\n", label,
-                               epoch, train_sum / std::max(1.0, train_count), val, stop.lr, seconds_since(t0));
+                               epoch, train_err.get_balanced_loss(balance.power), val, stop.lr,
+                               seconds_since(t0));
     if (stop.should_stop(o)) break;
     if (seconds_since(t0) > 60.0 * o.max_minutes) {
       if (o.verbose) std::cerr << fmt::format("[{}] time budget of {} min reached\n", label, o.max_minutes);
@@ -466,10 +495,12 @@ FitResult fit_lstm_torque_model(const std::vector<Recording>& recs, const FitOpt
   const SequenceData data =
       prepare_data(recs, effort_targets(recs, M), split, N, M, resolve_input_features(o, TorqueModelKind::lstm));
   const LstmShape shape = choose_shape(o, summary.train_samples);
+  summary.loss_balance = o.loss_balance.value_or(get_default_loss_balance(TorqueModelKind::lstm));
   if (o.verbose)
-    std::cerr << fmt::format("[lstm] {} layers x {} hidden, window {}, {} streams, weight decay {}\n", shape.layers,
-                             shape.hidden, shape.window, shape.streams, shape.weight_decay);
-  auto tr = train_lstm(data, split, N, M, o, shape, device, t0, "lstm");
+    std::cerr << fmt::format("[lstm] {} layers x {} hidden, window {}, {} streams, weight decay {}, loss balance {}\n",
+                             shape.layers, shape.hidden, shape.window, shape.streams, shape.weight_decay,
+                             summary.loss_balance);
+  auto tr = train_lstm(data, split, N, M, o, shape, summary.loss_balance, device, t0, "lstm");
   record_training(summary, tr);
   const TorqueModelInfo info = make_network_info(recs, N, M);
   auto model = std::make_unique<LstmTorqueModel>(info, tr.network, data.norm);
@@ -501,7 +532,8 @@ FitResult fit_hybrid_torque_model(const std::vector<Recording>& recs, const FitO
   const SequenceData data =
       prepare_data(recs, residual, split, N, M, resolve_input_features(o, TorqueModelKind::hybrid));
   const LstmShape shape = choose_shape(o, summary.train_samples);
-  auto tr = train_lstm(data, split, N, M, o, shape, device, t0, "hybrid");
+  summary.loss_balance = o.loss_balance.value_or(get_default_loss_balance(TorqueModelKind::hybrid));
+  auto tr = train_lstm(data, split, N, M, o, shape, summary.loss_balance, device, t0, "hybrid");
   record_training(summary, tr);
   const TorqueModelInfo info = make_network_info(recs, N, M);
   auto model = std::make_unique<HybridTorqueModel>(info, base, tr.network, data.norm);
