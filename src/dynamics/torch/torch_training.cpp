@@ -276,8 +276,11 @@ struct LossBalance {
   double power;
   torch::Tensor running_mse;
   explicit LossBalance(double p) : power(p) {}
-  torch::Tensor compute_loss(const torch::Tensor& mse) {
-    if (power == 0.0) return mse.mean();
+  // pred, target: batch x time x joints; mse: their per-joint mean squared error.
+  torch::Tensor compute_loss(const torch::Tensor& pred, const torch::Tensor& target, const torch::Tensor& mse) {
+    // The same value as mse.mean(), summed in the order fits have always used,
+    // so that P = 0 takes the same training steps as fits before the balance.
+    if (power == 0.0) return torch::mse_loss(pred, target);
     const auto m = mse.detach().clamp_min(1e-12);
     running_mse = running_mse.defined() ? 0.98 * running_mse + 0.02 * m : m;
     return (mse / running_mse.pow(power)).mean();
@@ -388,8 +391,9 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
       state = std::make_tuple(std::get<0>(st).detach(), std::get<1>(st).detach());
       const Eigen::Index skip = std::max<Eigen::Index>(0, std::min<Eigen::Index>(W, o.burn_in - c));
       if (skip >= W) continue;  // still warming up the state
-      auto mse = (pred.slice(1, skip) - y.slice(1, skip)).pow(2).mean(torch::IntArrayRef{0, 1});
-      auto loss = balance.compute_loss(mse);
+      const auto scored = pred.slice(1, skip), target = y.slice(1, skip);
+      auto mse = (scored - target).pow(2).mean(torch::IntArrayRef{0, 1});
+      auto loss = balance.compute_loss(scored, target, mse);
       opt.zero_grad();
       loss.backward();
       torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
