@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "rcm/io/recording.hpp"
 #include "test_dynamics_synthetic.hpp"
@@ -64,27 +65,19 @@ TEST(DynamicsCli, FitLinearThenEvalJson) {
   EXPECT_GT(max_change, 1e-9);
   EXPECT_NE(run("dynamics fit --model svm --out x.json " + (dir / "free.csv").string()).status, 0);
   EXPECT_NE(run("dynamics eval " + model + " " + (dir / "missing.csv").string()).status, 0);
-  for (const char* bad : {"0.01,abc", "0.01,-0.1", "0.01,,0.1", "0", "''"}) {
-    const auto r = run("dynamics fit --model lstm --direction-features " + std::string(bad) + " --out " + model +
-                           " " + (dir / "free.csv").string(),
-                       true);
-    EXPECT_NE(r.status, 0) << bad;
-    EXPECT_NE(r.out.find("--direction-features"), std::string::npos) << r.out;
-  }
-  for (const char* bad : {"0.03,abc", "-0.03", "0", "''"}) {
-    const auto r = run("dynamics fit --model lstm --acceleration-features " + std::string(bad) + " --out " + model +
-                           " " + (dir / "free.csv").string(),
-                       true);
-    EXPECT_NE(r.status, 0) << bad;
-    EXPECT_NE(r.out.find("--acceleration-features"), std::string::npos) << r.out;
-  }
-  for (const char* bad : {"1.5", "-0.1", "nan", "abc"}) {
-    const auto r = run("dynamics fit --model lstm --loss-balance " + std::string(bad) + " --out " + model + " " +
-                           (dir / "free.csv").string(),
-                       true);
-    EXPECT_NE(r.status, 0) << bad;
-    EXPECT_NE(r.out.find("--loss-balance"), std::string::npos) << r.out;
-  }
+  // A bad value of a fit flag: non-zero exit, and the message names the flag.
+  auto expect_rejected = [&](const std::string& flag, const std::vector<std::string>& values) {
+    for (const auto& bad : values) {
+      const auto r =
+          run("dynamics fit --model lstm " + flag + " " + bad + " --out " + model + " " + (dir / "free.csv").string(),
+              true);
+      EXPECT_NE(r.status, 0) << flag << " " << bad;
+      EXPECT_NE(r.out.find(flag), std::string::npos) << r.out;
+    }
+  };
+  expect_rejected("--direction-features", {"0.01,abc", "0.01,-0.1", "0.01,,0.1", "0", "''"});
+  expect_rejected("--acceleration-features", {"0.03,abc", "-0.03", "0", "''"});
+  expect_rejected("--loss-balance", {"1.5", "-0.1", "nan", "abc"});
   // Only the recurrent kinds read them: asking the others is an error, not ignored.
   for (const char* flag : {"--acceleration-features 0.03", "--direction-features 0.1", "--loss-balance 0.5"}) {
     const auto r = run("dynamics fit --model linear " + std::string(flag) + " --out " + model + " " +
