@@ -14,6 +14,7 @@
 #include <iostream>
 #include <limits>
 #include <random>
+#include <utility>
 
 #include "rcm/common/error.hpp"
 #include "rcm/dynamics/linear_model.hpp"
@@ -276,14 +277,23 @@ struct LossBalance {
   double power;
   torch::Tensor running_mse;
   explicit LossBalance(double p) : power(p) {}
-  // pred, target: batch x time x joints; mse: their per-joint mean squared error.
-  torch::Tensor compute_loss(const torch::Tensor& pred, const torch::Tensor& target, const torch::Tensor& mse) {
-    // The same value as mse.mean(), summed in the order fits have always used,
-    // so that P = 0 takes the same training steps as fits before the balance.
-    if (power == 0.0) return torch::mse_loss(pred, target);
+  // pred, target: batch x time x joints. Also returns their per-joint mean
+  // squared error, out of the gradient, for the epoch's score.
+  std::pair<torch::Tensor, torch::Tensor> compute_loss(const torch::Tensor& pred, const torch::Tensor& target) {
+    if (power == 0.0) {
+      // torch::mse_loss sums in the order fits have always used, so that P = 0
+      // takes the same training steps as fits before the balance.
+      torch::Tensor mse;
+      {
+        torch::NoGradGuard guard;
+        mse = (pred - target).pow(2).mean(torch::IntArrayRef{0, 1});
+      }
+      return {torch::mse_loss(pred, target), mse};
+    }
+    const auto mse = (pred - target).pow(2).mean(torch::IntArrayRef{0, 1});
     const auto m = mse.detach().clamp_min(1e-12);
     running_mse = running_mse.defined() ? 0.98 * running_mse + 0.02 * m : m;
-    return (mse / running_mse.pow(power)).mean();
+    return {(mse / running_mse.pow(power)).mean(), mse.detach()};
   }
 };
 
@@ -391,14 +401,12 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
       state = std::make_tuple(std::get<0>(st).detach(), std::get<1>(st).detach());
       const Eigen::Index skip = std::max<Eigen::Index>(0, std::min<Eigen::Index>(W, o.burn_in - c));
       if (skip >= W) continue;  // still warming up the state
-      const auto scored = pred.slice(1, skip), target = y.slice(1, skip);
-      auto mse = (scored - target).pow(2).mean(torch::IntArrayRef{0, 1});
-      auto loss = balance.compute_loss(scored, target, mse);
+      auto [loss, mse] = balance.compute_loss(pred.slice(1, skip), y.slice(1, skip));
       opt.zero_grad();
       loss.backward();
       torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
       opt.step();
-      train_err.add(mse.detach(), 1);
+      train_err.add(mse, 1);
     }
     const double val = validate();
     if (stop.update(val, epoch, o, opt)) best_params = clone_parameters(*net);
