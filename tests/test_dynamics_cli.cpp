@@ -78,6 +78,23 @@ TEST(DynamicsCli, FitLinearThenEvalJson) {
   expect_rejected("--direction-features", {"0.01,abc", "0.01,-0.1", "0.01,,0.1", "0", "''"});
   expect_rejected("--acceleration-features", {"0.03,abc", "-0.03", "0", "''"});
   expect_rejected("--loss-balance", {"1.5", "-0.1", "nan", "abc"});
+  expect_rejected("--output-delay", {"-0.01", "nan", "inf", "abc"});
+  {
+    // 5 s at 200 Hz is 1000 samples, more than the burn-in the shifted targets need.
+    const auto r = run("dynamics fit --model lstm --output-delay 5 --out " + model + " " + (dir / "free.csv").string(),
+                       true);
+    EXPECT_NE(r.status, 0);
+    EXPECT_NE(r.out.find("output_delay_s"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("burn-in"), std::string::npos) << r.out;
+  }
+  for (const char* kind : {"linear", "mlp", "hybrid"}) {
+    const auto r = run(std::string("dynamics fit --model ") + kind + " --output-delay 0.04 --out " + model + " " +
+                           (dir / "free.csv").string(),
+                       true);
+    EXPECT_NE(r.status, 0) << kind;
+    EXPECT_NE(r.out.find("--output-delay"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("lstm only"), std::string::npos) << r.out;
+  }
   // Only the recurrent kinds read them: asking the others is an error, not ignored.
   for (const char* flag : {"--acceleration-features 0.03", "--direction-features 0.1", "--loss-balance 0.5"}) {
     const auto r = run("dynamics fit --model linear " + std::string(flag) + " --out " + model + " " +

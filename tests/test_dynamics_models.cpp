@@ -697,3 +697,137 @@ TEST(ModelFile, BadFilesAreLocatedInputErrors) {
   std::filesystem::remove(garbage);
   EXPECT_THROW(parse_torque_model_kind("svm"), rcm::InputError);
 }
+
+namespace {
+// A smooth 3-joint path of T samples at 200 Hz.
+struct Path3 {
+  Eigen::VectorXd time;
+  Eigen::MatrixXd position, velocity;
+};
+Path3 make_path3(Eigen::Index T) {
+  Path3 p;
+  p.time = Eigen::VectorXd::LinSpaced(T, 0.0, 0.005 * static_cast<double>(T - 1));
+  p.position.resize(T, 3);
+  p.velocity.resize(T, 3);
+  for (Eigen::Index t = 0; t < T; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const double w = 2.0 + k, s = p.time(t);
+      p.position(t, k) = 0.3 * std::sin(w * s + k);
+      p.velocity(t, k) = 0.3 * w * std::cos(w * s + k);
+    }
+  return p;
+}
+// The path followed by `extra` copies of its last sample, time advancing at 5 ms.
+Path3 hold_last(const Path3& p, Eigen::Index extra) {
+  const Eigen::Index T = p.time.size();
+  Path3 q;
+  q.time.resize(T + extra);
+  q.position.resize(T + extra, 3);
+  q.velocity.resize(T + extra, 3);
+  q.time.head(T) = p.time;
+  q.position.topRows(T) = p.position;
+  q.velocity.topRows(T) = p.velocity;
+  for (Eigen::Index k = 0; k < extra; ++k) {
+    q.time(T + k) = p.time(T - 1) + 0.005 * static_cast<double>(k + 1);
+    q.position.row(T + k) = p.position.row(T - 1);
+    q.velocity.row(T + k) = p.velocity.row(T - 1);
+  }
+  return q;
+}
+// With an acceleration feature, so that the held samples' time stamps matter.
+Normalization norm3_with_acceleration() {
+  Normalization norm = norm3(Eigen::VectorXf::LinSpaced(6, 0.3f, 0.9f));
+  norm.acceleration_filter_s = Eigen::VectorXf::Constant(1, 0.02f);
+  norm.acceleration_scale = Eigen::VectorXf::LinSpaced(3, 0.5f, 2.0f);
+  return norm;
+}
+}  // namespace
+
+TEST(OutputDelay, PredictionsAlignTheDelayedNetworkAndHoldTheLastSample) {
+  const Normalization norm = norm3_with_acceleration();
+  const auto net = random_lstm(9, 16, 1, 8, 3, 41);
+  const int d = 5;
+  const LstmTorqueModel causal(info3(), net, norm), delayed(info3(), net, norm, d);
+  EXPECT_EQ(causal.output_delay(), 0);
+  EXPECT_EQ(delayed.output_delay(), d);
+  const Eigen::Index T = 120;
+  const Path3 p = make_path3(T);
+  // The network's own outputs over the path and d held samples after it: row t + d
+  // is the delayed model's torque of sample t.
+  const Path3 held = hold_last(p, d);
+  const Eigen::MatrixXd raw = predict_torque(causal, held.time, held.position, held.velocity);
+  const Eigen::MatrixXd streamed = predict_torque_streaming(delayed, p.time, p.position, p.velocity);
+  ASSERT_EQ(streamed.rows(), T);
+  EXPECT_EQ((streamed - raw.bottomRows(T)).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ((predict_torque(delayed, p.time, p.position, p.velocity) - streamed).cwiseAbs().maxCoeff(), 0.0);
+  // Sample by sample, call t writes the torque of sample t - d.
+  auto ws = delayed.create_workspace();
+  for (Eigen::Index t = 0; t < T; ++t) {
+    Eigen::VectorXd q = p.position.row(t).transpose(), qd = p.velocity.row(t).transpose(), tau(3);
+    delayed.compute_step(*ws, p.time(t), q.data(), qd.data(), tau.data());
+    if (t >= d) ASSERT_EQ((tau.transpose() - streamed.row(t - d)).cwiseAbs().maxCoeff(), 0.0) << t;
+  }
+  // A recording shorter than the delay: every row comes from the held samples.
+  const Path3 three{p.time.head(3), p.position.topRows(3), p.velocity.topRows(3)};
+  const Path3 three_held = hold_last(three, d);
+  EXPECT_EQ((predict_torque_streaming(delayed, three.time, three.position, three.velocity) -
+             predict_torque(causal, three_held.time, three_held.position, three_held.velocity).bottomRows(3))
+                .cwiseAbs()
+                .maxCoeff(),
+            0.0);
+  EXPECT_THROW(LstmTorqueModel(info3(), net, norm, -1), std::invalid_argument);
+}
+
+TEST(OutputDelay, ModelFileKeepsTheDelayAndLocatesBadValues) {
+  const Normalization norm = norm3_with_acceleration();
+  const auto net = random_lstm(9, 16, 1, 8, 3, 43);
+  const LstmTorqueModel causal(info3(), net, norm), delayed(info3(), net, norm, 7);
+  // Absent when 0: causal model files keep their bytes.
+  EXPECT_FALSE(torque_model_to_json(causal)["parameters"].contains("output_delay_samples"));
+  const nlohmann::json j = torque_model_to_json(delayed);
+  EXPECT_EQ(j["parameters"]["output_delay_samples"], 7);
+  const auto loaded = torque_model_from_json(j, "memory");
+  EXPECT_EQ(loaded->output_delay(), 7);
+  EXPECT_EQ(torque_model_to_json(*loaded), j);
+  const Path3 p = make_path3(60);
+  EXPECT_EQ((predict_torque(*loaded, p.time, p.position, p.velocity) -
+             predict_torque(delayed, p.time, p.position, p.velocity))
+                .cwiseAbs()
+                .maxCoeff(),
+            0.0);
+  for (const nlohmann::json& bad : {nlohmann::json(-1), nlohmann::json(2.5), nlohmann::json("7"),
+                                    nlohmann::json(1000000), nlohmann::json(nullptr)}) {
+    nlohmann::json b = j;
+    b["parameters"]["output_delay_samples"] = bad;
+    try {
+      torque_model_from_json(b, "memory");
+      ADD_FAILURE() << "accepted " << bad.dump();
+    } catch (const rcm::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("parameters.output_delay_samples"), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST(OutputDelay, FitOptionResolvesToSamplesWithinTheBurnIn) {
+  FitOptions o;
+  EXPECT_DOUBLE_EQ(get_default_output_delay_s(TorqueModelKind::lstm), 0.04);
+  EXPECT_EQ(resolve_output_delay_samples(TorqueModelKind::lstm, o, 0.005), 8);
+  EXPECT_EQ(resolve_output_delay_samples(TorqueModelKind::lstm, o, 1.0 / 1500.0), 60);
+  for (const auto kind : {TorqueModelKind::mlp, TorqueModelKind::linear, TorqueModelKind::hybrid}) {
+    EXPECT_DOUBLE_EQ(get_default_output_delay_s(kind), 0.0);
+    EXPECT_EQ(resolve_output_delay_samples(kind, o, 0.005), 0);
+  }
+  o.output_delay_s = 0.0;
+  EXPECT_EQ(resolve_output_delay_samples(TorqueModelKind::lstm, o, 0.005), 0);
+  o.output_delay_s = 1.0;  // 200 samples: the whole burn-in
+  EXPECT_EQ(resolve_output_delay_samples(TorqueModelKind::lstm, o, 0.005), 200);
+  o.output_delay_s = 1.01;
+  EXPECT_THROW(resolve_output_delay_samples(TorqueModelKind::lstm, o, 0.005), rcm::InputError);
+  o.output_delay_s = 0.04;
+  EXPECT_THROW(resolve_output_delay_samples(TorqueModelKind::mlp, o, 0.005), rcm::InputError);
+  EXPECT_THROW(resolve_output_delay_samples(TorqueModelKind::lstm, o, 0.0), rcm::InputError);
+  for (const double bad : {-0.01, std::nan(""), HUGE_VAL}) {
+    o.output_delay_s = bad;
+    EXPECT_THROW(o.check(), rcm::InputError) << bad;
+  }
+}

@@ -224,6 +224,93 @@ TEST(OnlineEstimator, PerSampleUpdateDoesNotAllocate) {
   EXPECT_EQ(g_allocations - before, 0);
 }
 
+namespace {
+// tau_fs = a fixed function of the joint state, written `delay` calls late as by
+// a fixed-lag network (TorqueModel::output_delay).
+Eigen::Vector3d trailing_torque(const double* q, const double* qd) {
+  return {0.3 * q[0] + 0.05 * qd[0], -0.2 * q[1], 2.0 * q[2] - 0.1 * qd[2]};
+}
+
+class TrailingModel final : public rcm::dynamics::TorqueModel {
+ public:
+  explicit TrailingModel(int delay) : TorqueModel(make_info()), delay_(delay) {}
+  rcm::dynamics::TorqueModelKind kind() const override { return rcm::dynamics::TorqueModelKind::lstm; }
+  int output_delay() const override { return delay_; }
+  std::unique_ptr<rcm::dynamics::TorqueModelWorkspace> create_workspace() const override {
+    auto ws = std::make_unique<Ws>();
+    ws->ring.assign(static_cast<std::size_t>(delay_ + 1), Eigen::Vector3d::Zero());
+    return ws;
+  }
+  void reset_state(rcm::dynamics::TorqueModelWorkspace& w) const override { static_cast<Ws&>(w).calls = 0; }
+  void compute_step(rcm::dynamics::TorqueModelWorkspace& w, double, const double* q, const double* qd,
+                    double* tau) const override {
+    auto& ws = static_cast<Ws&>(w);
+    const std::size_t n = ws.ring.size();
+    ws.ring[ws.calls % n] = trailing_torque(q, qd);
+    ++ws.calls;
+    // The oldest entry: the sample of `delay` calls before.
+    const Eigen::Vector3d& v = ws.ring[ws.calls % n];
+    for (int j = 0; j < 3; ++j) tau[j] = v[j];
+  }
+  nlohmann::json save_parameters() const override { return nlohmann::json::object(); }
+
+ private:
+  struct Ws final : rcm::dynamics::TorqueModelWorkspace {
+    std::vector<Eigen::Vector3d> ring;
+    std::size_t calls = 0;
+  };
+  static rcm::dynamics::TorqueModelInfo make_info() {
+    rcm::dynamics::TorqueModelInfo info;
+    info.num_joints = info.num_outputs = 3;
+    info.sample_period_s = 0.005;
+    return info;
+  }
+  int delay_;
+};
+}  // namespace
+
+TEST(OnlinePipeline, PairsADelayedModelWithTheSampleItsTorqueBelongsTo) {
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const rcm::OnlineEstimator estimator(incision, linear_tissue(), default_options());
+  const int d = 6;
+  const rcm::OnlinePipeline now(std::make_shared<const TrailingModel>(0), estimator);
+  const rcm::OnlinePipeline late(std::make_shared<const TrailingModel>(d), estimator);
+  auto ws_now = now.create_workspace();
+  auto ws_late = late.create_workspace();
+  std::mt19937 rng(3);
+  const Eigen::Vector3d truth(0.004, -0.003, 0.02), noise(0.02, 0.02, 0.1);
+  std::vector<rcm::OnlineOutput> reference;
+  const rcm::OnlineOutput fresh = rcm::get_online_output(estimator.create_workspace());
+  for (int pass = 0; pass < 2; ++pass) {  // the second after a reset
+    now.reset(ws_now);
+    late.reset(ws_late);
+    reference.clear();
+    long allocations = 0;
+    for (int k = 0; k < 4000; ++k) {
+      const PathSample s = path(k / 200.0);
+      const Eigen::Vector3d effort =
+          make_dtau(incision, linear_tissue(), s, truth, noise, rng) + trailing_torque(s.q.data(), s.qd.data());
+      reference.push_back(now.compute_sample(ws_now, s.t, s.q.data(), s.qd.data(), effort.data()));
+      const long a0 = g_allocations;
+      const rcm::OnlineOutput& o = late.compute_sample(ws_late, s.t, s.q.data(), s.qd.data(), effort.data());
+      allocations += g_allocations - a0;
+      if (k < d) {  // nothing yet: the reset output
+        EXPECT_EQ(o.time, fresh.time);
+        EXPECT_EQ(o.misalignment_m, fresh.misalignment_m);
+        continue;
+      }
+      const rcm::OnlineOutput& r = reference[static_cast<std::size_t>(k - d)];
+      ASSERT_EQ(o.time, r.time) << k;
+      ASSERT_EQ(o.misalignment_m, r.misalignment_m) << k;
+      ASSERT_EQ(o.f_inc_base, r.f_inc_base) << k;
+      ASSERT_EQ(o.onset, r.onset) << k;
+    }
+    EXPECT_EQ(allocations, 0);
+    // What was compared is an estimate, near the truth after 20 s.
+    EXPECT_LT((reference.back().misalignment_m - truth).norm(), 0.006);
+  }
+}
+
 TEST(OnlineEstimator, OptionsAreChecked) {
   const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
   rcm::OnlineEstimatorOptions o;

@@ -60,6 +60,10 @@ TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
   EXPECT_NEAR(model.info().sample_period_s, 0.005, 1e-12);
   if (GetParam() == TorqueModelKind::lstm)  // [q, qdot], three direction, one acceleration, three Dahl per joint
     EXPECT_EQ(static_cast<const LstmTorqueModel&>(model).network().input_size(), 27);
+  // The default output delay: 40 ms for the lstm, none for the others.
+  const int d = model.output_delay();
+  EXPECT_EQ(d, GetParam() == TorqueModelKind::lstm ? 8 : 0);
+  EXPECT_EQ(fit.summary.to_json().value("output_delay_samples", 0), d);
   if (GetParam() == TorqueModelKind::mlp)
     EXPECT_EQ(static_cast<const MlpTorqueModel&>(model).networks().front().input_size(), 6);
   if (GetParam() == TorqueModelKind::hybrid)  // none by default (get_default_*)
@@ -85,10 +89,10 @@ TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
     EXPECT_LT(in_sample[j].rmse, 0.75 * baseline[j].rmse) << to_string(GetParam()) << " joint " << j + 1;
   }
 
-  // Streaming one sample at a time equals the causal whole-recording run, also
-  // after a reset; predict_torque equals it too unless the model's batch path
-  // looks ahead (the linear model's zero-phase qddot, inherited by the hybrid),
-  // and then stays close to it.
+  // Streaming one sample at a time equals the causal whole-recording run (call
+  // t + d giving row t), also after a reset; predict_torque equals it too unless
+  // the model's batch path looks ahead (the linear model's zero-phase qddot,
+  // inherited by the hybrid), and then stays close to it.
   const Eigen::MatrixXd p_stream = predict_torque_streaming(model, rec.time, rec.position, rec.velocity);
   const bool looks_ahead = GetParam() == TorqueModelKind::linear || GetParam() == TorqueModelKind::hybrid;
   if (!looks_ahead) {
@@ -103,7 +107,7 @@ TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
     for (Eigen::Index t = 0; t < 300; ++t) {
       Eigen::VectorXd q = rec.position.row(t).transpose(), qd = rec.velocity.row(t).transpose(), tau(3);
       model.compute_step(*ws, rec.time(t), q.data(), qd.data(), tau.data());
-      ASSERT_EQ((tau.transpose() - p_stream.row(t)).cwiseAbs().maxCoeff(), 0.0);
+      if (t >= d) ASSERT_EQ((tau.transpose() - p_stream.row(t - d)).cwiseAbs().maxCoeff(), 0.0);
     }
   }
 
@@ -173,10 +177,13 @@ TEST(TorchScript, ExportThenImportGivesTheSameModel) {
     norm.acceleration_filter_s = Eigen::VectorXf::LinSpaced(filters, 0.01f, 0.05f);
     norm.acceleration_scale = Eigen::VectorXf::LinSpaced(3 * filters, 0.5f, 2.0f);
     norm.dahl_displacement = Eigen::VectorXf::LinSpaced(3 * dahl, 2e-4f, 5e-3f);
-    LstmTorqueModel model(info, random_network(6 + 3 * (features + filters + dahl), 16, 2, 3, 8), norm);
+    // One with an output delay, which the module carries as an attribute.
+    const int delay = filters == 1 ? 4 : 0;
+    LstmTorqueModel model(info, random_network(6 + 3 * (features + filters + dahl), 16, 2, 3, 8), norm, delay);
     const auto path = std::filesystem::temp_directory_path() / "rcm_test_lstm.pt";
     export_torchscript(model, path);
     const auto imported = import_torchscript(path);  // checks the module's forward internally
+    EXPECT_EQ(imported->output_delay(), delay);
     EXPECT_EQ(imported->normalization().velocity_tanh_scale, norm.velocity_tanh_scale);
     EXPECT_EQ(imported->normalization().acceleration_filter_s, norm.acceleration_filter_s);
     EXPECT_EQ(imported->normalization().acceleration_scale, norm.acceleration_scale);
@@ -192,6 +199,8 @@ TEST(TorchScript, ExportThenImportGivesTheSameModel) {
       // kernel over the whole.
       const int z_size = (filters > 0 ? 3 + 3 * filters : 0) + (dahl > 0 ? 3 + 3 * dahl : 0);
       const int T = 400;
+      // forward returns the network's output step for step, whatever the delay.
+      const Eigen::MatrixXd raw = predict_torque(LstmTorqueModel(info, model.network(), norm), rec).topRows(T);
       const auto csv = std::filesystem::temp_directory_path() / "rcm_test_lstm_io.csv";
       {
         std::ofstream out(csv);
@@ -199,7 +208,7 @@ TEST(TorchScript, ExportThenImportGivesTheSameModel) {
         for (int t = 0; t < T; ++t) {
           for (int k = 0; k < 3; ++k) out << static_cast<float>(rec.position(t, k)) << ",";
           for (int k = 0; k < 3; ++k) out << static_cast<float>(rec.velocity(t, k)) << ",";
-          out << a(t, 0) << "," << a(t, 1) << "," << a(t, 2) << "\n";
+          out << raw(t, 0) << "," << raw(t, 1) << "," << raw(t, 2) << "\n";
         }
       }
       const std::string check = R"PY(
@@ -360,9 +369,11 @@ TEST(LossBalance, ValidationScoreIsTheBalancedLossOfTheValidationPieces) {
   const auto& rec = synthetic_minute();
   auto o = tiny_options();
   o.max_epochs = 3;
-  // Memoryless features, so that a piece cut out of the recording sees the same inputs.
+  // Memoryless features, so that a piece cut out of the recording sees the same
+  // inputs; no output delay, so that its last samples need nothing after it.
   o.acceleration_filters_s = std::vector<double>{};
   o.dahl_fractions = std::vector<double>{};
+  o.output_delay_s = 0.0;
   const auto split = split_in_time({rec}, o.train_fraction, o.validation_fraction);
   ASSERT_EQ(split.validation.size(), 1u);
   const Eigen::Index b = split.validation[0].begin, piece = 2000, context = o.burn_in;
@@ -384,6 +395,45 @@ TEST(LossBalance, ValidationScoreIsTheBalancedLossOfTheValidationPieces) {
                 1e-4 * fit.summary.best_validation_loss)
         << "p " << p;
     EXPECT_GT(std::abs(compute_balanced_loss(mse, 1.0 - p) / compute_balanced_loss(mse, p) - 1.0), 1e-3);
+  }
+}
+
+TEST(OutputDelay, TheDelayedLstmLearnsTheTorqueOfTheSampleDBefore) {
+  // effort(t) = qdot(t + d) with white qdot: no causal model can predict it, and
+  // a network whose output at t + d is trained on the torque of t reads it from
+  // its input. A delay applied the wrong way round (or not at all) fails both.
+  const int d = 4;
+  const Eigen::Index T = 4000;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> g(0.0, 1.0);
+  rcm::Recording rec;
+  rec.source = "future velocity";
+  rec.time = Eigen::VectorXd::LinSpaced(T, 0.0, 0.005 * static_cast<double>(T - 1));
+  rec.velocity.resize(T, 3);
+  for (Eigen::Index i = 0; i < rec.velocity.size(); ++i) rec.velocity.data()[i] = g(rng);
+  rec.position.resize(T, 3);
+  rec.position.row(0).setZero();
+  for (Eigen::Index t = 1; t < T; ++t) rec.position.row(t) = rec.position.row(t - 1) + 0.005 * rec.velocity.row(t);
+  rec.effort = Eigen::MatrixXd::Zero(T, 3);
+  rec.effort.topRows(T - d) = rec.velocity.bottomRows(T - d);
+  auto o = tiny_options();
+  o.velocity_tanh_scales = std::vector<double>{};
+  o.acceleration_filters_s = std::vector<double>{};
+  o.dahl_fractions = std::vector<double>{};
+  o.output_delay_s = d * 0.005;
+  const FitResult delayed = fit_torque_model(TorqueModelKind::lstm, {rec}, o);
+  ASSERT_EQ(delayed.model->output_delay(), d);
+  o.output_delay_s = 0.0;
+  const FitResult causal = fit_torque_model(TorqueModelKind::lstm, {rec}, o);
+  ASSERT_EQ(causal.model->output_delay(), 0);
+  // Scored on the fitted part, past the burn-in, before the zero tail.
+  const Eigen::Index b = o.burn_in, n = split_in_time({rec}, 0.7, 0.2).validation.back().end - b;
+  const Eigen::MatrixXd measured = rec.effort.middleRows(b, n);
+  const auto e_delayed = compute_torque_errors(measured, predict_torque(*delayed.model, rec).middleRows(b, n));
+  const auto e_causal = compute_torque_errors(measured, predict_torque(*causal.model, rec).middleRows(b, n));
+  for (int j = 0; j < 3; ++j) {
+    EXPECT_LT(e_delayed[j].rmse, 0.4) << "joint " << j + 1;  // qdot has sd 1
+    EXPECT_GT(e_causal[j].rmse, 0.8) << "joint " << j + 1;
   }
 }
 

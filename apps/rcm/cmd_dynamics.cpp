@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <cmath>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -39,6 +40,7 @@ struct DynamicsArgs {
   std::optional<std::string> acceleration_features;  // unset: the kind's default
   std::optional<std::string> dahl_features;          // unset: the kind's default
   std::optional<double> loss_balance;                // unset: the kind's default
+  std::optional<double> output_delay;                 // s; unset: the kind's default
   std::string torchscript_out, torchscript_in, predictions;
 };
 
@@ -91,6 +93,14 @@ void run_fit(const DynamicsArgs& a) {
       throw rcm::InputError(rcm::cli::flag_location("--loss-balance"),
                             fmt::format("expected a value in [0, 1], got {}", *a.loss_balance));
     o.loss_balance = a.loss_balance;
+  }
+  if (a.output_delay) {
+    if (kind != TorqueModelKind::lstm)
+      throw rcm::InputError(rcm::cli::flag_location("--output-delay"), "is for --model lstm only");
+    if (!(*a.output_delay >= 0 && std::isfinite(*a.output_delay)))
+      throw rcm::InputError(rcm::cli::flag_location("--output-delay"),
+                            fmt::format("expected a finite value >= 0 (s), got {}", *a.output_delay));
+    o.output_delay_s = a.output_delay;
   }
   const auto recs = load_all(a.recordings, a.dedupe);
   FitResult fit;
@@ -208,6 +218,10 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
                   "lstm, hybrid: p in [0, 1]; each joint's error in the training loss is divided by its running "
                   "mean to the power p (0: plain mean over joints, 1: equal weight to every joint's relative "
                   "improvement; default: 0.5 for lstm, 0 for hybrid)");
+  fit->add_option("--output-delay", args->output_delay,
+                  "lstm: seconds by which the network's torque trails its input, so that it sees what follows "
+                  "the sample it predicts (rounded to samples; 0: causal; default 0.04); the live pipeline "
+                  "pairs it with the effort of as long before");
   fit->add_option("--threads", args->threads, "LibTorch intra-op threads (default 2)");
   fit->add_option("--max-epochs", args->max_epochs, "epoch limit (early stopping usually ends sooner)");
 #if defined(RCM_HAVE_TORCH)
@@ -223,7 +237,8 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   ev->add_option("--predictions", args->predictions, "also write the predicted torque of every sample to this CSV");
   ev->add_flag("--streaming", args->streaming,
                "run the model one sample at a time, causally, as the live robot does (default: the offline "
-               "estimate, where linear and hybrid may take qddot from later samples)");
+               "estimate, where linear and hybrid may take qddot from later samples; an lstm with an output "
+               "delay gives the same torque either way, the live robot gets it that much later)");
   ev->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   ev->add_flag("--json", args->json, "print {\"joints\": [{\"index\", \"rmse\", \"nrmse_percent\"}]}");
   ev->callback([args] { run_eval(*args); });

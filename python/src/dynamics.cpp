@@ -85,6 +85,9 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_property_readonly("info", &TorqueModel::info)
       .def_property_readonly("num_joints", &TorqueModel::num_joints)
       .def_property_readonly("num_outputs", &TorqueModel::num_outputs)
+      .def_property_readonly("output_delay", &TorqueModel::output_delay,
+                             "samples by which compute_step's torque trails its input (0: the torque of the sample "
+                             "passed); predict_torque and predict_torque_streaming align it")
       .def("create_workspace", [](std::shared_ptr<TorqueModel> self) {
         return TorqueWorkspace{self, self->create_workspace()};
       }, "A workspace for this model, in the reset state")
@@ -106,7 +109,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
         return tau;
       }, py::arg("workspace"), py::arg("t"), py::arg("q"), py::arg("qd"),
            "Advance by one sample at time t (s) and return tau_fs of joints 1..num_outputs (N m, N for joint 3).\n"
-           "q, qd: at least num_joints values. Causal: the same as predict_torque_streaming, sample by sample.")
+           "q, qd: at least num_joints values. Causal: the same as predict_torque_streaming, sample by sample;\n"
+           "with output_delay d > 0, the torque of the sample d calls earlier.")
       .def("to_json", [](const TorqueModel& self) { return to_python(torque_model_to_json(self)); },
            "The model file's content (rcm-torque-model/1) as a dict")
       .def("__repr__", [](const TorqueModel& self) {

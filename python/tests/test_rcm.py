@@ -374,6 +374,7 @@ class TestDynamics(unittest.TestCase):
         ws = model.create_workspace()
         steps = np.array([model.compute_step(ws, rec.time[t], rec.position[t], rec.velocity[t]) for t in range(T)])
         self.assertEqual(steps.shape, (T, model.num_outputs))
+        self.assertEqual(model.output_delay, 0)  # so step t is row t
         self.assertTrue(np.array_equal(steps, streamed))
         # reset_state forgets the friction memory: the first steps repeat exactly.
         model.reset_state(ws)

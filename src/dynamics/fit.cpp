@@ -40,6 +40,8 @@ void FitOptions::check() const {
       if (!(f > 0) || !std::isfinite(f)) bad_option("dahl_fractions", "expected positive finite values");
   if (loss_balance && !(*loss_balance >= 0 && *loss_balance <= 1))
     bad_option("loss_balance", "expected a value in [0, 1]");
+  if (output_delay_s && !(*output_delay_s >= 0 && std::isfinite(*output_delay_s)))
+    bad_option("output_delay_s", "expected a finite value >= 0 (s)");
 }
 
 std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind) {
@@ -58,6 +60,23 @@ std::vector<double> get_default_dahl_fractions(TorqueModelKind kind) {
 }
 
 double get_default_loss_balance(TorqueModelKind kind) { return kind == TorqueModelKind::lstm ? 0.5 : 0.0; }
+
+double get_default_output_delay_s(TorqueModelKind kind) { return kind == TorqueModelKind::lstm ? 0.04 : 0.0; }
+
+int resolve_output_delay_samples(TorqueModelKind kind, const FitOptions& options, double sample_period_s) {
+  const double s = options.output_delay_s.value_or(get_default_output_delay_s(kind));
+  if (s == 0.0) return 0;
+  if (kind != TorqueModelKind::lstm)
+    bad_option("output_delay_s", fmt::format("only the lstm has an output delay, not {}", to_string(kind)));
+  if (!(sample_period_s > 0)) bad_option("output_delay_s", "the recordings have no sampling period");
+  const double d = std::round(s / sample_period_s);
+  // Targets before the first d samples of a recording do not exist; the burn-in
+  // is never scored, so the delay must fit in it.
+  if (d > options.burn_in)
+    bad_option("output_delay_s", fmt::format("{} s is {} samples at {:.4g} s, more than the burn-in of {} samples", s,
+                                             d, sample_period_s, options.burn_in));
+  return static_cast<int>(d);
+}
 
 double compute_balanced_loss(const Eigen::Ref<const Eigen::ArrayXd>& per_joint_mse, double p) {
   if (per_joint_mse.size() == 0) throw std::invalid_argument("compute_balanced_loss: no joints");
@@ -142,6 +161,7 @@ nlohmann::json FitSummary::to_json() const {
   j["best_epoch"] = best_epoch;
   j["best_validation_loss"] = best_validation_loss;
   if (kind == TorqueModelKind::lstm || kind == TorqueModelKind::hybrid) j["loss_balance"] = loss_balance;
+  if (kind == TorqueModelKind::lstm) j["output_delay_samples"] = output_delay_samples;
   j["seconds"] = seconds;
   j["device"] = device;
   j["test"] = rcm::dynamics::to_json(test_errors)["joints"];

@@ -486,6 +486,7 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
   check_fit_recordings(recordings);
   const int N = recordings.front().num_joints();
   const int M = resolve_num_outputs(recordings, options);
+  resolve_output_delay_samples(TorqueModelKind::linear, options, median_sample_period(recordings));
   const TimeSplit split = split_in_time(recordings, options.train_fraction, options.validation_fraction);
   if (split.train.empty() || split.validation.empty())
     throw std::invalid_argument("fit_linear_torque_model: empty training or validation split");

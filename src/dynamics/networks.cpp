@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <random>
@@ -517,9 +518,14 @@ void compute_dense_forward(const DenseStack& stack, const float* x, float* y, fl
 
 // ---------------------------------------------------------------------------- lstm
 
-LstmTorqueModel::LstmTorqueModel(TorqueModelInfo info, LstmNetwork network, Normalization normalization)
-    : TorqueModel(std::move(info)), kernel_(network), normalization_(std::move(normalization)) {
+LstmTorqueModel::LstmTorqueModel(TorqueModelInfo info, LstmNetwork network, Normalization normalization,
+                                 int output_delay)
+    : TorqueModel(std::move(info)),
+      kernel_(network),
+      normalization_(std::move(normalization)),
+      output_delay_(output_delay) {
   check_normalization(normalization_, num_joints(), num_outputs());
+  if (output_delay_ < 0) throw std::invalid_argument("LSTM model: output_delay must be >= 0 samples");
   if (network.input_size() != normalization_.network_inputs(num_joints()) || network.output_size() != num_outputs())
     throw std::invalid_argument(
         "LSTM model: network sizes do not match the normalization's inputs (2 x num_joints + direction, "
@@ -551,7 +557,10 @@ void LstmTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, co
 }
 
 nlohmann::json LstmTorqueModel::save_parameters() const {
-  return {{"lstm", save_lstm(kernel_.network())}, {"normalization", save_normalization(normalization_)}};
+  nlohmann::json j = {{"lstm", save_lstm(kernel_.network())}, {"normalization", save_normalization(normalization_)}};
+  // Absent at 0, so causal models keep their old bytes.
+  if (output_delay_ > 0) j["output_delay_samples"] = output_delay_;
+  return j;
 }
 
 // ---------------------------------------------------------------------------- mlp
@@ -685,7 +694,14 @@ std::unique_ptr<TorqueModel> detail::load_network_parameters(TorqueModelInfo inf
       auto net = load_lstm(require(p, "lstm", source, "parameters"), source, "parameters.lstm");
       auto norm = load_normalization(require(p, "normalization", source, "parameters"), source,
                                      "parameters.normalization", 2 * N, M);
-      return std::make_unique<LstmTorqueModel>(std::move(info), std::move(net), std::move(norm));
+      int delay = 0;
+      if (p.contains("output_delay_samples")) {
+        const auto& d = p["output_delay_samples"];
+        if (!d.is_number_integer() || d.get<std::int64_t>() < 0 || d.get<std::int64_t>() > 100000)
+          fail(source, "parameters.output_delay_samples", "expected an integer number of samples in [0, 100000]");
+        delay = d.get<int>();
+      }
+      return std::make_unique<LstmTorqueModel>(std::move(info), std::move(net), std::move(norm), delay);
     }
     if (kind == TorqueModelKind::mlp) {
       const auto& nets = require(p, "networks", source, "parameters");

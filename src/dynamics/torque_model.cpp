@@ -214,16 +214,24 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& 
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::VectorXd& time,
                                          const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity) {
   check_sizes(model, time, position, velocity);
-  const Eigen::Index T = time.size();
+  const Eigen::Index T = time.size(), d = model.output_delay();
   auto ws = model.create_workspace();
   const int N = model.num_joints();
   Eigen::VectorXd q(N), qd(N), tau(model.num_outputs());
   Eigen::MatrixXd out(T, model.num_outputs());
-  for (Eigen::Index t = 0; t < T; ++t) {
+  if (T == 0) return out;
+  // A fixed-lag model needs d samples past the last one: the last sample held,
+  // time advancing (a repeated stamp would be read as the same sample).
+  const double dt = model.info().sample_period_s > 0 ? model.info().sample_period_s
+                    : T > 1                          ? (time(T - 1) - time(0)) / static_cast<double>(T - 1)
+                                                     : 1.0;
+  for (Eigen::Index k = 0; k < T + d; ++k) {
+    const Eigen::Index t = std::min(k, T - 1);
     q = position.row(t).head(N).transpose();
     qd = velocity.row(t).head(N).transpose();
-    model.compute_step(*ws, time(t), q.data(), qd.data(), tau.data());
-    out.row(t) = tau.transpose();
+    const double tk = k < T ? time(t) : time(T - 1) + static_cast<double>(k - T + 1) * dt;
+    model.compute_step(*ws, tk, q.data(), qd.data(), tau.data());
+    if (k >= d) out.row(k - d) = tau.transpose();
   }
   return out;
 }

@@ -197,6 +197,10 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
   return out;
 }
 
+namespace {
+constexpr std::ptrdiff_t kDelayStride = 10;  // time, q 1-3, qd 1-3, effort 1-3
+}  // namespace
+
 OnlinePipeline::OnlinePipeline(std::shared_ptr<const dynamics::TorqueModel> model, OnlineEstimator estimator)
     : model_(std::move(model)), estimator_(std::move(estimator)) {
   if (!model_ || model_->num_outputs() < 3)
@@ -208,6 +212,8 @@ OnlinePipeline::Workspace OnlinePipeline::create_workspace() const {
   ws.model = model_->create_workspace();
   ws.estimator = estimator_.create_workspace();
   ws.tau_fs.assign(static_cast<std::size_t>(model_->num_outputs()), 0.0);
+  const int d = model_->output_delay();
+  if (d > 0) ws.delay_line.assign(static_cast<std::size_t>(d + 1) * kDelayStride, 0.0);
   reset(ws);
   return ws;
 }
@@ -215,11 +221,30 @@ OnlinePipeline::Workspace OnlinePipeline::create_workspace() const {
 void OnlinePipeline::reset(Workspace& ws) const {
   model_->reset_state(*ws.model);
   estimator_.reset(ws.estimator);
+  ws.delay_next = ws.delay_filled = 0;
 }
 
 const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, const double* q, const double* qd,
                                                    const double* effort) const {
   model_->compute_step(*ws.model, time, q, qd, ws.tau_fs.data());
+  const int d = model_->output_delay();
+  if (d > 0) {
+    // The torque is that of the sample d calls ago: pair it with that sample.
+    double* slot = ws.delay_line.data() + static_cast<std::ptrdiff_t>(ws.delay_next) * kDelayStride;
+    slot[0] = time;
+    std::copy(q, q + 3, slot + 1);
+    std::copy(qd, qd + 3, slot + 4);
+    std::copy(effort, effort + 3, slot + 7);
+    ws.delay_next = (ws.delay_next + 1) % (d + 1);
+    if (ws.delay_filled < d) {
+      ++ws.delay_filled;
+      return get_online_output(ws.estimator);
+    }
+    time = ws.delay_line[static_cast<std::size_t>(ws.delay_next) * kDelayStride];
+    q = ws.delay_line.data() + static_cast<std::ptrdiff_t>(ws.delay_next) * kDelayStride + 1;
+    qd = q + 3;
+    effort = q + 6;
+  }
   const Eigen::Vector3d dtau(effort[0] - ws.tau_fs[0], effort[1] - ws.tau_fs[1], effort[2] - ws.tau_fs[2]);
   return estimator_.compute_update(ws.estimator, time, Eigen::Vector3d(q[0], q[1], q[2]),
                                    Eigen::Vector3d(qd[0], qd[1], qd[2]), dtau);

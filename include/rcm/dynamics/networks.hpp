@@ -214,10 +214,14 @@ class LstmKernel {
 // Dense stack forward in float; a and b are scratch of max_width() each. No allocation.
 void compute_dense_forward(const DenseStack& stack, const float* x, float* y, float* a, float* b);
 
+// output_delay: d >= 0; the network's output at sample t is the torque of
+// sample t - d (see TorqueModel::output_delay), trained so with its targets
+// shifted by d.
 class LstmTorqueModel final : public TorqueModel {
  public:
-  LstmTorqueModel(TorqueModelInfo info, LstmNetwork network, Normalization normalization);
+  LstmTorqueModel(TorqueModelInfo info, LstmNetwork network, Normalization normalization, int output_delay = 0);
   TorqueModelKind kind() const override { return TorqueModelKind::lstm; }
+  int output_delay() const override { return output_delay_; }
   std::unique_ptr<TorqueModelWorkspace> create_workspace() const override;
   void reset_state(TorqueModelWorkspace& workspace) const override;
   void compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
@@ -229,6 +233,7 @@ class LstmTorqueModel final : public TorqueModel {
  private:
   LstmKernel kernel_;
   Normalization normalization_;
+  int output_delay_ = 0;
 };
 
 // Yilmaz et al.: one dense network per joint on [q, qdot] of all joints (memoryless).

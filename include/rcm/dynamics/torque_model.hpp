@@ -60,16 +60,24 @@ class TorqueModel {
   // Forget the history (state as at the start of a recording).
   virtual void reset_state(TorqueModelWorkspace& workspace) const = 0;
   // Advance by one sample taken at time `t` (s) and write the predicted torque of
-  // joints 1..num_outputs into `tau`. q and qd hold at least num_joints values.
+  // joints 1..num_outputs into `tau`: the torque of this sample, or, for a model
+  // with output_delay() = d > 0, of the sample d calls earlier (the first d calls
+  // write nothing meaningful). q and qd hold at least num_joints values.
   // No allocation. The workspace must come from this model's create_workspace().
   virtual void compute_step(TorqueModelWorkspace& workspace, double t, const double* q,
                             const double* qd, double* tau) const = 0;
+  // Samples by which compute_step's torque trails its input: 0, or d for a
+  // fixed-lag network that also sees the d samples after the one it predicts
+  // (the inertial torque needs qddot, which a causal estimate gets late). A live
+  // caller pairs it with the effort and joint state of d samples before
+  // (OnlinePipeline does); predict_torque and predict_torque_streaming align it.
+  virtual int output_delay() const { return 0; }
 
   // Body of the model file (see docs/dynamics.md); `info` is written by the caller.
   virtual nlohmann::json save_parameters() const = 0;
 
   // Whole-recording prediction behind predict_torque(): T x num_outputs from the
-  // reset state. By default compute_step() over every sample; a model may
+  // reset state. By default predict_torque_streaming(); a model may
   // override it with estimates that also use later samples (the linear model's
   // zero-phase qddot), which only offline analysis can afford. Sizes are checked
   // by predict_torque().
@@ -90,7 +98,9 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& 
 
 // What the live robot gets over a recording: compute_step() on every sample
 // from the reset state, causal whatever the model (predict_torque may use later
-// samples). Same size checks.
+// samples). Row t is the torque of sample t: for a model with output_delay() = d,
+// the output of call t + d, the last d rows from d more calls that repeat the
+// last sample (a zero-order hold) at the model's sample period. Same size checks.
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::VectorXd& time,
                                          const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Recording& recording);

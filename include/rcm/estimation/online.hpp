@@ -140,6 +140,10 @@ class OnlinePipeline {
     std::unique_ptr<dynamics::TorqueModelWorkspace> model;
     OnlineEstimator::Workspace estimator;
     std::vector<double> tau_fs;  // num_outputs
+    // The last d + 1 samples [time, q 1-3, qd 1-3, effort 1-3] for a model whose
+    // torque trails by d = output_delay() samples; empty when d = 0.
+    std::vector<double> delay_line;
+    int delay_next = 0, delay_filled = 0;
   };
 
   // Throws std::invalid_argument when the model predicts fewer than 3 joints.
@@ -149,6 +153,9 @@ class OnlinePipeline {
   void reset(Workspace& workspace) const;
 
   // q, qd, effort: at least model.num_joints() values (joint 3 in m, m/s, N).
+  // With a model whose torque trails by d = output_delay() samples, the update
+  // is for the sample of d calls before, with its own joint state and effort
+  // (OnlineOutput::time says which); the first d calls return the reset output.
   const OnlineOutput& compute_sample(Workspace& workspace, double time, const double* q, const double* qd,
                                      const double* effort) const;
 

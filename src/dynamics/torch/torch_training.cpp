@@ -504,20 +504,30 @@ FitResult fit_lstm_torque_model(const std::vector<Recording>& recs, const FitOpt
   const TimeSplit split = split_in_time(recs, o.train_fraction, o.validation_fraction);
   FitSummary summary = make_summary(TorqueModelKind::lstm, split);
   const torch::Device device = select_device(o, summary.device);
-  const SequenceData data =
+  const TorqueModelInfo info = make_network_info(recs, N, M);
+  const int delay = resolve_output_delay_samples(TorqueModelKind::lstm, o, info.sample_period_s);
+  SequenceData data =
       prepare_data(recs, effort_targets(recs, M), split, N, M, resolve_input_features(o, TorqueModelKind::lstm));
+  // The output at sample t learns the torque of t - d. The first d targets of a
+  // recording (its first sample repeated) lie in the burn-in, which is never scored.
+  if (delay > 0)
+    for (auto& y : data.y) {
+      const int64_t T = y.size(0), d = std::min<int64_t>(delay, T);
+      y = torch::cat({y.slice(0, 0, 1).expand({d, y.size(1)}), y.slice(0, 0, T - d)}).contiguous();
+    }
   const LstmShape shape = choose_shape(o, summary.train_samples);
   summary.loss_balance = o.loss_balance.value_or(get_default_loss_balance(TorqueModelKind::lstm));
+  summary.output_delay_samples = delay;
   if (o.verbose)
-    std::cerr << fmt::format("[lstm] {} layers x {} hidden, window {}, {} streams, weight decay {}, loss balance {}\n",
-                             shape.layers, shape.hidden, shape.window, shape.streams, shape.weight_decay,
-                             summary.loss_balance);
+    std::cerr << fmt::format(
+        "[lstm] {} layers x {} hidden, window {}, {} streams, weight decay {}, loss balance {}, output delay {} "
+        "samples\n",
+        shape.layers, shape.hidden, shape.window, shape.streams, shape.weight_decay, summary.loss_balance, delay);
   auto tr = train_lstm(data, split, N, M, o, shape, summary.loss_balance, device, t0, "lstm");
   record_training(summary, tr);
-  const TorqueModelInfo info = make_network_info(recs, N, M);
-  auto model = std::make_unique<LstmTorqueModel>(info, tr.network, data.norm);
+  auto model = std::make_unique<LstmTorqueModel>(info, tr.network, data.norm, delay);
   return finish(std::move(model), std::move(summary), recs, split, o, t0, [&](TorqueModelInfo i) {
-    return std::make_unique<LstmTorqueModel>(std::move(i), tr.network, data.norm);
+    return std::make_unique<LstmTorqueModel>(std::move(i), tr.network, data.norm, delay);
   });
 }
 
@@ -527,6 +537,7 @@ FitResult fit_hybrid_torque_model(const std::vector<Recording>& recs, const FitO
   check_fit_recordings(recs);
   setup_torch(o);
   const int N = recs.front().num_joints(), M = resolve_num_outputs(recs, o);
+  resolve_output_delay_samples(TorqueModelKind::hybrid, o, median_sample_period(recs));
   FitOptions lo = o;
   lo.verbose = false;
   FitResult base_fit = fit_linear_torque_model(recs, lo);
@@ -560,6 +571,7 @@ FitResult fit_mlp_torque_model(const std::vector<Recording>& recs, const FitOpti
   check_fit_recordings(recs);
   setup_torch(o);
   const int N = recs.front().num_joints(), M = resolve_num_outputs(recs, o);
+  resolve_output_delay_samples(TorqueModelKind::mlp, o, median_sample_period(recs));
   const TimeSplit split = split_in_time(recs, o.train_fraction, o.validation_fraction);
   FitSummary summary = make_summary(TorqueModelKind::mlp, split);
   const torch::Device device = select_device(o, summary.device);
@@ -784,6 +796,8 @@ void export_torchscript(const LstmTorqueModel& model, const std::filesystem::pat
   m.register_attribute("sample_period_s", c10::FloatType::get(), model.info().sample_period_s);
   m.register_attribute("num_layers", c10::IntType::get(), static_cast<int64_t>(L));
   m.register_attribute("hidden_size", c10::IntType::get(), static_cast<int64_t>(net.hidden_size()));
+  // forward's torque at step t is that of step t - output_delay_samples.
+  m.register_attribute("output_delay_samples", c10::IntType::get(), static_cast<int64_t>(model.output_delay()));
   m.define(fmt::format(R"JIT(
     def forward(self, {4}:
         xn = (x - self.input_mean) / self.input_scale
@@ -872,9 +886,18 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   if (norm.has_acceleration() && !(info.sample_period_s > 0))
     import_error(path, "sample_period_s", "acceleration features need the module's sample period (s), a float attribute");
   info.training = {{"imported_from", path.string()}};
-  std::unique_ptr<LstmTorqueModel> model;
+  int delay = 0;
+  if (m.hasattr("output_delay_samples")) {
+    const auto d = m.attr("output_delay_samples");
+    if (!d.isInt() || d.toInt() < 0 || d.toInt() > 100000)
+      import_error(path, "output_delay_samples", "expected an int attribute in [0, 100000] (samples)");
+    delay = static_cast<int>(d.toInt());
+  }
+  std::unique_ptr<LstmTorqueModel> model, undelayed;
   try {
-    model = std::make_unique<LstmTorqueModel>(info, net, norm);
+    model = std::make_unique<LstmTorqueModel>(info, net, norm, delay);
+    // The check below compares the network step for step, as forward returns it.
+    undelayed = std::make_unique<LstmTorqueModel>(info, net, norm, 0);
   } catch (const std::invalid_argument& e) {
     import_error(path, "", e.what());
   }
@@ -908,7 +931,7 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   Eigen::MatrixXd xd = to_eigen(x[0]).cast<double>();
   // At the module's own sample period: what its acceleration features assume.
   const double dt = info.sample_period_s > 0 ? info.sample_period_s : 1.0;
-  const Eigen::MatrixXd mine = predict_torque(*model, Eigen::VectorXd::LinSpaced(T, 0, dt * (T - 1)),
+  const Eigen::MatrixXd mine = predict_torque(*undelayed, Eigen::VectorXd::LinSpaced(T, 0, dt * (T - 1)),
                                               xd.leftCols(I / 2), xd.rightCols(I / 2));
   const Eigen::MatrixXd theirs = to_eigen(y[0]).cast<double>();
   const double scale = std::max(1.0, theirs.cwiseAbs().maxCoeff());
