@@ -113,4 +113,16 @@ static void BM_OnlinePipelineHybrid(benchmark::State& state) {
   run_pipeline(state, rcm::OnlinePipeline(model, make_estimator()));
 }
 BENCHMARK(BM_OnlinePipelineHybrid);
+
+// The pure LSTM, causal (0) and with its default 40 ms output delay at 1.5 kHz
+// (60 samples), for which the pipeline also keeps the last 61 samples.
+static void BM_OnlinePipelineLstm(benchmark::State& state) {
+  const rcm::dynamics::Normalization norm{Eigen::VectorXf::Zero(12), Eigen::VectorXf::Ones(12), Eigen::VectorXf::Zero(6),
+                                          Eigen::VectorXf::Ones(6)};
+  auto model = std::make_shared<const rcm::dynamics::LstmTorqueModel>(
+      info(6), rcm::dynamics::make_random_lstm_network(12, 128, 1, 64, 6, 1, 0.2f), norm,
+      static_cast<int>(state.range(0)));
+  run_pipeline(state, rcm::OnlinePipeline(model, make_estimator()));
+}
+BENCHMARK(BM_OnlinePipelineLstm)->ArgName("delay")->Arg(0)->Arg(60);
 BENCHMARK_MAIN();
