@@ -84,7 +84,7 @@ TEST(DynamicsCli, FitLinearThenEvalJson) {
     const auto r = run("dynamics fit --model lstm --output-delay 5 --out " + model + " " + (dir / "free.csv").string(),
                        true);
     EXPECT_NE(r.status, 0);
-    EXPECT_NE(r.out.find("output_delay_s"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("--output-delay"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("burn-in"), std::string::npos) << r.out;
   }
   for (const char* kind : {"linear", "mlp", "hybrid"}) {

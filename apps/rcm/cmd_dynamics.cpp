@@ -103,6 +103,16 @@ void run_fit(const DynamicsArgs& a) {
     o.output_delay_s = a.output_delay;
   }
   const auto recs = load_all(a.recordings, a.dedupe);
+  if (a.output_delay && kind == TorqueModelKind::lstm && !recs.empty()) {
+    // Checked here too, so that a delay longer than the burn-in names the flag.
+    const double period = median_sample_period(recs);
+    const double samples = std::round(*a.output_delay / period);
+    if (period > 0 && samples > o.burn_in)
+      throw rcm::InputError(rcm::cli::flag_location("--output-delay"),
+                            fmt::format("{} s is {} samples at the recordings' {:.4g} s, more than the burn-in of {} "
+                                        "samples that the shifted targets need",
+                                        *a.output_delay, samples, period, o.burn_in));
+  }
   FitResult fit;
 #if defined(RCM_HAVE_TORCH)
   if (!a.torchscript_out.empty() && kind != TorqueModelKind::lstm) {
