@@ -14,7 +14,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   gnuplot-nox \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster
 
-.PHONY: deps build test demo bench clean
+.PHONY: deps build test demo bench coverage clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -47,6 +47,12 @@ demo: build
 
 bench: build
 	$(PYTHON) bench/run_benchmarks.py --build $(BUILD)
+
+# Interval coverage and method errors per friction model and free-space length
+# (about 40 minutes on 2 cores); writes its table into docs/estimation.md.
+COVERAGE_SEEDS ?= 1,2
+coverage: build
+	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
 
 clean:
 	rm -rf $(BUILD)

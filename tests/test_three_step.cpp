@@ -204,4 +204,60 @@ TEST(ThreeStep, PositionChatterIsRemovedAndMotionKept) {
   EXPECT_THROW(rcm::remove_position_chatter(r, Eigen::Vector3d(-1.0, 0.0, 0.0)), std::invalid_argument);
 }
 
+// Hysteretic friction at the hold: a joint at rest keeps +F after a motion up
+// and -F after a motion down. A static file with one approach from each side:
+// the paper's last hold reads the friction as force; the balanced step cancels
+// it, and says per joint whether both directions were seen.
+TEST(ThreeStep, BalancedStaticStepCancelsHystereticFriction) {
+  const Eigen::Vector3d q0(0.0, 0.0, 0.12), band(0.12, 0.24, 0.6), true_dtau(0.3, -0.2, 1.5);
+  const int H = 1400;
+  rcm::Recording r;
+  r.source = "static";
+  r.time = Eigen::VectorXd::LinSpaced(H, 0.0, (H - 1) * 0.005);
+  r.position.resize(H, 3);
+  r.velocity = Eigen::MatrixXd::Zero(H, 3);
+  r.effort.resize(H, 3);
+  // 0.5 s from q0 + a down to q0, 2 s hold, 0.5 s out to q0 - a, 0.5 s back up, 3.5 s hold.
+  // Joint 3 arrives from above both times: its holds stay one-sided.
+  const Eigen::Vector3d a(0.05, -0.05, 0.005);
+  Eigen::Vector3d friction = Eigen::Vector3d::Zero();
+  for (int t = 0; t < H; ++t) {
+    Eigen::Vector3d q = q0;
+    if (t < 100) q = q0 + a * (1.0 - t / 100.0);
+    else if (t >= 500 && t < 600) q = q0 - a * ((t - 500) / 100.0);
+    else if (t >= 600 && t < 700) q = q0 - a * (1.0 - (t - 600) / 100.0);
+    if (t >= 500 && t < 700) q[2] = q0[2] + a[2] * (t < 600 ? (t - 500) / 100.0 : 1.0 - (t - 600) / 100.0);
+    if (t > 0) {
+      const Eigen::Vector3d dq = q - r.position.row(t - 1).transpose();
+      for (int j = 0; j < 3; ++j)
+        if (dq[j] != 0.0) friction[j] = dq[j] > 0 ? band[j] : -band[j];
+      r.velocity.row(t) = (dq / 0.005).transpose();
+    }
+    r.position.row(t) = q.transpose();
+    r.effort.row(t) = (true_dtau + friction).transpose();
+  }
+  const Eigen::MatrixXd tau_fs = Eigen::MatrixXd::Zero(H, 3);  // a model that knows nothing of friction
+
+  const rcm::StaticHold last = rcm::compute_static_hold(r, tau_fs, q0, {}, rcm::StaticStep::last_hold);
+  ASSERT_EQ(last.holds.size(), 2u);
+  EXPECT_EQ(last.holds[0].direction, Eigen::Vector3i(-1, 1, -1));
+  EXPECT_EQ(last.holds[1].direction, Eigen::Vector3i(1, -1, -1));
+  EXPECT_TRUE(last.get_dtau().isApprox(true_dtau + Eigen::Vector3d(band[0], -band[1], -band[2]), 1e-12));
+
+  const rcm::StaticHold balanced = rcm::compute_static_hold(r, tau_fs, q0);
+  EXPECT_EQ(balanced.step, rcm::StaticStep::balanced);
+  EXPECT_NEAR(balanced.get_dtau()[0], true_dtau[0], 1e-12);
+  EXPECT_NEAR(balanced.get_dtau()[1], true_dtau[1], 1e-12);
+  EXPECT_NEAR(balanced.get_dtau()[2], true_dtau[2] - band[2], 1e-12);  // one-sided: the mean of its holds
+  EXPECT_TRUE(balanced.direction_balanced[0]);
+  EXPECT_TRUE(balanced.direction_balanced[1]);
+  EXPECT_FALSE(balanced.direction_balanced[2]);
+  // Unequal hold lengths: each side counts once, whatever its duration.
+  EXPECT_GT(balanced.holds[1].segment.duration_s, 1.5 * balanced.holds[0].segment.duration_s);
+
+  EXPECT_EQ(rcm::parse_static_step("last-hold"), rcm::StaticStep::last_hold);
+  EXPECT_EQ(rcm::to_string(rcm::parse_static_step("balanced")), "balanced");
+  EXPECT_THROW(rcm::parse_static_step("both"), std::invalid_argument);
+}
+
 }  // namespace

@@ -13,7 +13,7 @@
 namespace {
 
 struct Options {
-  std::string out = "demo-out", model, method = "joint";
+  std::string out = "demo-out", model, method = rcm::StudyOptions{}.method;
   unsigned seed = 1;
   bool quick = false, json = false;
   double max_minutes = 0.0;

@@ -11,7 +11,8 @@
 namespace {
 
 struct Options {
-  std::string session, out = "rcm-run", method = "three-step", export_problems;
+  std::string session, out = "rcm-run", method = rcm::StudyOptions{}.method, export_problems;
+  std::string static_step = rcm::to_string(rcm::StudyOptions{}.static_step);
   rcm::cli::FreeSpaceFlags free_space;
   double D0 = std::numeric_limits<double>::quiet_NaN();
   bool json = false;
@@ -23,6 +24,11 @@ void run(const Options& o) {
   const rcm::Session session = rcm::load_session(o.session);
   rcm::StudyOptions options = rcm::cli::make_study_options(o.free_space);
   options.method = o.method;
+  try {
+    options.static_step = rcm::parse_static_step(o.static_step);
+  } catch (const std::invalid_argument& e) {
+    throw rcm::InputError(rcm::cli::flag_location("--static-step"), e.what());
+  }
   if (!std::isnan(o.D0)) options.three_step.D_initial = o.D0;
   if (!o.export_problems.empty()) options.export_problems_dir = o.export_problems;
   try {
@@ -49,8 +55,12 @@ const bool registered = rcm::cli::register_command({"run", 60, [](CLI::App& app)
   cmd->add_option("SESSION", o->session, "rcm-session/1 manifest")->required();
   cmd->add_option("--out", o->out, "output folder (default rcm-run)");
   cmd->add_option("--method", o->method,
-                  "three-step (paper Algorithm 1, default) or joint (all offsets in torque space, with 95 % intervals; "
-                  "three-step beside it)");
+                  "joint (default: all offsets in torque space, with 95 % intervals; three-step beside it) or "
+                  "three-step (paper Algorithm 1 alone)");
+  cmd->add_option("--static-step", o->static_step,
+                  "how the three-step method reads the static file: balanced (default: every hold at q0, those "
+                  "approached from above and from below averaged apart, so hysteretic friction cancels) or "
+                  "last-hold (the paper's)");
   cmd->add_option("--model", o->free_space.model, "free-space model to fit: hybrid (default with LibTorch), lstm, mlp, linear");
   cmd->add_option("--model-file", o->free_space.model_file, "use a saved free-space model instead of fitting one");
   cmd->add_option("--seed", o->free_space.seed, "seed of the model fit");

@@ -19,6 +19,7 @@ struct SimulateOptions {
   std::string out;
   std::string experiment = "session";
   std::string tissue;
+  std::string friction;
   std::string config_file;
   std::uint64_t seed = 0;
   bool seed_given = false;
@@ -39,7 +40,7 @@ std::string config_help() {
       "unknown keys and wrong types are errors). Defaults:\n";
   for (const auto& f : rcm::sim::describe_config(defaults))
     text += fmt::format("  {:<46} {:<24} {}\n", f.path, f.value, f.help);
-  text += "\nOrder of precedence: defaults < --tissue < --config < command-line flags.\n";
+  text += "\nOrder of precedence: defaults < --tissue, --friction < --config < command-line flags.\n";
   return text;
 }
 
@@ -54,6 +55,15 @@ void run_simulate(const SimulateOptions& o) {
     } catch (const rcm::InputError& e) {
       rcm::InputLocation loc;
       loc.file = "--tissue";
+      throw rcm::InputError(loc, e.reason());
+    }
+  }
+  if (!o.friction.empty()) {
+    try {
+      apply_friction_preset(config, o.friction);
+    } catch (const rcm::InputError& e) {
+      rcm::InputLocation loc;
+      loc.file = "--friction";
       throw rcm::InputError(loc, e.reason());
     }
   }
@@ -88,8 +98,8 @@ void run_simulate(const SimulateOptions& o) {
 
   if (o.experiment == "session") {
     auto progress = [&](const std::string& msg) { std::cerr << "simulate: " << msg << "\n"; };
-    std::cerr << fmt::format("simulate: session, seed {}, tissue {}, {:.0f} s free space + {} trials\n",
-                             config.seed, config.tissue.preset, config.protocol.free_space_s,
+    std::cerr << fmt::format("simulate: session, seed {}, tissue {}, {} friction, {:.0f} s free space + {} trials\n",
+                             config.seed, config.tissue.preset, config.friction_preset, config.protocol.free_space_s,
                              config.protocol.coaxial_offsets_m.size() * config.protocol.radial_offsets_m.size());
     const SessionWriteSummary s = simulate_session(config, out_dir, progress);
     if (o.json) {
@@ -109,6 +119,7 @@ void run_simulate(const SimulateOptions& o) {
                             {"session", s.manifest.string()},
                             {"seed", config.seed},
                             {"tissue", config.tissue.preset},
+                            {"friction", config.friction_preset},
                             {"elapsed_s", s.elapsed_s},
                             {"recordings", recs}});
       return;
@@ -153,6 +164,7 @@ void run_simulate(const SimulateOptions& o) {
                             {"svg", plot.svg.string()},
                             {"seed", config.seed},
                             {"tissue", config.tissue.preset},
+                            {"friction", config.friction_preset},
                             {"elapsed_s", elapsed},
                             {"points", pts}});
       return;
@@ -183,13 +195,15 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   auto opts = std::make_shared<SimulateOptions>();
   auto* cmd = app.add_subcommand(
       "simulate",
-      "Simulated phantom bench (closed-loop dVRK Classic PSM, LuGre friction, tissue pad, "
+      "Simulated phantom bench (closed-loop dVRK Classic PSM, hysteretic LuGre friction, tissue pad, "
       "sensors): write a session (rcm-session/1, with ground truth) or the Fig. 3 sweep");
   cmd->add_option("--out", opts->out, "output directory");
   cmd->add_option("--seed", opts->seed, "random seed (default 1, or the config's)")
       ->each([opts](const std::string&) { opts->seed_given = true; });
   cmd->add_option("--experiment", opts->experiment, "session (default) | force-angle");
   cmd->add_option("--tissue", opts->tissue, "tissue preset: linear (default), stiffening, viscoelastic, sliding");
+  cmd->add_option("--friction", opts->friction,
+                  "joint friction preset: hysteretic (default: rate-independent, the real PSM's band), smooth");
   cmd->add_option("--config", opts->config_file, "JSON file overriding any parameter (keys below)");
   cmd->add_flag("--quick", opts->quick, "short session: 120 s free space, 30 s calibration and trials");
   cmd->add_option("--free-space-s", opts->free_space_s, "free-space duration, s (default 900)");

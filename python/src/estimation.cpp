@@ -72,16 +72,36 @@ void bind_estimation(py::module_& m) {
     return find_rest_segment(rec, to_vector3(q0, argument_location("rcm.find_rest_segment", "q0")), o);
   }, py::arg("recording"), py::arg("q0"), py::arg("options") = RestDetectionOptions{},
         "The last run of samples at rest at q0; rcm.InputError when the recording never rests there");
-  py::class_<StaticHold>(m, "StaticHold", "Step 3b: mean measured and predicted torque over the rest segment")
-      .def_readonly("segment", &StaticHold::segment)
+  m.def("find_rest_segments", [](const Recording& rec, py::handle q0, const RestDetectionOptions& o) {
+    return find_rest_segments(rec, to_vector3(q0, argument_location("rcm.find_rest_segments", "q0")), o);
+  }, py::arg("recording"), py::arg("q0"), py::arg("options") = RestDetectionOptions{},
+        "Every run of samples at rest at q0, in time order; rcm.InputError when there is none");
+  py::enum_<StaticStep>(m, "StaticStep", "How step 3b combines the static file's holds")
+      .value("balanced", StaticStep::balanced)
+      .value("last_hold", StaticStep::last_hold);
+  py::class_<HoldApproach>(m, "HoldApproach", "One hold at q0 and, per joint, the direction of the motion that ended there")
+      .def_readonly("segment", &HoldApproach::segment)
+      .def_property_readonly("direction", [](const HoldApproach& h) { return Eigen::Vector3d(h.direction.cast<double>()); },
+                             "+1 up, -1 down, 0 unknown, per joint")
+      .def_readonly("tau_measured", &HoldApproach::tau_measured)
+      .def_readonly("tau_free_space", &HoldApproach::tau_free_space);
+  py::class_<StaticHold>(m, "StaticHold", "Step 3b: measured and predicted torque at q0, combined over the holds")
+      .def_readonly("segment", &StaticHold::segment, "the last hold")
+      .def_readonly("holds", &StaticHold::holds)
+      .def_readonly("step", &StaticHold::step)
       .def_readonly("tau_measured", &StaticHold::tau_measured)
       .def_readonly("tau_free_space", &StaticHold::tau_free_space)
+      .def_property_readonly("direction_balanced", [](const StaticHold& h) {
+        return std::vector<bool>{h.direction_balanced[0], h.direction_balanced[1], h.direction_balanced[2]};
+      }, "per joint: holds from both directions were averaged")
       .def("get_dtau", &StaticHold::get_dtau, "tau_measured - tau_free_space");
-  m.def("compute_static_hold", [](const Recording& rec, py::handle tau_fs, py::handle q0, const RestDetectionOptions& o) {
+  m.def("compute_static_hold", [](const Recording& rec, py::handle tau_fs, py::handle q0, const RestDetectionOptions& o,
+                                  StaticStep step) {
     const std::string fn = "rcm.compute_static_hold";
     const Eigen::MatrixXd tau = to_matrix(tau_fs, argument_location(fn, "tau_fs"));
-    return compute_static_hold(rec, tau, to_vector3(q0, argument_location(fn, "q0")), o);
+    return compute_static_hold(rec, tau, to_vector3(q0, argument_location(fn, "q0")), o, step);
   }, py::arg("recording"), py::arg("tau_fs"), py::arg("q0"), py::arg("options") = RestDetectionOptions{},
+        py::arg("step") = StaticStep::balanced,
         "tau_fs: (T, >= 3) prediction for the whole static file with the model's state carried");
   m.def("estimate_position_quantum", &estimate_position_quantum, py::arg("recording"),
         "Smallest nonzero position step per joint (the encoder count of quantized recordings)");
@@ -347,7 +367,8 @@ void bind_estimation(py::module_& m) {
         o.model_kind = dynamics::TorqueModelKind::linear;  // as the CLI without LibTorch
         return o;
       }))
-      .def_readwrite("method", &StudyOptions::method, "'three-step' or 'joint'")
+      .def_readwrite("method", &StudyOptions::method, "'joint' (default; three-step beside it) or 'three-step'")
+      .def_readwrite("static_step", &StudyOptions::static_step, "StaticStep of the three-step method")
       .def_readwrite("joint", &StudyOptions::joint, "JointEstimatorOptions")
       .def_readwrite("model_kind", &StudyOptions::model_kind)
       .def_readwrite("model_file", &StudyOptions::model_file, "path of a saved free-space model, or None (fit)")

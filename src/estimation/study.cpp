@@ -222,7 +222,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
               ? dynamics::predict_torque(model, remove_position_chatter(hold_rec, options.hold_chatter_width_counts *
                                                                                     estimate_position_quantum(hold_rec)))
               : dynamics::predict_torque(model, hold_rec);
-      out.hold = compute_static_hold(hold_rec, tau_fs_hold, session.q0, options.rest);
+      out.hold = compute_static_hold(hold_rec, tau_fs_hold, session.q0, options.rest, options.static_step);
       dtau_radial = out.hold->get_dtau();
       if (result.joint_tissue) {
         const auto hold_samples = make_joint_samples(incision, hold_rec, tau_fs_hold, options.three_step.coaxial.max_theta_rad);
@@ -402,11 +402,23 @@ nlohmann::json StudyResult::to_json() const {
     }
     jt["name"] = t.name;
     if (t.truth_m) jt["truth_m"] = vec_json(*t.truth_m);
-    if (t.hold)
-      jt["static_hold"] = {{"duration_s", t.hold->segment.duration_s},
+    if (t.hold) {
+      nlohmann::json holds = nlohmann::json::array();
+      for (const HoldApproach& h : t.hold->holds)
+        holds.push_back({{"duration_s", h.segment.duration_s},
+                         {"samples", h.segment.end - h.segment.begin},
+                         {"approach_direction", {h.direction[0], h.direction[1], h.direction[2]}},
+                         {"tau_measured", vec_json(h.tau_measured)},
+                         {"tau_free_space", vec_json(h.tau_free_space)}});
+      const auto& b = t.hold->direction_balanced;
+      jt["static_hold"] = {{"static_step", to_string(t.hold->step)},
+                           {"duration_s", t.hold->segment.duration_s},
                            {"samples", t.hold->segment.end - t.hold->segment.begin},
                            {"tau_measured", vec_json(t.hold->tau_measured)},
-                           {"tau_free_space", vec_json(t.hold->tau_free_space)}};
+                           {"tau_free_space", vec_json(t.hold->tau_free_space)},
+                           {"direction_balanced", {b[0], b[1], b[2]}},
+                           {"holds", holds}};
+    }
     if (t.paper_variant) jt["paper_f_q0_0_variant"] = estimate_json(*t.paper_variant, t.truth_m);
     if (t.force_rmse) jt["force_rmse_n"] = vec_json(*t.force_rmse);
     jt["force_offset_used_m"] = t.force_offset_used_m;

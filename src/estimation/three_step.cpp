@@ -13,24 +13,9 @@
 
 namespace rcm {
 
-RestSegment find_rest_segment(const Recording& r, const Eigen::Vector3d& q0, const RestDetectionOptions& o) {
-  const Eigen::Index T = r.time.size();
-  auto at_rest = [&](Eigen::Index t) {
-    for (int j = 0; j < 2; ++j)
-      if (std::abs(r.velocity(t, j)) > o.max_angular_speed || std::abs(r.position(t, j) - q0[j]) > o.max_angle_from_q0)
-        return false;
-    return std::abs(r.velocity(t, 2)) <= o.max_linear_speed && std::abs(r.position(t, 2) - q0[2]) <= o.max_insertion_from_q0;
-  };
-  // The last run long enough: the hold comes after the return motion.
-  Eigen::Index end = T;
-  while (end > 0) {
-    while (end > 0 && !at_rest(end - 1)) --end;
-    Eigen::Index begin = end;
-    while (begin > 0 && at_rest(begin - 1)) --begin;
-    if (end > begin && r.time[end - 1] - r.time[begin] >= o.min_duration_s)
-      return {begin, end, r.time[end - 1] - r.time[begin]};
-    end = begin;
-  }
+namespace {
+
+[[noreturn]] void throw_no_hold(const Recording& r, const Eigen::Vector3d& q0, const RestDetectionOptions& o) {
   InputLocation where;
   where.file = r.source;
   std::ostringstream msg;
@@ -40,18 +25,100 @@ RestSegment find_rest_segment(const Recording& r, const Eigen::Vector3d& q0, con
   throw InputError(where, msg.str());
 }
 
+// The direction of the motion that ended at the hold starting at `begin`: the
+// side of the last sample before it that lay farther from the hold's position
+// than the rest tolerance. 0 when there is none in the file.
+int find_approach_direction(const Recording& r, Eigen::Index begin, int joint, double q_hold, double tolerance) {
+  for (Eigen::Index t = begin - 1; t >= 0; --t) {
+    const double d = q_hold - r.position(t, joint);
+    if (std::abs(d) > tolerance) return d > 0.0 ? 1 : -1;
+  }
+  return 0;
+}
+
+}  // namespace
+
+std::vector<RestSegment> find_rest_segments(const Recording& r, const Eigen::Vector3d& q0,
+                                            const RestDetectionOptions& o) {
+  const Eigen::Index T = r.time.size();
+  auto at_rest = [&](Eigen::Index t) {
+    for (int j = 0; j < 2; ++j)
+      if (std::abs(r.velocity(t, j)) > o.max_angular_speed || std::abs(r.position(t, j) - q0[j]) > o.max_angle_from_q0)
+        return false;
+    return std::abs(r.velocity(t, 2)) <= o.max_linear_speed && std::abs(r.position(t, 2) - q0[2]) <= o.max_insertion_from_q0;
+  };
+  std::vector<RestSegment> out;
+  Eigen::Index begin = 0;
+  while (begin < T) {
+    while (begin < T && !at_rest(begin)) ++begin;
+    Eigen::Index end = begin;
+    while (end < T && at_rest(end)) ++end;
+    if (end > begin && r.time[end - 1] - r.time[begin] >= o.min_duration_s)
+      out.push_back({begin, end, r.time[end - 1] - r.time[begin]});
+    begin = end;
+  }
+  if (out.empty()) throw_no_hold(r, q0, o);
+  return out;
+}
+
+RestSegment find_rest_segment(const Recording& r, const Eigen::Vector3d& q0, const RestDetectionOptions& o) {
+  return find_rest_segments(r, q0, o).back();
+}
+
+std::string to_string(StaticStep step) { return step == StaticStep::last_hold ? "last-hold" : "balanced"; }
+
+StaticStep parse_static_step(const std::string& text) {
+  if (text == "last-hold") return StaticStep::last_hold;
+  if (text == "balanced") return StaticStep::balanced;
+  throw std::invalid_argument("expected balanced or last-hold, got '" + text + "'");
+}
+
 StaticHold compute_static_hold(const Recording& r, const Eigen::MatrixXd& tau_fs, const Eigen::Vector3d& q0,
-                               const RestDetectionOptions& o) {
+                               const RestDetectionOptions& o, StaticStep step) {
   if (tau_fs.rows() != r.time.size() || tau_fs.cols() < 3) {
     InputLocation where;
     where.file = r.source;
     throw InputError(where, "free-space torque prediction does not match the recording's samples");
   }
   StaticHold hold;
-  hold.segment = find_rest_segment(r, q0, o);
-  const Eigen::Index n = hold.segment.end - hold.segment.begin;
-  hold.tau_measured = r.effort.block(hold.segment.begin, 0, n, 3).colwise().mean().transpose();
-  hold.tau_free_space = tau_fs.block(hold.segment.begin, 0, n, 3).colwise().mean().transpose();
+  hold.step = step;
+  const Eigen::Vector3d tolerance(o.max_angle_from_q0, o.max_angle_from_q0, o.max_insertion_from_q0);
+  for (const RestSegment& seg : find_rest_segments(r, q0, o)) {
+    const Eigen::Index n = seg.end - seg.begin;
+    HoldApproach h;
+    h.segment = seg;
+    h.tau_measured = r.effort.block(seg.begin, 0, n, 3).colwise().mean().transpose();
+    h.tau_free_space = tau_fs.block(seg.begin, 0, n, 3).colwise().mean().transpose();
+    const Eigen::Vector3d q_hold = r.position.block(seg.begin, 0, n, 3).colwise().mean().transpose();
+    for (int j = 0; j < 3; ++j) h.direction[j] = find_approach_direction(r, seg.begin, j, q_hold[j], tolerance[j]);
+    hold.holds.push_back(h);
+  }
+  hold.segment = hold.holds.back().segment;
+  if (step == StaticStep::last_hold) {
+    hold.tau_measured = hold.holds.back().tau_measured;
+    hold.tau_free_space = hold.holds.back().tau_free_space;
+    return hold;
+  }
+  for (int j = 0; j < 3; ++j) {
+    // Per direction (-1, 0, +1): duration-weighted sums of both torques.
+    double w[3] = {0, 0, 0}, m[3] = {0, 0, 0}, f[3] = {0, 0, 0};
+    for (const HoldApproach& h : hold.holds) {
+      const int k = h.direction[j] + 1;
+      const double weight = static_cast<double>(h.segment.end - h.segment.begin);
+      w[k] += weight;
+      m[k] += weight * h.tau_measured[j];
+      f[k] += weight * h.tau_free_space[j];
+    }
+    if (w[0] > 0 && w[2] > 0) {
+      hold.direction_balanced[j] = true;
+      hold.tau_measured[j] = 0.5 * (m[0] / w[0] + m[2] / w[2]);
+      hold.tau_free_space[j] = 0.5 * (f[0] / w[0] + f[2] / w[2]);
+    } else {
+      const double total = w[0] + w[1] + w[2];
+      hold.tau_measured[j] = (m[0] + m[1] + m[2]) / total;
+      hold.tau_free_space[j] = (f[0] + f[1] + f[2]) / total;
+    }
+  }
   return hold;
 }
 

@@ -270,14 +270,27 @@ SimulatedTrial simulate_trial(const SimConfig& config, const Eigen::Vector3d& mi
   trial.misalignment_m = misalignment_m;
   // The same path as the calibration, so that trials differ only by the misalignment.
   ReferenceTrajectory ref = make_teleop_reference(config, "teleop", std::max(P.calibration_s, P.trial_s));
-  ref.add_move(P.trial_s, P.static_return_s, P.q0);
-  ref.add_hold(P.trial_s + P.static_return_s, P.q0);
+  // The static file: return to q0 and hold; with several approaches the arm then
+  // moves out to the other side of q0 on every joint and comes back, so that
+  // each joint's holds alternate the direction of the motion that ended there.
+  Eigen::Vector3d side = (ref.evaluate(P.trial_s).q - P.q0).unaryExpr([](double d) { return d < 0.0 ? -1.0 : 1.0; });
+  const double hold_s = P.static_hold_s / P.static_approaches;
+  double t = P.trial_s;
+  ref.add_move(t, P.static_return_s, P.q0);
+  t += P.static_return_s;
+  for (int a = 0; a < P.static_approaches; ++a) {
+    ref.add_hold(t, P.q0);
+    t += hold_s;
+    if (a + 1 == P.static_approaches) break;
+    side = -side;
+    ref.add_move(t, 0.5 * P.static_return_s, P.q0 + side.cwiseProduct(P.static_approach_offset));
+    ref.add_move(t + 0.5 * P.static_return_s, 0.5 * P.static_return_s, P.q0);
+    t += P.static_return_s;
+  }
   const TissueModel tissue(config.tissue, P.q0, misalignment_m);
-  auto recs = simulate_run(
-      config, ref, &tissue,
-      {{trial.name, 0.0, P.trial_s},
-       {trial.name + "_static", P.trial_s, P.trial_s + P.static_return_s + P.static_hold_s}},
-      derive_seed(config.seed, "noise:" + trial.name));
+  auto recs = simulate_run(config, ref, &tissue,
+                           {{trial.name, 0.0, P.trial_s}, {trial.name + "_static", P.trial_s, t}},
+                           derive_seed(config.seed, "noise:" + trial.name));
   trial.recording = std::move(recs[0]);
   trial.static_recording = std::move(recs[1]);
   return trial;
@@ -448,6 +461,7 @@ SessionWriteSummary simulate_session(const SimConfig& config, const std::filesys
                         {"seed", config.seed},
                         {"config", "sim_config.json"},
                         {"tissue", config.tissue.preset},
+                        {"friction", config.friction_preset},
                         {"truth_files", P.write_truth}};
   session.extra["simulator"] = sim;
   save_session(session.manifest, session);

@@ -49,6 +49,7 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("arm.gravity_base_m_s2", &c.arm.gravity_base_m_s2, "gravity in the base frame, m/s^2");
   add("arm.insertion_counterbalance_n", &c.arm.insertion_counterbalance_n,
       "insertion counterbalance spring force along -z3, N");
+  add("friction.preset", &c.friction_preset, "hysteretic | smooth (applied first)");
   for (int j = 0; j < 3; ++j) {
     JointFrictionParams& p = c.friction[static_cast<std::size_t>(j)];
     const std::string k = std::string("friction.") + kJointKeys[j];
@@ -113,7 +114,11 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("protocol.calibration_s", &P.calibration_s, "calibration teleoperation, s");
   add("protocol.trial_s", &P.trial_s, "trial teleoperation, s");
   add("protocol.static_return_s", &P.static_return_s, "static file: return to q0, s");
-  add("protocol.static_hold_s", &P.static_hold_s, "static file: hold at q0, s");
+  add("protocol.static_hold_s", &P.static_hold_s, "static file: time at q0, shared by its holds, s");
+  add("protocol.static_approaches", &P.static_approaches,
+      "static file: holds at q0, each approached from the other side (1: the paper's)");
+  add("protocol.static_approach_offset", &P.static_approach_offset,
+      "static file: how far out the arm goes between holds, rad, rad, m");
   add("protocol.coaxial_offsets_m", &P.coaxial_offsets_m, "trial coaxial offsets D, m");
   add("protocol.radial_offsets_m", &P.radial_offsets_m, "trial radial offsets [dr_x, dr_y], m");
   add("protocol.write_truth", &P.write_truth, "write *_truth.csv next to every recording");
@@ -280,12 +285,38 @@ SimConfig make_default_config() {
   c.arm.insertion_stage = {0.85, Eigen::Vector3d(0.0, 0.0, -0.22), Eigen::Vector3d(0.020, 0.020, 0.001)};
   c.arm.gravity_base_m_s2 = Eigen::Vector3d(0.0, 0.0, -9.81);
   c.arm.insertion_counterbalance_n = 7.0;
-  // Coulomb ~0.050 / 0.067 N m and 0.45 / 0.58 N, viscous 0.09 / 0.22 N m s/rad, 1.2 N s/m.
-  c.friction[0] = {0.052, 0.048, 1.3, 0.02, 0.09, 500.0, 2.0, 0.008};
-  c.friction[1] = {0.070, 0.064, 1.3, 0.02, 0.22, 600.0, 2.5, -0.012};
-  c.friction[2] = {0.45, 0.58, 1.25, 0.004, 1.2, 2.5e4, 40.0, 0.0};
+  apply_friction_preset(c, "hysteretic");
   apply_tissue_preset(c.tissue, "linear");
   return c;
+}
+
+std::vector<std::string> get_friction_preset_names() { return {"hysteretic", "smooth"}; }
+
+void apply_friction_preset(SimConfig& c, const std::string& name) {
+  if (name == "hysteretic") {
+    // The real Classic PSM: friction that barely depends on speed and keeps what
+    // the last motion left, so a joint at rest holds anywhere in a band of about
+    // +-0.12 / +-0.24 N m / +-0.6 N. Coulomb levels at the band, a little viscous
+    // friction, no Stribeck peak; the bristles take 2 mrad / 0.2 mm to reverse.
+    c.friction[0] = {0.125, 0.115, 1.0, 0.02, 0.01, 60.0, 1.0, 0.008};
+    c.friction[1] = {0.25, 0.23, 1.0, 0.02, 0.02, 120.0, 2.0, -0.012};
+    c.friction[2] = {0.58, 0.62, 1.0, 0.004, 0.2, 3000.0, 40.0, 0.0};
+  } else if (name == "smooth") {
+    // Smaller Coulomb levels with a Stribeck peak and stiff bristles, and most of
+    // the friction viscous: Coulomb ~0.050 / 0.067 N m and 0.45 / 0.58 N, viscous
+    // 0.09 / 0.22 N m s/rad and 1.2 N s/m.
+    c.friction[0] = {0.052, 0.048, 1.3, 0.02, 0.09, 500.0, 2.0, 0.008};
+    c.friction[1] = {0.070, 0.064, 1.3, 0.02, 0.22, 600.0, 2.5, -0.012};
+    c.friction[2] = {0.45, 0.58, 1.25, 0.004, 1.2, 2.5e4, 40.0, 0.0};
+  } else {
+    std::string known;
+    for (const auto& n : get_friction_preset_names()) known += (known.empty() ? "" : ", ") + n;
+    InputLocation loc;
+    loc.field = "friction.preset";
+    loc.kind = InputLocation::Kind::json_field;
+    throw InputError(loc, "unknown friction '" + name + "'; known: " + known);
+  }
+  c.friction_preset = name;
 }
 
 std::vector<std::string> get_tissue_preset_names() {
@@ -330,6 +361,15 @@ void apply_config_json(SimConfig& config, const nlohmann::json& json, const std:
       apply_tissue_preset(config.tissue, p.get<std::string>());
     } catch (const InputError& e) {
       fail(source, "tissue.preset", e.reason());
+    }
+  }
+  if (json.contains("friction") && json["friction"].is_object() && json["friction"].contains("preset")) {
+    const auto& p = json["friction"]["preset"];
+    if (!p.is_string()) fail(source, "friction.preset", "expected a string, got " + type_name(p));
+    try {
+      apply_friction_preset(config, p.get<std::string>());
+    } catch (const InputError& e) {
+      fail(source, "friction.preset", e.reason());
     }
   }
   std::map<std::string, FieldRef> fields;
@@ -487,6 +527,8 @@ void validate_config(const SimConfig& c, const std::string& source) {
   require(P.trial_s > 0, "protocol.trial_s", "expected > 0");
   require(P.static_return_s > 0, "protocol.static_return_s", "expected > 0");
   require(P.static_hold_s > 0, "protocol.static_hold_s", "expected > 0");
+  require(P.static_approaches >= 1 && P.static_approaches <= 8, "protocol.static_approaches", "expected 1..8");
+  positive3(P.static_approach_offset, "protocol.static_approach_offset", false);
   auto check_offset = [&](double D, const std::string& field) {
     require(D >= -0.02 && D <= 0.07, field, "expected a coaxial offset in [-0.02, 0.07] m");
     // The shaft must reach the pad: the tip is at about q3 along z3.

@@ -27,9 +27,12 @@ using TorqueModelFitter = std::function<dynamics::FitResult(
     dynamics::TorqueModelKind, const std::vector<Recording>&, const dynamics::FitOptions&)>;
 
 struct StudyOptions {
-  // "three-step" (paper Algorithm 1) or "joint" (all offsets in torque space;
-  // the three-step estimate is computed beside it for comparison).
-  std::string method = "three-step";
+  // "joint" (all offsets in torque space, with 95 % intervals; the three-step
+  // estimate is computed beside it) or "three-step" (paper Algorithm 1 alone).
+  // Joint is the default: it uses the whole motion, so the hysteretic friction a
+  // real joint holds at rest barely moves it, where the three-step radial force
+  // rests on one hold.
+  std::string method = "joint";
   JointEstimatorOptions joint;
   dynamics::TorqueModelKind model_kind = dynamics::TorqueModelKind::lstm;
   std::optional<std::filesystem::path> model_file;  // use a saved model, skip fitting
@@ -39,6 +42,7 @@ struct StudyOptions {
   double tissue_sensitivity_delta_m = 0.003;  // paper V-D: D* +- 3 mm
   ThreeStepOptions three_step;
   RestDetectionOptions rest;
+  StaticStep static_step = StaticStep::balanced;  // how step 3b combines the static file's holds
   RecordingReadOptions read;
   // The paper's f(q0, 0): the model stepped on (q0, 0) from its reset state for
   // this long, then read.
@@ -82,7 +86,7 @@ struct TrialOutcome {
 
 struct StudyResult {
   std::filesystem::path session_manifest;
-  std::string method = "three-step";
+  std::string method = "joint";
   dynamics::TorqueModelKind model_kind = dynamics::TorqueModelKind::lstm;
   std::shared_ptr<const dynamics::TorqueModel> model;
   std::optional<dynamics::FitSummary> fit;        // when fitted here

@@ -42,29 +42,62 @@ struct RestDetectionOptions {
   double min_duration_s = 0.25;
 };
 
-// The last contiguous run of samples at rest at q0: [begin, end).
+// A contiguous run of samples at rest at q0: [begin, end).
 struct RestSegment {
   Eigen::Index begin = 0, end = 0;
   double duration_s = 0.0;
 };
 
-// Throws InputError naming the recording when it never rests at q0 for
-// min_duration_s (e.g. the static file of another q0, or a robot still moving).
+// Every run at rest at q0 lasting at least min_duration_s, in time order. Throws
+// InputError naming the recording when there is none (e.g. the static file of
+// another q0, or a robot still moving).
+std::vector<RestSegment> find_rest_segments(const Recording& recording, const Eigen::Vector3d& q0,
+                                            const RestDetectionOptions& options = {});
+// The last of them: the hold comes after the return motion.
 RestSegment find_rest_segment(const Recording& recording, const Eigen::Vector3d& q0,
                               const RestDetectionOptions& options = {});
 
-// Step 3b's torque residual at the hold: mean over the rest segment.
-struct StaticHold {
+// How step 3b reads the static file.
+//  last_hold  the paper's: the last hold alone.
+//  balanced   every hold; per joint, the holds approached from above and from
+//             below are averaged separately and the two means averaged. A joint
+//             at rest keeps the friction its last motion left (rate-independent,
+//             hysteretic friction: anywhere in a band of about +-0.12 N m on the
+//             Classic PSM's yaw, 4 N at the incision at D = 30 mm); it changes
+//             sign with the direction of approach, so the balanced mean cancels
+//             what the free-space model got wrong of it, to first order. With
+//             holds from one side only it is the mean of every hold.
+enum class StaticStep { last_hold, balanced };
+std::string to_string(StaticStep step);
+StaticStep parse_static_step(const std::string& text);  // throws std::invalid_argument
+
+// One hold of the static file: its samples and, per joint, the direction of the
+// motion that ended there (+1 up, -1 down, 0 when the joint did not come from
+// farther than the rest tolerance within the file).
+struct HoldApproach {
   RestSegment segment;
-  Eigen::Vector3d tau_measured = Eigen::Vector3d::Zero();  // mean measured effort
+  Eigen::Vector3i direction = Eigen::Vector3i::Zero();
+  Eigen::Vector3d tau_measured = Eigen::Vector3d::Zero();   // mean measured effort
   Eigen::Vector3d tau_free_space = Eigen::Vector3d::Zero();  // mean predicted tau_fs
+};
+
+// Step 3b's torque residual at q0, combined over the holds as `step` says.
+struct StaticHold {
+  RestSegment segment;                 // the last hold
+  std::vector<HoldApproach> holds;     // every hold, in time order
+  StaticStep step = StaticStep::balanced;
+  Eigen::Vector3d tau_measured = Eigen::Vector3d::Zero();    // combined measured effort
+  Eigen::Vector3d tau_free_space = Eigen::Vector3d::Zero();  // combined predicted tau_fs
+  // Per joint: true when holds from both directions went into the mean.
+  Eigen::Matrix<bool, 3, 1> direction_balanced = Eigen::Matrix<bool, 3, 1>::Constant(false);
   Eigen::Vector3d get_dtau() const { return tau_measured - tau_free_space; }
 };
 
 // tau_fs: T x (>=3) free-space prediction for the whole static file, computed
 // with the model's state carried through the return motion.
 StaticHold compute_static_hold(const Recording& recording, const Eigen::MatrixXd& tau_fs,
-                               const Eigen::Vector3d& q0, const RestDetectionOptions& options = {});
+                               const Eigen::Vector3d& q0, const RestDetectionOptions& options = {},
+                               StaticStep step = StaticStep::balanced);
 
 // Encoder chatter at the hold. A joint at rest on the edge of an encoder count
 // makes the measured position toggle between two adjacent counts (seen on the

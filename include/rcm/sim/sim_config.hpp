@@ -117,7 +117,16 @@ struct ProtocolParams {
   double calibration_s = 60.0;
   double trial_s = 60.0;
   double static_return_s = 3.0;
-  double static_hold_s = 10.0;
+  double static_hold_s = 10.0;  // in all, shared by the holds
+  // Holds at q0 in each static file, each approached from the side opposite to
+  // the previous one (1: the paper's single return and hold). A joint at rest
+  // keeps the friction its last motion left, anywhere in its hysteresis band;
+  // with holds approached from both sides that friction changes sign between
+  // them and cancels in their mean (rcm::compute_static_hold). Between holds
+  // the arm moves out to q0 +- static_approach_offset and back, in
+  // static_return_s.
+  int static_approaches = 2;
+  Eigen::Vector3d static_approach_offset = Eigen::Vector3d(0.05, 0.05, 0.005);
   std::vector<double> coaxial_offsets_m{0.010, 0.020, 0.030, 0.040, 0.050};
   std::vector<Eigen::Vector2d> radial_offsets_m{Eigen::Vector2d(0.0, 0.0),
                                                 Eigen::Vector2d(0.010, 0.015)};
@@ -139,6 +148,7 @@ struct SimConfig {
   std::string robot = "dvrk-psm-classic";
   int threads = 2;  // recordings are independent; results do not depend on this
   ArmParams arm;
+  std::string friction_preset = "hysteretic";  // the preset `friction` started from
   std::array<JointFrictionParams, 3> friction;
   ControllerParams controller;
   SensorParams sensors;
@@ -156,12 +166,18 @@ std::vector<std::string> get_tissue_preset_names();
 // Sets every tissue field to the named preset; throws InputError for an unknown name.
 void apply_tissue_preset(TissueParams& tissue, const std::string& name);
 
+// Names accepted by --friction / friction.preset.
+std::vector<std::string> get_friction_preset_names();
+// Sets every joint's friction to the named preset; throws InputError for an unknown name.
+void apply_friction_preset(SimConfig& config, const std::string& name);
+
 // Throws InputError naming `source` and the field for every inconsistent value.
 void validate_config(const SimConfig& config, const std::string& source = "config");
 
 // Overrides fields of `config` from JSON. Unknown keys and wrong types throw
-// InputError naming `source` and the JSON path. `tissue.preset`, when present,
-// is applied first so that explicit tissue fields override the preset.
+// InputError naming `source` and the JSON path. `tissue.preset` and
+// `friction.preset`, when present, are applied first so that explicit fields
+// override the preset.
 void apply_config_json(SimConfig& config, const nlohmann::json& json, const std::string& source);
 SimConfig load_config(const std::filesystem::path& path);  // defaults + file, validated
 nlohmann::json config_to_json(const SimConfig& config);
