@@ -94,6 +94,7 @@ TEST(Study, RecoversSimulatedMisalignmentsWithTheRightSigns) {
 TEST(Study, JointMethodRecoversOffsetsWithCoveringIntervals) {
   rcm::StudyOptions o = linear_options();
   o.method = "joint";
+  o.static_step = rcm::StaticStep::last_hold;  // the paper's three-step, to compare with
   o.joint.bootstrap_replicates = 20;
   o.joint.calibration_bootstrap_replicates = 10;
   o.tissue_sensitivity_delta_m = 0.0;
