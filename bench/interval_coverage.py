@@ -17,6 +17,7 @@ import datetime
 import json
 import os
 import platform
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -64,14 +65,17 @@ def study(rcm, work, friction, minutes, seed, static_step):
         run([rcm, "simulate", "--out", session_dir, "--friction", friction, "--seed", str(seed),
              "--free-space-s", str(60 * minutes), "--config", grid, "--no-truth"], stdout=subprocess.DEVNULL)
     model = os.path.join(session_dir, "free_space_model.json")
-    cmd = [rcm, "run", manifest, "--out", os.path.join(session_dir, f"run_{static_step}"), "--seed", str(seed),
-           "--static-step", static_step, "--json"]
-    if static_step != "balanced":  # the ablation: the same fitted model, the three-step method alone
-        cmd += ["--model-file", model, "--method", "three-step"]
-    out = run(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL).stdout
+    run_dir = os.path.join(session_dir, f"run_{static_step}")
+    fitted = os.path.join(run_dir, "free_space_model.json")
+    if not (os.path.exists(os.path.join(run_dir, "results.json")) and os.path.exists(fitted)):
+        cmd = [rcm, "run", manifest, "--out", run_dir, "--seed", str(seed), "--static-step", static_step]
+        if static_step != "balanced":  # the ablation: the same fitted model, the three-step method alone
+            cmd += ["--model-file", model, "--method", "three-step"]
+        run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     if static_step == "balanced":
-        run(["cp", os.path.join(session_dir, "run_balanced", "free_space_model.json"), model])
-    return json.loads(out)
+        shutil.copyfile(fitted, model)
+    with open(os.path.join(run_dir, "results.json")) as f:  # a kept --work folder resumes from these
+        return json.load(f)
 
 
 def main():
@@ -80,44 +84,53 @@ def main():
     ap.add_argument("--seeds", default="1,2")
     ap.add_argument("--minutes", default="2,15", help="free-space lengths, min")
     ap.add_argument("--frictions", default="hysteretic,smooth")
-    ap.add_argument("--work", help="keep the sessions here (default: a temporary folder)")
+    ap.add_argument("--condition", action="append", default=[], metavar="FRICTION:MINUTES:SEEDS",
+                    help="one condition with its own seeds, e.g. hysteretic:15:1,2 (repeatable; replaces the grid "
+                         "of --frictions x --minutes x --seeds)")
+    ap.add_argument("--work", help="keep the sessions here (default: a temporary folder); a kept folder resumes")
     ap.add_argument("--no-doc", action="store_true", help="print the table only")
     args = ap.parse_args()
     rcm = os.path.join(os.path.abspath(args.build), "bin", "rcm")
     work = args.work or tempfile.mkdtemp(prefix="rcm_coverage_")
     os.makedirs(work, exist_ok=True)
-    seeds = [int(s) for s in args.seeds.split(",")]
+    conditions = []
+    for c in args.condition:
+        friction, minutes, seeds = c.split(":")
+        conditions.append((friction, float(minutes), [int(x) for x in seeds.split(",")]))
+    if not conditions:
+        conditions = [(f, float(m), [int(x) for x in args.seeds.split(",")])
+                      for f in args.frictions.split(",") for m in args.minutes.split(",")]
     rows = []
-    for friction in args.frictions.split(","):
-        for minutes in [float(m) for m in args.minutes.split(",")]:
-            far, near, far3, near3, farp, nearp = [], [], [], [], [], []
-            inside, trials = [0, 0, 0], 0
-            for seed in seeds:
-                res = study(rcm, work, friction, minutes, seed, "balanced")
-                paper = study(rcm, work, friction, minutes, seed, "last-hold")
-                for t, tp in zip(res["trials"], paper["trials"]):
-                    j = t["joint"]
-                    far_trial = t["truth_m"][2] > 0.020 + 1e-9
-                    (far if far_trial else near).append(j["error_m"])
-                    (far3 if far_trial else near3).append(t["three_step"]["error_m"])
-                    (farp if far_trial else nearp).append(tp["three_step"]["error_m"])
-                    trials += 1
-                    for a in range(3):
-                        inside[a] += j["ci95_low_m"][a] <= t["truth_m"][a] <= j["ci95_high_m"][a]
-            rows.append((friction, minutes, len(seeds), trials, mean(far), mean(near), mean(far3), mean(near3),
-                         mean(farp), mean(nearp), [i / trials for i in inside]))
-            print(rows[-1], file=sys.stderr, flush=True)
+    for friction, minutes, seeds in conditions:
+        far, near, far3, near3, farp, nearp = [], [], [], [], [], []
+        inside, trials = [0, 0, 0], 0
+        for seed in seeds:
+            res = study(rcm, work, friction, minutes, seed, "balanced")
+            paper = study(rcm, work, friction, minutes, seed, "last-hold")
+            for t, tp in zip(res["trials"], paper["trials"]):
+                j = t["joint"]
+                far_trial = t["truth_m"][2] > 0.020 + 1e-9
+                (far if far_trial else near).append(j["error_m"])
+                (far3 if far_trial else near3).append(t["three_step"]["error_m"])
+                (farp if far_trial else nearp).append(tp["three_step"]["error_m"])
+                trials += 1
+                for a in range(3):
+                    inside[a] += j["ci95_low_m"][a] <= t["truth_m"][a] <= j["ci95_high_m"][a]
+        rows.append((friction, minutes, ",".join(map(str, seeds)), trials, mean(far), mean(near), mean(far3), mean(near3),
+                     mean(farp), mean(nearp), [i / trials for i in inside]))
+        print(rows[-1], file=sys.stderr, flush=True)
     load = os.getloadavg()
-    lines = [f"Run {datetime.date.today().isoformat()} by `make coverage` (bench/interval_coverage.py, seeds "
-             f"{args.seeds}) on {os.cpu_count()} cores of {cpu_model()}, load average {load[0]:.1f} at the end. "
+    lines = [f"Run {datetime.date.today().isoformat()} by bench/interval_coverage.py on {os.cpu_count()} cores "
+             f"of {cpu_model()}, load average {load[0]:.1f} at the end. "
              "Each seed is one simulated session of 15 trials (D = 10..50 mm x radial [0, 0], [10, 15], "
              "[-12, 8] mm), estimated by `rcm run` with its defaults; the paper's last-hold static step "
              "(`--static-step last-hold`) reuses the same fitted model.", "",
-             "| friction | free space | trials | joint mean e, D > 20 / <= 20 mm | three-step (balanced holds) | "
-             "three-step (paper: last hold) | joint 95 % coverage x / y / D |",
-             "|---|---|---|---|---|---|---|"]
-    for fr, mins, nseeds, n, f, ne, f3, n3, fp, np_, cov in rows:
-        lines.append(f"| {fr} | {mins:g} min | {n} | {1e3 * f:.2f} / {1e3 * ne:.2f} | {1e3 * f3:.2f} / {1e3 * n3:.2f} | "
+             "| friction | free space | seeds | trials | joint mean e, D > 20 / <= 20 mm | "
+             "three-step (balanced holds) | three-step (paper: last hold) | joint 95 % coverage x / y / D |",
+             "|---|---|---|---|---|---|---|---|"]
+    for fr, mins, seed_list, n, f, ne, f3, n3, fp, np_, cov in rows:
+        lines.append(f"| {fr} | {mins:g} min | {seed_list} | {n} | {1e3 * f:.2f} / {1e3 * ne:.2f} | "
+                     f"{1e3 * f3:.2f} / {1e3 * n3:.2f} | "
                      f"{1e3 * fp:.2f} / {1e3 * np_:.2f} | "
                      f"{100 * cov[0]:.0f} / {100 * cov[1]:.0f} / {100 * cov[2]:.0f} % |")
     block = "\n".join(lines)

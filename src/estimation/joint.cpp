@@ -148,6 +148,7 @@ void JointEstimatorOptions::check() const {
     throw std::invalid_argument("JointEstimatorOptions: bootstrap_block_s and sample_period_s must be > 0");
   for (double d : D_starts)
     if (d < D_min || d > D_max) throw std::invalid_argument("JointEstimatorOptions: every D start must lie within the bounds");
+  if (!torque_bias.allFinite()) throw std::invalid_argument("JointEstimatorOptions: torque_bias must be finite");
 }
 
 std::vector<JointSample> make_joint_samples(const IncisionFrame& incision, const Recording& r,
@@ -364,8 +365,27 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
     out.sd_calibration_offset =
         (solve(incision, samples, nullptr, o, v0, best.p, moved, true, false, false).p - best.p).cwiseAbs();
   }
+  // The free-space model's error off the trials, as a torque offset on each
+  // joint in turn: what it moves the estimate by adds in quadrature.
+  if ((o.torque_bias.array() != 0.0).any()) {
+    Eigen::Vector3d sq = Eigen::Vector3d::Zero();
+    std::vector<Eigen::Vector3d> shifted(samples.size());
+    for (int j = 0; j < 3; ++j) {
+      if (o.torque_bias[j] == 0.0) continue;
+      for (std::size_t i = 0; i < samples.size(); ++i) {
+        shifted[i] = samples[i].dtau;
+        shifted[i][j] += o.torque_bias[j];
+      }
+      sq += (solve(incision, samples, &shifted, o, v0, best.p, tissue.parameters, true, false, false).p - best.p)
+                .array()
+                .square()
+                .matrix();
+    }
+    out.sd_free_space_model = sq.cwiseSqrt();
+  }
   const Eigen::Vector3d half = 1.96 * (out.sd_bootstrap.array().square() + out.sd_tissue.array().square() +
-                                       out.sd_systematic.array().square() + out.sd_calibration_offset.array().square())
+                                       out.sd_systematic.array().square() + out.sd_calibration_offset.array().square() +
+                                       out.sd_free_space_model.array().square())
                                           .sqrt()
                                           .matrix();
   out.ci_low = best.p - half;

@@ -53,6 +53,20 @@ std::optional<double> TrialOutcome::get_three_step_error_m() const {
   return (estimate.misalignment_m - *truth_m).norm();
 }
 
+StaticHold compute_model_hold(const dynamics::TorqueModel& model, const Recording& recording, const Eigen::Vector3d& q0,
+                              const StudyOptions& options, Eigen::MatrixXd* tau_fs) {
+  // At a hold the encoders chatter by a count; the model runs on positions with
+  // that chatter removed so that its friction memory survives.
+  Eigen::MatrixXd predicted =
+      options.hold_chatter_width_counts > 0
+          ? dynamics::predict_torque(model, remove_position_chatter(recording, options.hold_chatter_width_counts *
+                                                                                   estimate_position_quantum(recording)))
+          : dynamics::predict_torque(model, recording);
+  StaticHold hold = compute_static_hold(recording, predicted, q0, options.rest, options.static_step);
+  if (tau_fs) *tau_fs = std::move(predicted);
+  return hold;
+}
+
 Eigen::Vector3d compute_settled_free_space_torque(const dynamics::TorqueModel& model, const Eigen::Vector3d& q0,
                                                   double settle_s) {
   const double dt = model.info().sample_period_s > 0 ? model.info().sample_period_s : 0.005;
@@ -191,6 +205,23 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   JointEstimatorOptions joint_options = options.joint;
   if (options.method == "joint") {
     joint_options = make_joint_options_for_model(options.joint, free_space_step);
+    if (session.baseline) {
+      const Recording baseline = load_recording(*session.baseline, options.read);
+      try {
+        result.baseline_hold = compute_model_hold(model, baseline, session.q0, options);
+        joint_options.torque_bias = result.baseline_hold->get_dtau();
+        result.baseline_message = "free-space model error at rest on the aligned baseline";
+      } catch (const InputError& e) {
+        result.baseline_message = std::string("not used: ") + e.what();
+      }
+    } else {
+      result.baseline_message = "no baseline in the session";
+    }
+    progress(options.verbose, "baseline: " + result.baseline_message +
+                                  (result.baseline_hold ? " [" + std::to_string(joint_options.torque_bias[0]) + ", " +
+                                                              std::to_string(joint_options.torque_bias[1]) + ", " +
+                                                              std::to_string(joint_options.torque_bias[2]) + "]"
+                                                        : std::string()));
     progress(options.verbose, "joint method: identifying the tissue model in torque space");
     result.joint_tissue = fit_joint_tissue_model(
         incision, make_joint_samples(incision, calibration, tau_fs_cal, options.three_step.coaxial.max_theta_rad),
@@ -215,14 +246,8 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
       joint_samples = make_joint_samples(incision, trial, tau_fs, options.three_step.coaxial.max_theta_rad);
     if (spec.static_recording) {
       const Recording hold_rec = load_recording(*spec.static_recording, options.read);
-      // At the hold the encoders chatter by a count; the model runs on positions
-      // with that chatter removed so that its friction memory survives.
-      const Eigen::MatrixXd tau_fs_hold =
-          options.hold_chatter_width_counts > 0
-              ? dynamics::predict_torque(model, remove_position_chatter(hold_rec, options.hold_chatter_width_counts *
-                                                                                    estimate_position_quantum(hold_rec)))
-              : dynamics::predict_torque(model, hold_rec);
-      out.hold = compute_static_hold(hold_rec, tau_fs_hold, session.q0, options.rest, options.static_step);
+      Eigen::MatrixXd tau_fs_hold;
+      out.hold = compute_model_hold(model, hold_rec, session.q0, options, &tau_fs_hold);
       dtau_radial = out.hold->get_dtau();
       if (result.joint_tissue) {
         const auto hold_samples = make_joint_samples(incision, hold_rec, tau_fs_hold, options.three_step.coaxial.max_theta_rad);
@@ -333,6 +358,13 @@ nlohmann::json StudyResult::to_json() const {
   j["free_space_model"] = {{"kind", dynamics::to_string(model_kind)}, {"test_errors", dynamics::to_json(free_space_errors)}};
   if (fit) j["free_space_model"]["fit"] = fit->to_json();
 
+  if (method == "joint") {
+    j["baseline"] = {{"used", baseline_hold.has_value()}, {"message", baseline_message}};
+    if (baseline_hold) {
+      j["baseline"]["torque_residual"] = vec_json(baseline_hold->get_dtau());
+      j["baseline"]["holds"] = baseline_hold->holds.size();
+    }
+  }
   if (joint_tissue)
     j["joint_tissue_model"] = {{"family", joint_tissue->family},
                                {"k1_n_per_m", joint_tissue->parameters[0]},
@@ -363,6 +395,7 @@ nlohmann::json StudyResult::to_json() const {
                            {"sd_tissue_m", vec_json(je.sd_tissue)},
                            {"sd_systematic_m", vec_json(je.sd_systematic)},
                            {"sd_calibration_offset_m", vec_json(je.sd_calibration_offset)},
+                           {"sd_free_space_model_m", vec_json(je.sd_free_space_model)},
                            {"bootstrap_replicates", je.bootstrap_replicates},
                            {"bootstrap_block_s", je.bootstrap_block_s},
                            {"samples", je.samples},

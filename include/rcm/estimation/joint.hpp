@@ -82,6 +82,12 @@ struct JointEstimatorOptions {
   // the bench's measurement accuracy; 0.1 mm is a careful phantom setup.
   double calibration_offset_sd_m = 1e-4;
   double sample_period_s = 0.005;
+  // The free-space model's torque error on the arm as it is now (N m, N m, N),
+  // e.g. measured at rest on the aligned baseline, where no tissue force acts:
+  // an unmodelled payload or a model fitted on other data shows there. Each
+  // trial's interval includes how far its estimate moves when its torque
+  // residual is shifted by this much, joint by joint. 0: not known.
+  Eigen::Vector3d torque_bias = Eigen::Vector3d::Zero();
   unsigned seed = 1;
   int max_iterations = 100;
   void check() const;
@@ -99,12 +105,14 @@ struct JointEstimate {
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();      // from Ceres, scaled
   // 95 % interval: the trial's residual bootstrap combined in quadrature with the
   // tissue parameters' uncertainty propagated through dp/dtissue, with the
-  // systematic error seen on the calibration and with the uncertainty of D*.
+  // systematic error seen on the calibration, with the uncertainty of D* and
+  // with the free-space model's error measured off the trials (torque_bias).
   Eigen::Vector3d ci_low = Eigen::Vector3d::Zero(), ci_high = Eigen::Vector3d::Zero();
   Eigen::Vector3d sd_bootstrap = Eigen::Vector3d::Zero();  // half-width of the bootstrap interval / 1.96
   Eigen::Vector3d sd_tissue = Eigen::Vector3d::Zero();
   Eigen::Vector3d sd_systematic = Eigen::Vector3d::Zero();  // |calibration_bias_m| of the tissue model
   Eigen::Vector3d sd_calibration_offset = Eigen::Vector3d::Zero();  // through dparameters_dD_star
+  Eigen::Vector3d sd_free_space_model = Eigen::Vector3d::Zero();    // through options.torque_bias
   int bootstrap_replicates = 0;
   double bootstrap_block_s = 0.0;  // block length used: twice the residuals' integrated autocorrelation time
   SolverReport solver;

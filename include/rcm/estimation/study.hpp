@@ -96,6 +96,12 @@ struct StudyResult {
   TissuePairs tissue_pairs;
   std::optional<TissueSensitivity> tissue_sensitivity;
   std::optional<JointTissueModel> joint_tissue;  // with --method joint
+  // The free-space model's torque residual at rest on the aligned baseline (no
+  // tissue force there): its error on the arm as docked. Joint intervals include
+  // it (JointEstimatorOptions::torque_bias). Unset without a baseline hold at q0,
+  // with the reason in baseline_message.
+  std::optional<StaticHold> baseline_hold;
+  std::string baseline_message;
   double calibration_offset_m = 0.0;
   std::vector<TrialOutcome> trials;
   double seconds = 0.0;
@@ -132,6 +138,13 @@ MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options
 // Throws InputError for any defect of the session's files; the study needs a
 // calibration and at least one trial.
 StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter);
+
+// The free-space model over a recording that ends at rest at q0 (a static file
+// or the baseline), its positions' encoder chatter removed first as
+// options.hold_chatter_width_counts says, and the holds combined as
+// options.static_step says.
+StaticHold compute_model_hold(const dynamics::TorqueModel& model, const Recording& recording, const Eigen::Vector3d& q0,
+                              const StudyOptions& options, Eigen::MatrixXd* tau_fs = nullptr);
 
 // The paper's f(q0, 0) for a stateful model: stepped on (q0, 0) from reset.
 Eigen::Vector3d compute_settled_free_space_torque(const dynamics::TorqueModel& model, const Eigen::Vector3d& q0,
