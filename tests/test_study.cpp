@@ -257,6 +257,56 @@ TEST(Study, HystereticFrictionJointIntervalsCoverAndBalancedHoldsBeatTheLastHold
   for (int a = 0; a < 3; ++a) EXPECT_GE(covered[a], 10) << "axis " << a << " of " << trials;
 }
 
+// A free-space model off its regime: the free-space recording is of the arm
+// without the 200 g that the instrument carries when docked. The aligned
+// baseline shows the missing weight along the shaft at q0, and the joint
+// intervals on D grow with the error it causes instead of staying as narrow as
+// on the matched bench. (The payload's gravity torque on yaw and pitch grows
+// with the pivot angle and is zero at q0: the baseline cannot see that part.)
+TEST(Study, JointIntervalsWidenWhenTheFreeSpaceModelMissesAPayload) {
+  std::random_device rd;
+  const fs::path dir = fs::temp_directory_path() / ("rcm_test_study_payload_" + std::to_string(rd()));
+  rcm::sim::SimConfig config = rcm::sim::make_default_config();
+  config.protocol.free_space_s = 180.0;
+  config.protocol.calibration_s = 40.0;
+  config.protocol.trial_s = 40.0;
+  config.protocol.static_hold_s = 4.0;
+  config.protocol.baseline_hold_s = 4.0;
+  config.protocol.coaxial_offsets_m = {0.020, 0.040};
+  config.protocol.write_truth = false;
+  const rcm::Session matched = rcm::load_session(rcm::sim::simulate_session(config, dir / "light").manifest);
+  config.arm.insertion_stage.mass_kg += 0.2;
+  rcm::Session payload = rcm::load_session(rcm::sim::simulate_session(config, dir / "heavy").manifest);
+  payload.free_space = matched.free_space;
+  rcm::StudyOptions o = linear_options();
+  o.method = "joint";
+  o.joint.bootstrap_replicates = 20;
+  o.joint.calibration_bootstrap_replicates = 10;
+  o.tissue_sensitivity_delta_m = 0.0;
+  const rcm::StudyResult r_matched = rcm::run_study(matched, o, linear_fitter());
+  const rcm::StudyResult r = rcm::run_study(payload, o, linear_fitter());
+  ASSERT_TRUE(r.baseline_hold) << r.baseline_message;
+  // 0.2 kg x 9.81 m/s^2 along the vertical shaft at q0, against the insertion axis.
+  EXPECT_NEAR(r.baseline_hold->get_dtau()[2], -0.2 * 9.81, 0.3);
+  ASSERT_TRUE(r_matched.baseline_hold);
+  EXPECT_LT(std::abs(r_matched.baseline_hold->get_dtau()[2]), 0.2);
+  double worst_D_error = 0.0;
+  int covered_D = 0;
+  for (std::size_t i = 0; i < r.trials.size(); ++i) {
+    const rcm::TrialOutcome &t = r.trials[i], &m = r_matched.trials[i];
+    ASSERT_TRUE(t.joint && m.joint && t.truth_m);
+    const double truth_D = (*t.truth_m)[2];
+    worst_D_error = std::max(worst_D_error, std::abs(t.joint->misalignment_m[2] - truth_D));
+    covered_D += truth_D >= t.joint->ci_low[2] && truth_D <= t.joint->ci_high[2];
+    EXPECT_TRUE(truth_D >= m.joint->ci_low[2] && truth_D <= m.joint->ci_high[2]) << "matched " << m.name;
+    EXPECT_GT(t.joint->ci_high[2] - t.joint->ci_low[2], 10.0 * (m.joint->ci_high[2] - m.joint->ci_low[2])) << t.name;
+  }
+  EXPECT_GT(worst_D_error, 0.002) << "the payload must matter for this test to mean anything";
+  EXPECT_GE(covered_D, 3) << "of " << r.trials.size();
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+}
+
 TEST(Study, ResultsFollowTheContract) {
   const nlohmann::json j = study().to_json();
   EXPECT_EQ(j["format"], "rcm-results/1");
