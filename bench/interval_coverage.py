@@ -1,14 +1,15 @@
 #!/usr/bin/python3
 """`make coverage`: how often the 95 % intervals cover the truth, and what each
-method's error is, per friction model and free-space data length.
+method's error is, per friction model, free-space path and free-space length.
 
-For every friction preset (hysteretic, smooth), free-space length and seed it
-simulates a session on the 5 x 3 grid of offsets (D = 10..50 mm, radial [0, 0],
-[10, 15] and [-12, 8] mm), runs `rcm run` with its defaults (joint method,
-three-step beside it, the default free-space model), and writes the table
-between the coverage markers of docs/estimation.md, with the date and machine.
-Per condition: joint mean e (D > 20 / <= 20 mm), three-step mean e with the
-balanced static step and with the paper's last hold, and per-axis coverage.
+A condition is FRICTION:PATH:MINUTES (friction preset hysteretic or smooth;
+free-space path teleoperation or excitation, the periodic Fourier path of an
+identification run). For each condition and seed it simulates a session on
+the 5 x 3 grid of offsets (D = 10..50 mm, radial [0, 0], [10, 15] and [-12, 8]
+mm), runs `rcm run` with its defaults (joint method, three-step beside it, the
+default free-space model) and once more with the paper's last-hold static step
+on the same fitted model, and writes the table between the coverage markers of
+docs/estimation.md, with the date and machine.
 
 Run with Debian's Python: /usr/bin/python3 bench/interval_coverage.py --build build
 """
@@ -55,15 +56,17 @@ def mean(v):
     return sum(v) / len(v) if v else float("nan")
 
 
-def study(rcm, work, friction, minutes, seed, static_step):
-    session_dir = os.path.join(work, f"{friction}_{minutes}_{seed}")
+def study(rcm, work, condition, seed, static_step):
+    friction, path, minutes = condition
+    session_dir = os.path.join(work, f"{friction}_{path}_{minutes:g}min_seed{seed}")
     manifest = os.path.join(session_dir, "session.json")
     if not os.path.exists(manifest):
-        grid = os.path.join(work, "grid.json")
-        with open(grid, "w") as f:
-            json.dump(GRID, f)
+        config = os.path.join(work, f"config_{path}.json")
+        with open(config, "w") as f:
+            json.dump({**GRID, "trajectory": {"free_space_path": path}}, f)
         run([rcm, "simulate", "--out", session_dir, "--friction", friction, "--seed", str(seed),
-             "--free-space-s", str(60 * minutes), "--config", grid, "--no-truth"], stdout=subprocess.DEVNULL)
+             "--free-space-s", str(60 * minutes), "--config", config, "--no-truth"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     model = os.path.join(session_dir, "free_space_model.json")
     run_dir = os.path.join(session_dir, f"run_{static_step}")
     fitted = os.path.join(run_dir, "free_space_model.json")
@@ -82,11 +85,9 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--build", default="build")
     ap.add_argument("--seeds", default="1,2")
-    ap.add_argument("--minutes", default="2,15", help="free-space lengths, min")
-    ap.add_argument("--frictions", default="hysteretic,smooth")
-    ap.add_argument("--condition", action="append", default=[], metavar="FRICTION:MINUTES:SEEDS",
-                    help="one condition with its own seeds, e.g. hysteretic:15:1,2 (repeatable; replaces the grid "
-                         "of --frictions x --minutes x --seeds)")
+    ap.add_argument("--condition", action="append", default=[], metavar="FRICTION:PATH:MINUTES",
+                    help="repeatable; default: hysteretic and smooth, each with 2 and 15 min of teleoperation "
+                         "and 2 min of excitation")
     ap.add_argument("--work", help="keep the sessions here (default: a temporary folder); a kept folder resumes")
     ap.add_argument("--no-doc", action="store_true", help="print the table only")
     args = ap.parse_args()
@@ -94,19 +95,18 @@ def main():
     work = args.work or tempfile.mkdtemp(prefix="rcm_coverage_")
     os.makedirs(work, exist_ok=True)
     conditions = []
-    for c in args.condition:
-        friction, minutes, seeds = c.split(":")
-        conditions.append((friction, float(minutes), [int(x) for x in seeds.split(",")]))
-    if not conditions:
-        conditions = [(f, float(m), [int(x) for x in args.seeds.split(",")])
-                      for f in args.frictions.split(",") for m in args.minutes.split(",")]
+    for c in args.condition or [f"{f}:{p}:{m}" for f in ("hysteretic", "smooth")
+                                for p, m in (("teleoperation", 2), ("teleoperation", 15), ("excitation", 2))]:
+        friction, path, minutes = c.split(":")
+        conditions.append((friction, path, float(minutes)))
+    seeds = [int(x) for x in args.seeds.split(",")]
     rows = []
-    for friction, minutes, seeds in conditions:
+    for condition in conditions:
         far, near, far3, near3, farp, nearp = [], [], [], [], [], []
         inside, trials = [0, 0, 0], 0
         for seed in seeds:
-            res = study(rcm, work, friction, minutes, seed, "balanced")
-            paper = study(rcm, work, friction, minutes, seed, "last-hold")
+            res = study(rcm, work, condition, seed, "balanced")
+            paper = study(rcm, work, condition, seed, "last-hold")
             for t, tp in zip(res["trials"], paper["trials"]):
                 j = t["joint"]
                 far_trial = t["truth_m"][2] > 0.020 + 1e-9
@@ -116,22 +116,21 @@ def main():
                 trials += 1
                 for a in range(3):
                     inside[a] += j["ci95_low_m"][a] <= t["truth_m"][a] <= j["ci95_high_m"][a]
-        rows.append((friction, minutes, ",".join(map(str, seeds)), trials, mean(far), mean(near), mean(far3), mean(near3),
+        rows.append((*condition, trials, mean(far), mean(near), mean(far3), mean(near3),
                      mean(farp), mean(nearp), [i / trials for i in inside]))
         print(rows[-1], file=sys.stderr, flush=True)
     load = os.getloadavg()
-    lines = [f"Run {datetime.date.today().isoformat()} by bench/interval_coverage.py on {os.cpu_count()} cores "
-             f"of {cpu_model()}, load average {load[0]:.1f} at the end. "
+    lines = [f"Run {datetime.date.today().isoformat()} by `make coverage` (bench/interval_coverage.py, seeds "
+             f"{args.seeds}) on {os.cpu_count()} cores of {cpu_model()}, load average {load[0]:.1f} at the end. "
              "Each seed is one simulated session of 15 trials (D = 10..50 mm x radial [0, 0], [10, 15], "
              "[-12, 8] mm), estimated by `rcm run` with its defaults; the paper's last-hold static step "
-             "(`--static-step last-hold`) reuses the same fitted model.", "",
-             "| friction | free space | seeds | trials | joint mean e, D > 20 / <= 20 mm | "
-             "three-step (balanced holds) | three-step (paper: last hold) | joint 95 % coverage x / y / D |",
-             "|---|---|---|---|---|---|---|---|"]
-    for fr, mins, seed_list, n, f, ne, f3, n3, fp, np_, cov in rows:
-        lines.append(f"| {fr} | {mins:g} min | {seed_list} | {n} | {1e3 * f:.2f} / {1e3 * ne:.2f} | "
-                     f"{1e3 * f3:.2f} / {1e3 * n3:.2f} | "
-                     f"{1e3 * fp:.2f} / {1e3 * np_:.2f} | "
+             "(`--static-step last-hold`) reuses the same fitted model. Mean e in mm, D > 20 / <= 20 mm.", "",
+             "| friction | free space | trials | joint mean e | three-step (balanced holds) | "
+             "three-step (paper: last hold) | joint 95 % coverage x / y / D |",
+             "|---|---|---|---|---|---|---|"]
+    for fr, path, mins, n, f, ne, f3, n3, fp, np_, cov in rows:
+        lines.append(f"| {fr} | {mins:g} min {path} | {n} | {1e3 * f:.2f} / {1e3 * ne:.2f} | "
+                     f"{1e3 * f3:.2f} / {1e3 * n3:.2f} | {1e3 * fp:.2f} / {1e3 * np_:.2f} | "
                      f"{100 * cov[0]:.0f} / {100 * cov[1]:.0f} / {100 * cov[2]:.0f} % |")
     block = "\n".join(lines)
     print(block)

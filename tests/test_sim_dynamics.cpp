@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include "rcm/common/error.hpp"
 #include "rcm/kinematics/incision.hpp"
 #include "rcm/kinematics/psm_model.hpp"
 #include "rcm/sim/arm_dynamics.hpp"
@@ -106,6 +107,34 @@ TEST(SimTrajectory, TeleopDerivativesMatchFiniteDifferences) {
   const ReferenceSample s = path.evaluate(0.0);
   EXPECT_LT((s.q - config.protocol.q0).norm(), 1e-12);
   EXPECT_LT(s.qd.norm(), 1e-12);
+}
+
+// The identification-style excitation: derivatives (across the ramp's end too),
+// the amplitude bound, rest at q0 at the start, and exact periodicity after the
+// ramp.
+TEST(SimTrajectory, ExcitationDerivativesBoundsStartAndPeriod) {
+  SimConfig config = make_default_config();
+  config.trajectory.free_space_path = "excitation";
+  const ExcitationPath path(config.trajectory, config.protocol.q0, 42);
+  const double h = 1e-5, period = config.trajectory.excitation_period_s;
+  for (double t = 0.013; t < 3.0 * period; t += 0.0371) {
+    const ReferenceSample r = path.evaluate(t), a = path.evaluate(t + h), b = path.evaluate(t - h);
+    EXPECT_LT((r.qd - (a.q - b.q) / (2 * h)).norm(), 1e-7) << "t = " << t;
+    EXPECT_LT((r.qdd - (a.qd - b.qd) / (2 * h)).norm(), 1e-6) << "t = " << t;
+    for (int j = 0; j < 3; ++j)
+      EXPECT_LE(std::abs(r.q[j] - config.protocol.q0[j]), config.trajectory.amplitude[j] + 1e-12);
+    if (t > config.trajectory.excitation_ramp_s) {
+      const ReferenceSample later = path.evaluate(t + period);
+      EXPECT_LT((later.q - r.q).norm(), 1e-9) << "t = " << t;
+      EXPECT_LT((later.qd - r.qd).norm(), 1e-8) << "t = " << t;
+    }
+  }
+  const ReferenceSample s = path.evaluate(0.0);
+  EXPECT_LT((s.q - config.protocol.q0).norm(), 1e-15);
+  EXPECT_LT(s.qd.norm(), 1e-15);
+  EXPECT_LT(s.qdd.norm(), 1e-15);
+  config.trajectory.free_space_path = "sweep";
+  EXPECT_THROW(validate_config(config), rcm::InputError);
 }
 
 TEST(SimTrajectory, TeleopHasPauses) {

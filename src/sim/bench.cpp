@@ -218,7 +218,7 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
 ReferenceTrajectory make_teleop_reference(const SimConfig& config, const std::string& stream,
                                           double duration_s) {
   ReferenceTrajectory ref;
-  ref.add_teleop(0.0, std::make_shared<const TeleopPath>(
+  ref.add_path(0.0, std::make_shared<const TeleopPath>(
                           config.trajectory, config.protocol.q0,
                           derive_seed(config.seed, "path:" + stream), duration_s));
   return ref;
@@ -229,7 +229,12 @@ SimulatedRecording simulate_free_space(const SimConfig& config, int index) {
   const double duration = config.protocol.free_space_s / files;
   const std::string name =
       files == 1 ? std::string("free_space") : fmt::format("free_space_{}", index + 1);
-  const ReferenceTrajectory ref = make_teleop_reference(config, name, duration);
+  ReferenceTrajectory ref;
+  if (config.trajectory.free_space_path == "excitation")
+    ref.add_path(0.0, std::make_shared<const ExcitationPath>(config.trajectory, config.protocol.q0,
+                                                             derive_seed(config.seed, "path:" + name)));
+  else
+    ref = make_teleop_reference(config, name, duration);
   auto recs = simulate_run(config, ref, nullptr, {{name, 0.0, duration}},
                            derive_seed(config.seed, "noise:" + name));
   return std::move(recs.front());

@@ -92,6 +92,10 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("trajectory.pause_min_s", &T.pause_min_s, "shortest pause, s");
   add("trajectory.pause_max_s", &T.pause_max_s, "longest pause, s");
   add("trajectory.max_theta_rad", &T.max_theta_rad, "largest pivot angle the ranges may reach, rad");
+  add("trajectory.free_space_path", &T.free_space_path, "free-space recording: teleoperation | excitation");
+  add("trajectory.excitation_period_s", &T.excitation_period_s, "excitation: fundamental period, s");
+  add("trajectory.excitation_harmonics", &T.excitation_harmonics, "excitation: harmonics of the fundamental");
+  add("trajectory.excitation_ramp_s", &T.excitation_ramp_s, "excitation: fade-in from rest at q0, s");
   auto& X = c.tissue;
   add("tissue.preset", &X.preset, "linear | stiffening | viscoelastic | sliding (applied first)");
   add("tissue.stiffness_n_per_m", &X.stiffness_n_per_m, "k1 of g(x) = k1 x + k3 x^3, N/m");
@@ -476,6 +480,12 @@ void validate_config(const SimConfig& c, const std::string& source) {
   require(T.pause_min_s > 0 && T.pause_max_s >= T.pause_min_s, "trajectory.pause_max_s",
           "expected 0 < pause_min_s <= pause_max_s");
   require(T.max_theta_rad > 0 && T.max_theta_rad < 1.3, "trajectory.max_theta_rad", "expected 0..1.3 rad");
+  require(T.free_space_path == "teleoperation" || T.free_space_path == "excitation", "trajectory.free_space_path",
+          "expected teleoperation or excitation, got '" + T.free_space_path + "'");
+  require(T.excitation_period_s > 0, "trajectory.excitation_period_s", "expected > 0");
+  require(T.excitation_harmonics >= 1 && T.excitation_harmonics <= 50, "trajectory.excitation_harmonics",
+          "expected 1..50");
+  require(T.excitation_ramp_s > 0, "trajectory.excitation_ramp_s", "expected > 0");
   const auto& X = c.tissue;
   require(X.stiffness_n_per_m >= 0, "tissue.stiffness_n_per_m", "expected >= 0");
   require(X.cubic_n_per_m3 >= 0, "tissue.cubic_n_per_m3", "expected >= 0");

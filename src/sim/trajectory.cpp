@@ -188,7 +188,51 @@ ReferenceSample QuinticMove::evaluate(double t) const {
   return r;
 }
 
-void ReferenceTrajectory::add_teleop(double t_start, std::shared_ptr<const TeleopPath> path) {
+ExcitationPath::ExcitationPath(const TrajectoryParams& p, const Eigen::Vector3d& q0, std::uint64_t seed)
+    : q0_(q0), omega_(2.0 * M_PI / p.excitation_period_s), ramp_s_(p.excitation_ramp_s) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  for (int j = 0; j < 3; ++j) {
+    auto& c = coeff_[static_cast<std::size_t>(j)];
+    double bound = 0.0;
+    for (int k = 1; k <= p.excitation_harmonics; ++k) {
+      const double a = normal(rng) / k, b = normal(rng) / k;
+      c.push_back({a, b});
+      bound += std::abs(a) + 2.0 * std::abs(b);
+    }
+    for (auto& ab : c) {
+      ab[0] *= p.amplitude[j] / bound;
+      ab[1] *= p.amplitude[j] / bound;
+    }
+  }
+}
+
+ReferenceSample ExcitationPath::evaluate(double t) const {
+  // Quintic smoothstep r(s) = 10 s^3 - 15 s^4 + 6 s^5 and its derivatives in t.
+  const double s = std::clamp(t / ramp_s_, 0.0, 1.0);
+  const bool ramping = t < ramp_s_;
+  const double r = s * s * s * (10.0 + s * (-15.0 + 6.0 * s));
+  const double dr = ramping ? 30.0 * s * s * (1.0 - s) * (1.0 - s) / ramp_s_ : 0.0;
+  const double ddr = ramping ? 60.0 * s * (1.0 - s) * (1.0 - 2.0 * s) / (ramp_s_ * ramp_s_) : 0.0;
+  ReferenceSample out;
+  for (int j = 0; j < 3; ++j) {
+    double f = 0.0, df = 0.0, ddf = 0.0;
+    int k = 1;
+    for (const auto& [a, b] : coeff_[static_cast<std::size_t>(j)]) {
+      const double w = k * omega_, sn = std::sin(w * t), cs = std::cos(w * t);
+      f += a * sn + b * (cs - 1.0);
+      df += w * (a * cs - b * sn);
+      ddf -= w * w * (a * sn + b * cs);
+      ++k;
+    }
+    out.q[j] = q0_[j] + r * f;
+    out.qd[j] = dr * f + r * df;
+    out.qdd[j] = ddr * f + 2.0 * dr * df + r * ddf;
+  }
+  return out;
+}
+
+void ReferenceTrajectory::add_path(double t_start, std::shared_ptr<const ReferencePath> path) {
   Piece p{t_start, 0, std::move(path), {}, Eigen::Vector3d::Zero()};
   pieces_.push_back(std::move(p));
 }
@@ -211,7 +255,7 @@ ReferenceSample ReferenceTrajectory::evaluate(double t) const {
   const Piece& p = it == pieces_.begin() ? pieces_.front() : *(it - 1);
   const double tt = std::max(t, p.t_start);
   switch (p.kind) {
-    case 0: return p.teleop->evaluate(tt - p.t_start);
+    case 0: return p.path->evaluate(tt - p.t_start);
     case 1: return p.move.evaluate(tt);
     default: {
       ReferenceSample r;

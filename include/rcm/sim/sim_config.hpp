@@ -93,6 +93,14 @@ struct TrajectoryParams {
   double pause_min_s = 0.4;
   double pause_max_s = 2.5;
   double max_theta_rad = 0.95;        // refuse a path whose pivot angle exceeds this
+  // The free-space recording's path: "teleoperation" (the path above) or
+  // "excitation", a periodic finite Fourier series per joint as the dVRK's
+  // dynamics-identification runs play it: the same period over and over, never
+  // at rest after its start. Trials and calibration are always teleoperation.
+  std::string free_space_path = "teleoperation";
+  double excitation_period_s = 10.0;  // fundamental period
+  int excitation_harmonics = 5;       // frequencies k / period, k = 1..harmonics
+  double excitation_ramp_s = 2.0;     // C2 fade-in from rest at q0
 };
 
 struct TissueParams {

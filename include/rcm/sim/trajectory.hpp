@@ -19,15 +19,22 @@ struct ReferenceSample {
   Eigen::Vector3d qdd = Eigen::Vector3d::Zero();
 };
 
+// A path in its own time, t >= 0.
+class ReferencePath {
+ public:
+  virtual ~ReferencePath() = default;
+  virtual ReferenceSample evaluate(double t) const = 0;
+};
+
 // q_j(t) = q0_j + A_j tanh(u_j(tau(t))), u_j a sum of sinusoids with random
 // frequencies in [min, max] Hz and u_j(0) = 0; tau(t) is a time warp whose rate
 // falls smoothly to zero in pauses, so the robot stops wherever it is. Starts at
 // q0 at rest. Smooth (C2) everywhere; never leaves q0 +- A.
-class TeleopPath {
+class TeleopPath : public ReferencePath {
  public:
   TeleopPath(const TrajectoryParams& params, const Eigen::Vector3d& q0, std::uint64_t seed,
              double duration_s);
-  ReferenceSample evaluate(double t) const;
+  ReferenceSample evaluate(double t) const override;
 
  private:
   struct Pause { double a, b, r; double lost_before; };
@@ -42,6 +49,23 @@ class TeleopPath {
   std::vector<Pause> pauses_;
 };
 
+// A periodic excitation (the dVRK's dynamics-identification runs): per joint
+// f_j(t) = sum_k a_jk sin(k w t) + b_jk (cos(k w t) - 1), w = 2 pi / period,
+// k = 1..harmonics, random coefficients falling as 1/k and scaled so that
+// sum_k |a_jk| + 2 |b_jk| = A_j; q_j = q0_j + r(t) f_j(t) with r a C2 ramp from 0
+// to 1 over ramp_s. Starts at q0 at rest, never leaves q0 +- A, and after the
+// ramp repeats exactly every period.
+class ExcitationPath : public ReferencePath {
+ public:
+  ExcitationPath(const TrajectoryParams& params, const Eigen::Vector3d& q0, std::uint64_t seed);
+  ReferenceSample evaluate(double t) const override;
+
+ private:
+  Eigen::Vector3d q0_;
+  double omega_ = 1.0, ramp_s_ = 1.0;
+  std::array<std::vector<std::array<double, 2>>, 3> coeff_;  // per joint, per harmonic: a, b
+};
+
 // Fifth-order polynomial from (q, qd, qdd) to (q1, 0, 0) over T seconds.
 struct QuinticMove {
   double t0 = 0.0, duration = 1.0;
@@ -51,11 +75,11 @@ struct QuinticMove {
   ReferenceSample evaluate(double t) const;
 };
 
-// Pieces in time order; each covers [t_start, next t_start). A teleop piece is
+// Pieces in time order; each covers [t_start, next t_start). A path piece is
 // evaluated at (t - t_start); before the first piece the first one is held.
 class ReferenceTrajectory {
  public:
-  void add_teleop(double t_start, std::shared_ptr<const TeleopPath> path);
+  void add_path(double t_start, std::shared_ptr<const ReferencePath> path);
   void add_move(double t_start, double duration, const Eigen::Vector3d& to);  // from the reference at t_start
   void add_hold(double t_start, const Eigen::Vector3d& q);
   ReferenceSample evaluate(double t) const;
@@ -63,8 +87,8 @@ class ReferenceTrajectory {
  private:
   struct Piece {
     double t_start;
-    int kind;  // 0 teleop, 1 move, 2 hold
-    std::shared_ptr<const TeleopPath> teleop;
+    int kind;  // 0 path, 1 move, 2 hold
+    std::shared_ptr<const ReferencePath> path;
     QuinticMove move;
     Eigen::Vector3d hold;
   };
