@@ -18,7 +18,6 @@ import datetime
 import json
 import os
 import platform
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -56,29 +55,48 @@ def mean(v):
     return sum(v) / len(v) if v else float("nan")
 
 
-def study(rcm, work, condition, seed, static_step):
+def simulate(rcm, work, condition, seed, approaches):
+    """The session of a condition and seed, with `approaches` holds per static file.
+
+    The trial recordings do not depend on the static protocol (same seed, same
+    path and noise up to the trial's end), so the sessions with one and with two
+    holds differ only in their static files."""
     friction, path, minutes = condition
-    session_dir = os.path.join(work, f"{friction}_{path}_{minutes:g}min_seed{seed}")
+    session_dir = os.path.join(work, f"{friction}_{path}_{minutes:g}min_seed{seed}" +
+                               ("" if approaches == 2 else f"_{approaches}hold"))
     manifest = os.path.join(session_dir, "session.json")
     if not os.path.exists(manifest):
-        config = os.path.join(work, f"config_{path}.json")
+        config = os.path.join(work, f"config_{path}_{approaches}.json")
         with open(config, "w") as f:
-            json.dump({**GRID, "trajectory": {"free_space_path": path}}, f)
+            json.dump({"protocol": {**GRID["protocol"], "static_approaches": approaches},
+                       "trajectory": {"free_space_path": path}}, f)
         run([rcm, "simulate", "--out", session_dir, "--friction", friction, "--seed", str(seed),
              "--free-space-s", str(60 * minutes), "--config", config, "--no-truth"],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    model = os.path.join(session_dir, "free_space_model.json")
-    run_dir = os.path.join(session_dir, f"run_{static_step}")
-    fitted = os.path.join(run_dir, "free_space_model.json")
-    if not (os.path.exists(os.path.join(run_dir, "results.json")) and os.path.exists(fitted)):
-        cmd = [rcm, "run", manifest, "--out", run_dir, "--seed", str(seed), "--static-step", static_step]
-        if static_step != "balanced":  # the ablation: the same fitted model, the three-step method alone
-            cmd += ["--model-file", model, "--method", "three-step"]
-        run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    if static_step == "balanced":
-        shutil.copyfile(fitted, model)
-    with open(os.path.join(run_dir, "results.json")) as f:  # a kept --work folder resumes from these
+    return session_dir
+
+
+def study(rcm, session_dir, name, seed, extra):
+    """`rcm run` on the session into session_dir/run_<name>; a kept --work folder resumes."""
+    run_dir = os.path.join(session_dir, f"run_{name}")
+    if not (os.path.exists(os.path.join(run_dir, "results.json")) and
+            os.path.exists(os.path.join(run_dir, "free_space_model.json"))):
+        run([rcm, "run", os.path.join(session_dir, "session.json"), "--out", run_dir, "--seed", str(seed)] + extra,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    with open(os.path.join(run_dir, "results.json")) as f:
         return json.load(f)
+
+
+def study_condition(rcm, work, condition, seed):
+    """The defaults on the two-hold session, then the three-step method alone on
+    the same fitted model: the last of the two holds, and the paper's protocol
+    (one hold per static file)."""
+    two = simulate(rcm, work, condition, seed, 2)
+    one = simulate(rcm, work, condition, seed, 1)
+    default = study(rcm, two, "balanced", seed, ["--static-step", "balanced"])
+    model = os.path.join(two, "run_balanced", "free_space_model.json")
+    paper = ["--model-file", model, "--method", "three-step", "--static-step", "last-hold"]
+    return default, study(rcm, two, "last-hold", seed, paper), study(rcm, one, "paper", seed, paper)
 
 
 def main():
@@ -102,36 +120,39 @@ def main():
     seeds = [int(x) for x in args.seeds.split(",")]
     rows = []
     for condition in conditions:
-        far, near, far3, near3, farp, nearp = [], [], [], [], [], []
+        errors = {k: ([], []) for k in ("joint", "balanced", "last", "paper")}
         inside, trials = [0, 0, 0], 0
         for seed in seeds:
-            res = study(rcm, work, condition, seed, "balanced")
-            paper = study(rcm, work, condition, seed, "last-hold")
-            for t, tp in zip(res["trials"], paper["trials"]):
+            default, last, paper = study_condition(rcm, work, condition, seed)
+            for t, tl, tp in zip(default["trials"], last["trials"], paper["trials"]):
                 j = t["joint"]
-                far_trial = t["truth_m"][2] > 0.020 + 1e-9
-                (far if far_trial else near).append(j["error_m"])
-                (far3 if far_trial else near3).append(t["three_step"]["error_m"])
-                (farp if far_trial else nearp).append(tp["three_step"]["error_m"])
+                side = 0 if t["truth_m"][2] > 0.020 + 1e-9 else 1
+                errors["joint"][side].append(j["error_m"])
+                errors["balanced"][side].append(t["three_step"]["error_m"])
+                errors["last"][side].append(tl["three_step"]["error_m"])
+                errors["paper"][side].append(tp["three_step"]["error_m"])
                 trials += 1
                 for a in range(3):
                     inside[a] += j["ci95_low_m"][a] <= t["truth_m"][a] <= j["ci95_high_m"][a]
-        rows.append((*condition, trials, mean(far), mean(near), mean(far3), mean(near3),
-                     mean(farp), mean(nearp), [i / trials for i in inside]))
+        rows.append((*condition, trials, {k: (mean(v[0]), mean(v[1])) for k, v in errors.items()},
+                     [i / trials for i in inside]))
         print(rows[-1], file=sys.stderr, flush=True)
     load = os.getloadavg()
     lines = [f"Run {datetime.date.today().isoformat()} by `make coverage` (bench/interval_coverage.py, seeds "
              f"{args.seeds}) on {os.cpu_count()} cores of {cpu_model()}, load average {load[0]:.1f} at the end. "
              "Each seed is one simulated session of 15 trials (D = 10..50 mm x radial [0, 0], [10, 15], "
-             "[-12, 8] mm), estimated by `rcm run` with its defaults; the paper's last-hold static step "
-             "(`--static-step last-hold`) reuses the same fitted model. Mean e in mm, D > 20 / <= 20 mm.", "",
-             "| friction | free space | trials | joint mean e | three-step (balanced holds) | "
-             "three-step (paper: last hold) | joint 95 % coverage x / y / D |",
-             "|---|---|---|---|---|---|---|"]
-    for fr, path, mins, n, f, ne, f3, n3, fp, np_, cov in rows:
-        lines.append(f"| {fr} | {mins:g} min {path} | {n} | {1e3 * f:.2f} / {1e3 * ne:.2f} | "
-                     f"{1e3 * f3:.2f} / {1e3 * n3:.2f} | {1e3 * fp:.2f} / {1e3 * np_:.2f} | "
-                     f"{100 * cov[0]:.0f} / {100 * cov[1]:.0f} / {100 * cov[2]:.0f} % |")
+             "[-12, 8] mm) with two holds per static file, estimated by `rcm run` with its defaults; the "
+             "three-step method is also run alone on the same fitted model with the last hold only "
+             "(`--static-step last-hold`) and on the same trials with the paper's protocol of one hold per "
+             "static file. Mean e in mm, D > 20 / <= 20 mm.", "",
+             "| friction | free space | trials | joint | joint 95 % coverage x / y / D | three-step, balanced "
+             "holds | three-step, last hold | three-step, paper protocol (one hold) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for fr, path, mins, n, e, cov in rows:
+        pair = lambda k: f"{1e3 * e[k][0]:.2f} / {1e3 * e[k][1]:.2f}"
+        lines.append(f"| {fr} | {mins:g} min {path} | {n} | {pair('joint')} | "
+                     f"{100 * cov[0]:.0f} / {100 * cov[1]:.0f} / {100 * cov[2]:.0f} % | {pair('balanced')} | "
+                     f"{pair('last')} | {pair('paper')} |")
     block = "\n".join(lines)
     print(block)
     if not args.no_doc:

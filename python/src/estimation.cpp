@@ -200,6 +200,7 @@ void bind_estimation(py::module_& m) {
       .def_readonly("covariance", &JointTissueModel::covariance)
       .def_readonly("bootstrap_replicates", &JointTissueModel::bootstrap_replicates)
       .def_readonly("calibration_bias_m", &JointTissueModel::calibration_bias_m)
+      .def_readonly("calibration_offset_m", &JointTissueModel::calibration_offset_m)
       .def("__repr__", [](const JointTissueModel& t) {
         return "<rcm.JointTissueModel " + t.family + ": k1 " + std::to_string(t.parameters[0]) + " N/m, c " +
                std::to_string(t.parameters[2]) + " N s/m>";
@@ -218,6 +219,7 @@ void bind_estimation(py::module_& m) {
       .def_readonly("sd_bootstrap", &JointEstimate::sd_bootstrap)
       .def_readonly("sd_tissue", &JointEstimate::sd_tissue)
       .def_readonly("sd_systematic", &JointEstimate::sd_systematic)
+      .def_readonly("sd_systematic_scale", &JointEstimate::sd_systematic_scale)
       .def_readonly("sd_calibration_offset", &JointEstimate::sd_calibration_offset)
       .def_readonly("sd_free_space_model", &JointEstimate::sd_free_space_model)
       .def_readonly("bootstrap_replicates", &JointEstimate::bootstrap_replicates)

@@ -237,6 +237,7 @@ JointTissueModel fit_joint_tissue_model(const IncisionFrame& incision, const std
       if (f.cost < best.cost) best = f;
     }
     out.calibration_bias_m = best.p - p;
+    out.calibration_offset_m = D_star;
   }
 
   if (o.calibration_offset_sd_m > 0) {
@@ -360,6 +361,9 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
   const Eigen::Matrix3d cov_tissue = S * tissue.covariance * S.transpose();
   out.sd_tissue = cov_tissue.diagonal().cwiseMax(0.0).cwiseSqrt();
   out.sd_systematic = tissue.calibration_bias_m.cwiseAbs();
+  if (std::abs(tissue.calibration_offset_m) > 0.0)
+    out.sd_systematic_scale =
+        tissue.calibration_bias_m.norm() / std::abs(tissue.calibration_offset_m) * best.p.cwiseAbs();
   if (tissue.calibration_offset_sd_m > 0) {
     const Eigen::Vector4d moved = tissue.parameters + tissue.dparameters_dD_star * tissue.calibration_offset_sd_m;
     out.sd_calibration_offset =
@@ -384,7 +388,8 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
     out.sd_free_space_model = sq.cwiseSqrt();
   }
   const Eigen::Vector3d half = 1.96 * (out.sd_bootstrap.array().square() + out.sd_tissue.array().square() +
-                                       out.sd_systematic.array().square() + out.sd_calibration_offset.array().square() +
+                                       out.sd_systematic.array().square() + out.sd_systematic_scale.array().square() +
+                                       out.sd_calibration_offset.array().square() +
                                        out.sd_free_space_model.array().square())
                                           .sqrt()
                                           .matrix();

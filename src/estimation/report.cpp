@@ -268,10 +268,14 @@ std::filesystem::path write_study_report(const StudyResult& r, const Session& se
   md += "| paper, [0, 0, 30] mm | 1.4 | 0.7 | 2.1 |\n| paper, [10, 15, 30] mm | 2.0 | 1.4 | 1.8 |\n";
 
   if (r.method == "joint") {
+    const std::string step = r.trials.empty() || !r.trials.front().hold ? std::string("no static file")
+                                                                          : to_string(r.trials.front().hold->step);
     md += "\n## Misalignment (Table IV): three-step vs joint\n\nThree-step: paper Algorithm 1 with the hold's tau_fs carried "
-          "through the return motion. Joint: all three offsets in torque space over the trial and its static file, "
-          "with 95 % intervals from a moving-block residual bootstrap, the tissue parameters' uncertainty and the "
-          "systematic error the model makes on the calibration.\n\n```\n" + format_table_iv(r) + "```\n";
+          "through the return motion (static step: " + step + "). Joint: all three offsets in torque space over the "
+          "trial and its static file, with 95 % intervals from a moving-block residual bootstrap, the tissue "
+          "parameters' uncertainty, the systematic error the model makes on the calibration (as it is and relative "
+          "to D*) and the free-space model's error at rest on the aligned baseline (" + r.baseline_message +
+          ").\n\n```\n" + format_table_iv(r) + "```\n";
     if (r.joint_tissue)
       md += fmt::format("\nTissue model in torque space ({}): k1 = {:.1f} N/m, k3 = {:.4g} N/m^3, damping {:.2f} N s/m, "
                         "axial friction {:.2f} N.\n",

@@ -394,6 +394,7 @@ nlohmann::json StudyResult::to_json() const {
                            {"sd_bootstrap_m", vec_json(je.sd_bootstrap)},
                            {"sd_tissue_m", vec_json(je.sd_tissue)},
                            {"sd_systematic_m", vec_json(je.sd_systematic)},
+                           {"sd_systematic_scale_m", vec_json(je.sd_systematic_scale)},
                            {"sd_calibration_offset_m", vec_json(je.sd_calibration_offset)},
                            {"sd_free_space_model_m", vec_json(je.sd_free_space_model)},
                            {"bootstrap_replicates", je.bootstrap_replicates},

@@ -58,6 +58,7 @@ struct JointTissueModel {
   // do to an estimate where the truth is known. Neither the covariance nor a
   // residual bootstrap sees such a bias, so every trial's interval includes it.
   Eigen::Vector3d calibration_bias_m = Eigen::Vector3d::Zero();
+  double calibration_offset_m = 0.0;  // D*, the calibration's known coaxial offset
   double bootstrap_block_s = 0.0;  // block length the calibration bootstrap used
   // d(parameters)/dD* by refitting at D* + calibration_offset_sd_m: how the
   // uncertainty of the known offset moves every trial alike.
@@ -111,6 +112,11 @@ struct JointEstimate {
   Eigen::Vector3d sd_bootstrap = Eigen::Vector3d::Zero();  // half-width of the bootstrap interval / 1.96
   Eigen::Vector3d sd_tissue = Eigen::Vector3d::Zero();
   Eigen::Vector3d sd_systematic = Eigen::Vector3d::Zero();  // |calibration_bias_m| of the tissue model
+  // The calibration's error relative to D* (|calibration_bias_m| / D*) times
+  // |estimate|: a free-space model that is off scales the force and with it
+  // every offset, radial ones too, which a pure coaxial calibration cannot show
+  // directly.
+  Eigen::Vector3d sd_systematic_scale = Eigen::Vector3d::Zero();
   Eigen::Vector3d sd_calibration_offset = Eigen::Vector3d::Zero();  // through dparameters_dD_star
   Eigen::Vector3d sd_free_space_model = Eigen::Vector3d::Zero();    // through options.torque_bias
   int bootstrap_replicates = 0;
