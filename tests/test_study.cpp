@@ -20,26 +20,32 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// A small bench: 3 min of free space and the paper's protocol on 40 s trials at
+// D = 20 and 40 mm, with and without a radial offset.
+rcm::sim::SimConfig make_small_config() {
+  rcm::sim::SimConfig config = rcm::sim::make_default_config();
+  config.protocol.free_space_s = 180.0;
+  config.protocol.calibration_s = 40.0;
+  config.protocol.trial_s = 40.0;
+  config.protocol.static_hold_s = 4.0;
+  config.protocol.baseline_hold_s = 4.0;
+  config.protocol.coaxial_offsets_m = {0.020, 0.040};
+  config.protocol.write_truth = false;
+  return config;
+}
+
 struct Bench {
   fs::path dir;
   rcm::Session session;
 };
 
-// A small bench, simulated once for the whole file: 3 min of free space and the
-// paper's protocol at D = 20 and 40 mm with and without a radial offset.
+// The small bench, simulated once for the whole file.
 const Bench& bench() {
   static const Bench b = [] {
     Bench out;
     std::random_device rd;
     out.dir = fs::temp_directory_path() / ("rcm_test_study_" + std::to_string(rd()));
-    rcm::sim::SimConfig config = rcm::sim::make_default_config();
-    config.protocol.free_space_s = 180.0;
-    config.protocol.calibration_s = 40.0;
-    config.protocol.trial_s = 40.0;
-    config.protocol.static_hold_s = 4.0;
-    config.protocol.baseline_hold_s = 4.0;
-    config.protocol.coaxial_offsets_m = {0.020, 0.040};
-    config.protocol.write_truth = false;
+    const rcm::sim::SimConfig config = make_small_config();
     static const fs::path cleanup_dir = out.dir;
     std::atexit([] {
       std::error_code ec;
@@ -159,15 +165,9 @@ TEST(Study, JointMethodHoldsOnStiffeningAndSlidingTissue) {
   for (const std::string preset : {"stiffening", "sliding"}) {
     std::random_device rd;
     const fs::path dir = fs::temp_directory_path() / ("rcm_test_study_" + preset + std::to_string(rd()));
-    rcm::sim::SimConfig config = rcm::sim::make_default_config();
+    rcm::sim::SimConfig config = make_small_config();
     rcm::sim::apply_tissue_preset(config.tissue, preset);
-    config.protocol.free_space_s = 180.0;
-    config.protocol.calibration_s = 40.0;
-    config.protocol.trial_s = 40.0;
-    config.protocol.static_hold_s = 4.0;
-    config.protocol.baseline_hold_s = 4.0;
     config.protocol.coaxial_offsets_m = {0.015, 0.040};
-    config.protocol.write_truth = false;
     const auto written = rcm::sim::simulate_session(config, dir);
     rcm::StudyOptions o = linear_options();
     o.method = "joint";
@@ -210,17 +210,10 @@ TEST(Study, HystereticFrictionJointIntervalsCoverAndBalancedHoldsBeatTheLastHold
   for (const std::uint64_t seed : {11u, 12u, 13u}) {
     std::random_device rd;
     const fs::path dir = fs::temp_directory_path() / ("rcm_test_study_hysteretic_" + std::to_string(rd()));
-    rcm::sim::SimConfig config = rcm::sim::make_default_config();
+    rcm::sim::SimConfig config = make_small_config();
     rcm::sim::apply_friction_preset(config, "hysteretic");
     config.seed = seed;
-    config.protocol.free_space_s = 180.0;
-    config.protocol.calibration_s = 40.0;
-    config.protocol.trial_s = 40.0;
-    config.protocol.static_hold_s = 4.0;
     config.protocol.static_approaches = 2;
-    config.protocol.baseline_hold_s = 4.0;
-    config.protocol.coaxial_offsets_m = {0.020, 0.040};
-    config.protocol.write_truth = false;
     const rcm::Session session = rcm::load_session(rcm::sim::simulate_session(config, dir).manifest);
     rcm::StudyOptions o = linear_options();
     o.method = "joint";
@@ -266,14 +259,7 @@ TEST(Study, HystereticFrictionJointIntervalsCoverAndBalancedHoldsBeatTheLastHold
 TEST(Study, JointIntervalsWidenWhenTheFreeSpaceModelMissesAPayload) {
   std::random_device rd;
   const fs::path dir = fs::temp_directory_path() / ("rcm_test_study_payload_" + std::to_string(rd()));
-  rcm::sim::SimConfig config = rcm::sim::make_default_config();
-  config.protocol.free_space_s = 180.0;
-  config.protocol.calibration_s = 40.0;
-  config.protocol.trial_s = 40.0;
-  config.protocol.static_hold_s = 4.0;
-  config.protocol.baseline_hold_s = 4.0;
-  config.protocol.coaxial_offsets_m = {0.020, 0.040};
-  config.protocol.write_truth = false;
+  rcm::sim::SimConfig config = make_small_config();
   const rcm::Session matched = rcm::load_session(rcm::sim::simulate_session(config, dir / "light").manifest);
   config.arm.insertion_stage.mass_kg += 0.2;
   rcm::Session payload = rcm::load_session(rcm::sim::simulate_session(config, dir / "heavy").manifest);

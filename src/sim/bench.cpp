@@ -218,9 +218,8 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
 ReferenceTrajectory make_teleop_reference(const SimConfig& config, const std::string& stream,
                                           double duration_s) {
   ReferenceTrajectory ref;
-  ref.add_path(0.0, std::make_shared<const TeleopPath>(
-                          config.trajectory, config.protocol.q0,
-                          derive_seed(config.seed, "path:" + stream), duration_s));
+  ref.add_path(0.0, std::make_shared<const TeleopPath>(config.trajectory, config.protocol.q0,
+                                                      derive_seed(config.seed, "path:" + stream), duration_s));
   return ref;
 }
 

@@ -277,6 +277,16 @@ void walk(const nlohmann::json& j, const std::string& prefix, const std::map<std
   }
 }
 
+[[noreturn]] void throw_unknown_preset(const std::string& section, const std::string& name,
+                                      const std::vector<std::string>& known_names) {
+  std::string known;
+  for (const auto& n : known_names) known += (known.empty() ? "" : ", ") + n;
+  InputLocation loc;
+  loc.field = section + ".preset";
+  loc.kind = InputLocation::Kind::json_field;
+  throw InputError(loc, "unknown " + section + " '" + name + "'; known: " + known);
+}
+
 }  // namespace
 
 SimConfig make_default_config() {
@@ -313,12 +323,7 @@ void apply_friction_preset(SimConfig& c, const std::string& name) {
     c.friction[1] = {0.070, 0.064, 1.3, 0.02, 0.22, 600.0, 2.5, -0.012};
     c.friction[2] = {0.45, 0.58, 1.25, 0.004, 1.2, 2.5e4, 40.0, 0.0};
   } else {
-    std::string known;
-    for (const auto& n : get_friction_preset_names()) known += (known.empty() ? "" : ", ") + n;
-    InputLocation loc;
-    loc.field = "friction.preset";
-    loc.kind = InputLocation::Kind::json_field;
-    throw InputError(loc, "unknown friction '" + name + "'; known: " + known);
+    throw_unknown_preset("friction", name, get_friction_preset_names());
   }
   c.friction_preset = name;
 }
@@ -347,12 +352,7 @@ void apply_tissue_preset(TissueParams& t, const std::string& name) {
     t.stiffness_n_per_m = 875.0;
     t.axial_friction_n = 1.5;
   } else {
-    std::string known;
-    for (const auto& n : get_tissue_preset_names()) known += (known.empty() ? "" : ", ") + n;
-    InputLocation loc;
-    loc.field = "tissue.preset";
-    loc.kind = InputLocation::Kind::json_field;
-    throw InputError(loc, "unknown tissue '" + name + "'; known: " + known);
+    throw_unknown_preset("tissue", name, get_tissue_preset_names());
   }
 }
 
