@@ -68,6 +68,16 @@ rcm::StudyOptions linear_options() {
   return o;
 }
 
+// The joint method with fewer bootstrap replicates and no D* +- 3 mm tissue refits.
+rcm::StudyOptions quick_joint_options() {
+  rcm::StudyOptions o = linear_options();
+  o.method = "joint";
+  o.joint.bootstrap_replicates = 20;
+  o.joint.calibration_bootstrap_replicates = 10;
+  o.tissue_sensitivity_delta_m = 0.0;
+  return o;
+}
+
 rcm::TorqueModelFitter linear_fitter() {
   return [](rcm::dynamics::TorqueModelKind, const std::vector<rcm::Recording>& recs,
             const rcm::dynamics::FitOptions& o) { return rcm::dynamics::fit_linear_torque_model(recs, o); };
@@ -98,12 +108,8 @@ TEST(Study, RecoversSimulatedMisalignmentsWithTheRightSigns) {
 
 // Beyond the paper: all three offsets in torque space, with intervals.
 TEST(Study, JointMethodRecoversOffsetsWithCoveringIntervals) {
-  rcm::StudyOptions o = linear_options();
-  o.method = "joint";
+  rcm::StudyOptions o = quick_joint_options();
   o.static_step = rcm::StaticStep::last_hold;  // the paper's three-step, to compare with
-  o.joint.bootstrap_replicates = 20;
-  o.joint.calibration_bootstrap_replicates = 10;
-  o.tissue_sensitivity_delta_m = 0.0;
   const rcm::StudyResult r = rcm::run_study(bench().session, o, linear_fitter());
   ASSERT_TRUE(r.joint_tissue);
   EXPECT_EQ(r.joint_tissue->family, "linear");
@@ -169,11 +175,7 @@ TEST(Study, JointMethodHoldsOnStiffeningAndSlidingTissue) {
     rcm::sim::apply_tissue_preset(config.tissue, preset);
     config.protocol.coaxial_offsets_m = {0.015, 0.040};
     const auto written = rcm::sim::simulate_session(config, dir);
-    rcm::StudyOptions o = linear_options();
-    o.method = "joint";
-    o.joint.bootstrap_replicates = 20;
-    o.joint.calibration_bootstrap_replicates = 10;
-    o.tissue_sensitivity_delta_m = 0.0;
+    rcm::StudyOptions o = quick_joint_options();
     const rcm::StudyResult r = rcm::run_study(rcm::load_session(written.manifest), o, linear_fitter());
     ASSERT_TRUE(r.joint_tissue);
     if (preset == "stiffening") EXPECT_EQ(r.joint_tissue->family, "stiffening");
@@ -215,11 +217,7 @@ TEST(Study, HystereticFrictionJointIntervalsCoverAndBalancedHoldsBeatTheLastHold
     config.seed = seed;
     config.protocol.static_approaches = 2;
     const rcm::Session session = rcm::load_session(rcm::sim::simulate_session(config, dir).manifest);
-    rcm::StudyOptions o = linear_options();
-    o.method = "joint";
-    o.joint.bootstrap_replicates = 20;
-    o.joint.calibration_bootstrap_replicates = 10;
-    o.tissue_sensitivity_delta_m = 0.0;
+    rcm::StudyOptions o = quick_joint_options();
     const rcm::StudyResult joint = rcm::run_study(session, o, linear_fitter());
     o.method = "three-step";
     o.static_step = rcm::StaticStep::last_hold;
@@ -264,11 +262,7 @@ TEST(Study, JointIntervalsWidenWhenTheFreeSpaceModelMissesAPayload) {
   config.arm.insertion_stage.mass_kg += 0.2;
   rcm::Session payload = rcm::load_session(rcm::sim::simulate_session(config, dir / "heavy").manifest);
   payload.free_space = matched.free_space;
-  rcm::StudyOptions o = linear_options();
-  o.method = "joint";
-  o.joint.bootstrap_replicates = 20;
-  o.joint.calibration_bootstrap_replicates = 10;
-  o.tissue_sensitivity_delta_m = 0.0;
+  rcm::StudyOptions o = quick_joint_options();
   const rcm::StudyResult r_matched = rcm::run_study(matched, o, linear_fitter());
   const rcm::StudyResult r = rcm::run_study(payload, o, linear_fitter());
   ASSERT_TRUE(r.baseline_hold) << r.baseline_message;
