@@ -99,7 +99,8 @@ FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOption
     out.fit = fit.summary;
     out.errors = fit.summary.test_errors;
     out.model = std::move(fit.model);
-    progress(options.verbose, "free-space model: " + out.fit->brief_report());
+    // A verbose fit has printed its report already.
+    if (!options.fit.verbose) progress(options.verbose, "free-space model: " + out.fit->brief_report());
   }
   if (out.model->num_outputs() < 3) {
     InputLocation where;
