@@ -153,6 +153,11 @@ void run_eval(const DynamicsArgs& a) {
     }
     if (auto w = check_sample_period(*model, r); !w.empty()) warnings.push_back(w);
   }
+  // Where the recordings leave what the model was fitted on, its error there is an
+  // extrapolation: say how much of each recording that is.
+  const RegimeMonitor regime(model->info().regime);
+  std::vector<RegimeSummary> regimes;
+  for (const auto& r : recs) regimes.push_back(compute_regime_summary(regime, r));
   for (const auto& w : warnings) std::cerr << "warning: " << w << "\n";
   const auto mode = a.streaming ? PredictionMode::streaming : PredictionMode::batch;
   const auto errors = evaluate_torque_model(*model, recs, 0.0, mode);
@@ -178,16 +183,28 @@ void run_eval(const DynamicsArgs& a) {
     j["model"] = {{"kind", to_string(model->kind())}, {"path", a.model_path}};
     j["mode"] = a.streaming ? "streaming" : "batch";
     j["warnings"] = warnings;
+    nlohmann::json regime_json = nlohmann::json::array();
+    for (std::size_t r = 0; r < recs.size(); ++r) {
+      auto rj = regimes[r].to_json();
+      rj["recording"] = recs[r].source;
+      regime_json.push_back(rj);
+    }
+    j["regime"] = regime_json;
     rcm::cli::print_json(j);
     return;
   }
   std::vector<std::vector<std::string>> rows;
-  for (const auto& e : errors)
-    rows.push_back({std::to_string(e.index), fmt::format("{:.4g}", e.rmse), fmt::format("{:.2f}", e.nrmse_percent),
-                    fmt::format("{:.4g}", e.range)});
+  // Joint 3 is the insertion (N); every other joint is revolute (N m).
+  for (const auto& e : errors) {
+    const char* unit = e.index == 3 ? "N" : "N m";
+    rows.push_back({std::to_string(e.index), fmt::format("{:.4g} {}", e.rmse, unit), fmt::format("{:.2f}", e.nrmse_percent),
+                    fmt::format("{:.4g} {}", e.range, unit)});
+  }
   std::cout << "model: " << to_string(model->kind()) << " (" << a.model_path << "), "
             << (a.streaming ? "streaming (causal, as live)" : "batch (offline)") << "\n"
             << rcm::cli::format_table({"joint", "RMSE", "NRMSE %", "range"}, rows);
+  for (std::size_t r = 0; r < recs.size(); ++r)
+    std::cout << "regime: " << (recs.size() > 1 ? recs[r].source + ": " : std::string()) << regimes[r].to_text() << "\n";
 }
 
 #if defined(RCM_HAVE_TORCH)

@@ -60,18 +60,28 @@ void run(const Options& o) {
 
   // Printing happens in the callback: events at once, the estimate at a cadence.
   double next_print = rec.time(0);
-  std::string csv = "time,dr_x,dr_y,D,sd_dr_x,sd_dr_y,sd_D,force_x,force_y,force_z,force_norm,cusum,onset,alarm,at_rest,hypothesis\n";
+  std::string csv = "time,dr_x,dr_y,D,sd_dr_x,sd_dr_y,sd_D,force_x,force_y,force_z,force_norm,cusum,onset,alarm,at_rest,hypothesis,out_of_regime,regime_flags\n";
   bool onset_printed = false;
+  double next_regime_print = rec.time(0);
+  std::uint32_t regime_since_print = 0;
   if (!o.json && !o.quiet)
     std::cout << fmt::format("{:>9} {:>8} {:>8} {:>8}   {:>6} {:>6} {:>6}  {:>7}  {}\n", "time (s)", "dr_x", "dr_y", "D",
                              "sd_x", "sd_y", "sd_D", "|f| (N)", "(mm)");
   auto on_sample = [&](const rcm::OnlineOutput& out) {
     if (!o.out.empty())
-      csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", out.time, out.misalignment_m[0],
+      csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", out.time, out.misalignment_m[0],
                          out.misalignment_m[1], out.misalignment_m[2], out.sd_m[0], out.sd_m[1], out.sd_m[2],
                          out.f_inc_base[0], out.f_inc_base[1], out.f_inc_base[2], out.force_norm_n, out.cusum,
-                         out.onset ? 1 : 0, out.alarm ? 1 : 0, out.at_rest ? 1 : 0, out.hypothesis);
+                         out.onset ? 1 : 0, out.alarm ? 1 : 0, out.at_rest ? 1 : 0, out.hypothesis,
+                         out.out_of_regime ? 1 : 0, out.regime_flags);
     if (o.json) return;
+    // Leaving the regime is an event, printed at most once per second of recording.
+    regime_since_print |= out.regime_flags;
+    if (out.out_of_regime && out.time >= next_regime_print) {
+      std::cout << fmt::format("{:9.3f}  OUT OF REGIME: {} beyond the free-space model's training data\n", out.time,
+                               rcm::dynamics::describe_regime_flags(out.regime_flags));
+      next_regime_print = out.time + 1.0;
+    }
     if (out.onset && !onset_printed) {
       onset_printed = true;
       std::cout << fmt::format("{:9.3f}  ONSET of a misalignment detected\n", out.time);
@@ -83,9 +93,10 @@ void run(const Options& o) {
     if (!o.quiet && o.print_every_s > 0 && out.time >= next_print) {
       next_print = out.time + o.print_every_s;
       const Eigen::Vector3d p = out.misalignment_m * 1e3, sd = out.sd_m * 1e3;
-      std::cout << fmt::format("{:9.3f} {:8.2f} {:8.2f} {:8.2f}   {:6.2f} {:6.2f} {:6.2f}  {:7.2f}{}{}\n", out.time, p[0],
+      std::cout << fmt::format("{:9.3f} {:8.2f} {:8.2f} {:8.2f}   {:6.2f} {:6.2f} {:6.2f}  {:7.2f}{}{}{}\n", out.time, p[0],
                                p[1], p[2], sd[0], sd[1], sd[2], out.force_norm_n, out.onset ? "" : "  (no onset yet)",
-                               out.alarm ? "  ALARM" : "");
+                               out.alarm ? "  ALARM" : "", regime_since_print ? "  (out of regime)" : "");
+      regime_since_print = 0;
     }
   };
   rcm::OnlineReplayOptions replay_options;
@@ -128,6 +139,7 @@ void run(const Options& o) {
       events.push_back({{"raised_s", a.raised_s}, {"cleared_s", opt(a.cleared_s)}, {"peak_force_n", a.peak_force_n}});
     j["alarms"] = events;
     j["update_us"] = {{"mean", mean_us}, {"max", 1e6 * replay.max_update_s}};
+    j["regime"] = replay.regime.to_json();
     j["trace"] = o.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(o.out);
     rcm::cli::print_json(j);
     return;
@@ -145,6 +157,7 @@ void run(const Options& o) {
                              o.settle_band_m * 1e3, *replay.settled_after_s);
   std::cout << fmt::format("alarms     {} (threshold {:.1f} N), peak model force {:.1f} N\n", replay.alarms.size(),
                            o.alarm_force_n, replay.peak_force_n);
+  std::cout << fmt::format("regime     {}\n", replay.regime.to_text());
   std::cout << fmt::format("update     {:.2f} us per sample on average (free-space model + estimator), max {:.1f} us\n",
                            mean_us, 1e6 * replay.max_update_s);
 }

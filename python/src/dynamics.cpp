@@ -72,7 +72,37 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("num_outputs", &TorqueModelInfo::num_outputs, "joints predicted: 1..num_outputs")
       .def_readonly("sample_period_s", &TorqueModelInfo::sample_period_s, "the period it was trained at")
       .def_property_readonly("training", [](const TorqueModelInfo& i) { return to_python(i.training); },
-                             "fit summary (dict, informative only)");
+                             "fit summary (dict, informative only)")
+      .def_readonly("regime", &TorqueModelInfo::regime, "what the fit saw (TrainingRegime; known False if the file says nothing)");
+
+  py::class_<TrainingRegime>(d, "TrainingRegime",
+                             "Per-joint position, velocity and acceleration ranges of the data a free-space model was fitted on")
+      .def_property_readonly("known", [](const TrainingRegime& r) { return !r.empty(); })
+      .def_readonly("position_min", &TrainingRegime::position_min)
+      .def_readonly("position_max", &TrainingRegime::position_max)
+      .def_readonly("velocity_min", &TrainingRegime::velocity_min)
+      .def_readonly("velocity_max", &TrainingRegime::velocity_max)
+      .def_readonly("acceleration_abs_max", &TrainingRegime::acceleration_abs_max,
+                    "of the causal estimate: low-pass (acceleration_filter_s) of the velocity's backward difference")
+      .def_readonly("acceleration_filter_s", &TrainingRegime::acceleration_filter_s)
+      .def_readonly("samples", &TrainingRegime::samples);
+  d.def("describe_regime_flags", &describe_regime_flags, py::arg("flags"),
+        "'joint 1 velocity, joint 3 position' for OnlineOutput.regime_flags");
+  py::class_<RegimeSummary>(d, "RegimeSummary", "Samples outside a free-space model's training regime")
+      .def_readonly("known", &RegimeSummary::known, "False: the model carries no regime, nothing was checked")
+      .def_readonly("samples", &RegimeSummary::samples)
+      .def_readonly("flagged", &RegimeSummary::flagged)
+      .def_property_readonly("fraction", &RegimeSummary::get_fraction)
+      .def_property_readonly("first_time_s", [](const RegimeSummary& s) -> py::object {
+        return s.first_time_s ? py::object(py::float_(*s.first_time_s)) : py::object(py::none());
+      })
+      .def_readonly("all_flags", &RegimeSummary::all_flags)
+      .def("to_dict", [](const RegimeSummary& s) { return to_python(s.to_json()); })
+      .def("__str__", &RegimeSummary::to_text);
+  d.def("compute_regime_summary", [](const TorqueModel& model, const rcm::Recording& recording) {
+    return compute_regime_summary(RegimeMonitor(model.info().regime), recording);
+  }, py::arg("model"), py::arg("recording"),
+        "The recording's samples beyond the model's training regime (what `rcm dynamics eval` prints)");
 
   py::class_<TorqueWorkspace>(d, "TorqueModelWorkspace",
                               "State (friction memory, LSTM h/c) and buffers of one running model; from model.create_workspace()");

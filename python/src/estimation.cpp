@@ -272,10 +272,13 @@ void bind_estimation(py::module_& m) {
       .def_readonly("alarm", &OnlineOutput::alarm)
       .def_readonly("alarm_raised", &OnlineOutput::alarm_raised)
       .def_readonly("alarm_cleared", &OnlineOutput::alarm_cleared)
+      .def_readonly("out_of_regime", &OnlineOutput::out_of_regime,
+                    "the sample lies beyond the free-space model's training data (rcm.dynamics.describe_regime_flags)")
+      .def_readonly("regime_flags", &OnlineOutput::regime_flags, "bit 3 j + k: joint j position (k 0), velocity (1), acceleration (2)")
       .def("__repr__", [](const OnlineOutput& o) {
         return "<rcm.OnlineOutput t=" + std::to_string(o.time) + " [" + std::to_string(o.misalignment_m[0]) + ", " +
                std::to_string(o.misalignment_m[1]) + ", " + std::to_string(o.misalignment_m[2]) + "] m" +
-               (o.onset ? ", onset" : "") + (o.alarm ? ", ALARM" : "") + ">";
+               (o.onset ? ", onset" : "") + (o.alarm ? ", ALARM" : "") + (o.out_of_regime ? ", out of regime" : "") + ">";
       });
   py::class_<OnlineEstimator::Workspace>(m, "OnlineEstimatorWorkspace", "State of the filter bank (fixed size)")
       .def_property_readonly("output", [](const OnlineEstimator::Workspace& w) { return w.output; }, "the last OnlineOutput");
@@ -350,7 +353,8 @@ void bind_estimation(py::module_& m) {
       .def_readonly("alarms", &OnlineReplay::alarms)
       .def_readonly("peak_force_n", &OnlineReplay::peak_force_n)
       .def_readonly("mean_update_s", &OnlineReplay::mean_update_s, "wall clock per sample (with a callback: includes it)")
-      .def_readonly("max_update_s", &OnlineReplay::max_update_s);
+      .def_readonly("max_update_s", &OnlineReplay::max_update_s)
+      .def_readonly("regime", &OnlineReplay::regime, "samples outside the free-space model's training regime");
   m.def("replay_online", [](const OnlinePipeline& pipeline, const Recording& rec, const OnlineReplayOptions& o,
                             py::object on_sample) {
     // With a callback the GIL stays held: it is called from this thread for every sample.
@@ -406,6 +410,7 @@ void bind_estimation(py::module_& m) {
       .def_readonly("force_offset_used_m", &TrialOutcome::force_offset_used_m)
       .def_readonly("force_rmse", &TrialOutcome::force_rmse, "per axis, N, or None")
       .def_readonly("ill_conditioned_samples", &TrialOutcome::ill_conditioned_samples)
+      .def_readonly("regime", &TrialOutcome::regime, "the trial's samples outside the free-space model's training regime")
       .def_readonly("seconds", &TrialOutcome::seconds)
       .def("get_misalignment_m", &TrialOutcome::get_misalignment_m, "the method's estimate: joint when computed, else three-step")
       .def("get_error_m", &TrialOutcome::get_error_m, "|estimate - truth| or None")

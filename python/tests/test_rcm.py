@@ -530,6 +530,31 @@ class TestOnline(unittest.TestCase):
         for a, b in zip(replay.alarms, cli["alarms"]):
             self.assertAlmostEqual(a.raised_s, b["raised_s"], places=9)
         self.assertLess(np.linalg.norm(replay.final_output.misalignment_m - TRUTH["D30_r10_15"]), 0.002)
+        self.assertEqual(replay.regime.flagged, cli["regime"]["flagged"])
+        self.assertEqual(replay.regime.samples, cli["regime"]["samples"])
+
+    def test_training_regime_flags_a_faster_replay(self):
+        model = self.setup.free_space.model
+        regime = model.info.regime
+        self.assertTrue(regime.known)
+        self.assertEqual(len(regime.position_min), model.num_joints)
+        self.assertEqual(rcm.dynamics.compute_regime_summary(model, self.trial).to_dict()["checked"], True)
+        # The trial replayed three times as fast: velocities beyond anything in free space.
+        rec = self.trial
+        fast = rcm.Recording(rec.time / 3.0, rec.position, rec.velocity * 3.0, rec.effort, source="fast")
+        summary = rcm.dynamics.compute_regime_summary(model, fast)
+        self.assertGreater(summary.flagged, 0)
+        self.assertIn("velocity", str(summary))
+        pipeline = self.make_pipeline()
+        ws = pipeline.create_workspace()
+        flagged = 0
+        for t in range(fast.num_samples):
+            out = pipeline.compute_sample(ws, fast.time[t], fast.position[t], fast.velocity[t], fast.effort[t])
+            flagged += out.out_of_regime
+            if out.out_of_regime:
+                self.assertNotEqual(out.regime_flags, 0)
+                self.assertIn("joint", rcm.dynamics.describe_regime_flags(out.regime_flags))
+        self.assertEqual(flagged, summary.flagged)
 
     def test_per_sample_pipeline_equals_replay(self):
         pipeline = self.make_pipeline()

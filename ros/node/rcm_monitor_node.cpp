@@ -174,17 +174,22 @@ class MonitorNode {
     onset_pub_ = nh.advertise<std_msgs::Bool>(prefix + "onset", 10, true);
     alarm_pub_ = nh.advertise<std_msgs::Bool>(prefix + "alarm", 10, true);
     rejected_pub_ = nh.advertise<std_msgs::UInt64>(prefix + "rejected_samples", 10, true);
+    out_of_regime_pub_ = nh.advertise<std_msgs::Bool>(prefix + "out_of_regime", 10, true);
+    regime_.known = pipeline_->regime_monitor().known();
     misalignment_msg_.header.frame_id = p.incision_frame;
     sd_msg_.header.frame_id = p.incision_frame;
     force_msg_.header.frame_id = p.base_frame;
     publish_bool(onset_pub_, false);
     publish_bool(alarm_pub_, false);
     publish_rejected();
+    publish_bool(out_of_regime_pub_, false);
+    if (!regime_.known)
+      ROS_WARN("rcm: the free-space model carries no training regime: out_of_regime is never raised (refit it)");
     const std::string topic = p.arm.empty() ? std::string("measured_js") : p.arm + "/measured_js";
     sub_ = nh.subscribe(topic, queue, &MonitorNode::on_joint_state, this,
                         ros::TransportHints().tcpNoDelay());
     ROS_INFO("rcm: listening on %s; publishing %s/{misalignment,misalignment_sd,incision_force,onset,alarm,"
-             "rejected_samples}; alarm above %.1f N",
+             "rejected_samples,out_of_regime}; alarm above %.1f N",
              sub_.getTopic().c_str(), ros::names::resolve(ns).c_str(), p.alarm_force_n);
   }
 
@@ -201,6 +206,7 @@ class MonitorNode {
                  "rcm: per sample: model + estimator %.2f us mean, %.1f us max; whole callback with publishing %.2f us "
                  "mean, %.1f us max\n",
                  step_.mean_us(), 1e6 * step_.max_s, callback_.mean_us(), 1e6 * callback_.max_s);
+    std::fprintf(stderr, "rcm: regime: %s\n", regime_.to_text().c_str());
     if (monitor_.started()) {
       const rcm::OnlineOutput& o = monitor_.get_output();
       std::fprintf(stderr, "rcm: final estimate dr_x %.2f +- %.2f, dr_y %.2f +- %.2f, D %.2f +- %.2f mm (1 sd); onset %s\n",
@@ -267,12 +273,20 @@ class MonitorNode {
       else
         ROS_WARN("rcm: t = %.3f s: alarm cleared (%.1f N)", out.time, out.force_norm_n);
     }
+    regime_.add(out.time, out.regime_flags);
+    if (out.out_of_regime != out_of_regime_) {
+      out_of_regime_ = out.out_of_regime;
+      publish_bool(out_of_regime_pub_, out_of_regime_);
+      if (out_of_regime_)
+        ROS_WARN_THROTTLE(1.0, "rcm: t = %.3f s: OUT OF REGIME: %s beyond the free-space model's training data",
+                          out.time, rcm::dynamics::describe_regime_flags(out.regime_flags).c_str());
+    }
     if (params_.status_period_s > 0 && out.time >= next_status_s_) {
       next_status_s_ = out.time + params_.status_period_s;
-      ROS_INFO("rcm: t = %.1f s: dr_x %.2f, dr_y %.2f, D %.2f mm (sd %.2f, %.2f, %.2f), |f| %.1f N%s%s", out.time,
+      ROS_INFO("rcm: t = %.1f s: dr_x %.2f, dr_y %.2f, D %.2f mm (sd %.2f, %.2f, %.2f), |f| %.1f N%s%s%s", out.time,
                1e3 * out.misalignment_m[0], 1e3 * out.misalignment_m[1], 1e3 * out.misalignment_m[2],
                1e3 * out.sd_m[0], 1e3 * out.sd_m[1], 1e3 * out.sd_m[2], out.force_norm_n,
-               out.onset ? "" : " (no onset yet)", out.alarm ? " ALARM" : "");
+               out.onset ? "" : " (no onset yet)", out.alarm ? " ALARM" : "", out.out_of_regime ? " (out of regime)" : "");
     }
     callback_.add(std::chrono::duration<double>(clock::now() - start).count());
   }
@@ -301,12 +315,13 @@ class MonitorNode {
   std::unique_ptr<rcm::OnlinePipeline> pipeline_;
   rcm::LiveMonitor monitor_;
   ros::Subscriber sub_;
-  ros::Publisher misalignment_pub_, sd_pub_, force_pub_, onset_pub_, alarm_pub_, rejected_pub_;
+  ros::Publisher misalignment_pub_, sd_pub_, force_pub_, onset_pub_, alarm_pub_, rejected_pub_, out_of_regime_pub_;
   geometry_msgs::Vector3Stamped misalignment_msg_, sd_msg_;
   geometry_msgs::WrenchStamped force_msg_;
   std_msgs::Bool bool_msg_;
   std_msgs::UInt64 rejected_msg_;
-  bool onset_ = false, alarm_ = false;
+  bool onset_ = false, alarm_ = false, out_of_regime_ = false;
+  rcm::dynamics::RegimeSummary regime_;
   int since_publish_ = 0;
   double next_status_s_ = 0.0;
   TimingStats step_, callback_;

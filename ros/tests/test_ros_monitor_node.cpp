@@ -141,7 +141,7 @@ struct Received {
   std::size_t estimates = 0, sds = 0, forces = 0;
   geometry_msgs::Vector3Stamped last_estimate, last_sd;
   geometry_msgs::WrenchStamped last_force;
-  std::vector<bool> onset, alarm;
+  std::vector<bool> onset, alarm, out_of_regime;
   std::uint64_t rejected = 0;
   std::size_t rejected_messages = 0;
 };
@@ -222,6 +222,11 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
     std::lock_guard<std::mutex> lock(got.mutex);
     got.alarm.push_back(m->data);
   });
+  auto sub_regime = nh.subscribe<std_msgs::Bool>("/PSM1/rcm/out_of_regime", 1000,
+                                                 [&](const std_msgs::Bool::ConstPtr& m) {
+                                                   std::lock_guard<std::mutex> lock(got.mutex);
+                                                   got.out_of_regime.push_back(m->data);
+                                                 });
   auto sub_rejected = nh.subscribe<std_msgs::UInt64>("/PSM1/rcm/rejected_samples", 1000,
                                                      [&](const std_msgs::UInt64::ConstPtr& m) {
                                                        std::lock_guard<std::mutex> lock(got.mutex);
@@ -243,7 +248,8 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
         std::lock_guard<std::mutex> lock(got.mutex);
         return !node.alive() || (pub.getNumSubscribers() > 0 && sub_estimate.getNumPublishers() > 0 &&
                                  sub_sd.getNumPublishers() > 0 && sub_force.getNumPublishers() > 0 &&
-                                 !got.onset.empty() && !got.alarm.empty() && got.rejected_messages > 0);
+                                 !got.onset.empty() && !got.alarm.empty() && got.rejected_messages > 0 &&
+                                 !got.out_of_regime.empty());
       },
       60s);
   remove_dir.keep = !connected;
@@ -327,6 +333,17 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
   const std::vector<bool> expected_onset =
       expected["onset_s"].is_null() ? std::vector<bool>{false} : std::vector<bool>{false, true};
   EXPECT_EQ(got.onset, expected_onset);
+  // Regime: false at start; the same count of flagged samples as rcm monitor.
+  ASSERT_FALSE(got.out_of_regime.empty());
+  EXPECT_FALSE(got.out_of_regime.front());
+  const auto flagged = expected["regime"]["flagged"].get<std::size_t>();
+  if (flagged == 0) {
+    EXPECT_EQ(got.out_of_regime.size(), 1u);
+    EXPECT_NE(node_log.find("rcm: regime: all " + std::to_string(T) + " samples inside"), std::string::npos);
+  } else {
+    EXPECT_GT(got.out_of_regime.size(), 1u);
+    EXPECT_NE(node_log.find("outside the free-space model's training regime"), std::string::npos);
+  }
   if (::testing::Test::HasFailure()) std::cout << "node log:\n" << node_log;
 }
 

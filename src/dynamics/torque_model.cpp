@@ -292,6 +292,7 @@ nlohmann::json torque_model_to_json(const TorqueModel& model) {
   j["sample_period_s"] = model.info().sample_period_s;
   j["inputs"] = "[q_1..q_N, qdot_1..qdot_N] (rad, m; rad/s, m/s)";
   j["training"] = model.info().training;
+  j["regime"] = regime_to_json(model.info().regime);
   j["parameters"] = model.save_parameters();
   return j;
 }
@@ -323,6 +324,11 @@ std::unique_ptr<TorqueModel> torque_model_from_json(const nlohmann::json& docume
   if (!sp.is_number() || !(sp.get<double>() >= 0)) fail(source, "sample_period_s", "expected a number >= 0");
   info.sample_period_s = sp.get<double>();
   if (document.contains("training")) info.training = document.at("training");
+  if (document.contains("regime")) {
+    info.regime = regime_from_json(document.at("regime"), source);
+    if (!info.regime.empty() && info.regime.num_joints() != info.num_joints)
+      fail(source, "regime.position_min", fmt::format("expected {} joints (num_joints)", info.num_joints));
+  }
   const auto& p = detail::require(document, "parameters", source, "");
   if (kind == TorqueModelKind::linear) return detail::load_linear_parameters(std::move(info), p, source);
   return detail::load_network_parameters(std::move(info), static_cast<int>(kind), p, source);

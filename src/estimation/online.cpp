@@ -201,8 +201,11 @@ namespace {
 constexpr std::ptrdiff_t kDelayStride = 10;  // time, q 1-3, qd 1-3, effort 1-3
 }  // namespace
 
-OnlinePipeline::OnlinePipeline(std::shared_ptr<const dynamics::TorqueModel> model, OnlineEstimator estimator)
-    : model_(std::move(model)), estimator_(std::move(estimator)) {
+OnlinePipeline::OnlinePipeline(std::shared_ptr<const dynamics::TorqueModel> model, OnlineEstimator estimator,
+                               const dynamics::RegimeCheckOptions& regime_options)
+    : model_(std::move(model)),
+      estimator_(std::move(estimator)),
+      regime_(model_ ? model_->info().regime : dynamics::TrainingRegime{}, regime_options) {
   if (!model_ || model_->num_outputs() < 3)
     throw std::invalid_argument("OnlinePipeline: the free-space model must predict joints 1-3");
 }
@@ -211,6 +214,7 @@ OnlinePipeline::Workspace OnlinePipeline::create_workspace() const {
   Workspace ws;
   ws.model = model_->create_workspace();
   ws.estimator = estimator_.create_workspace();
+  ws.regime = regime_.create_workspace();
   ws.tau_fs.assign(static_cast<std::size_t>(model_->num_outputs()), 0.0);
   const int d = model_->output_delay();
   if (d > 0) ws.delay_line.assign(static_cast<std::size_t>(d + 1) * kDelayStride, 0.0);
@@ -221,6 +225,7 @@ OnlinePipeline::Workspace OnlinePipeline::create_workspace() const {
 void OnlinePipeline::reset(Workspace& ws) const {
   model_->reset_state(*ws.model);
   estimator_.reset(ws.estimator);
+  regime_.reset(ws.regime);
   ws.delay_next = ws.delay_filled = 0;
 }
 
@@ -246,8 +251,13 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
     effort = q + 6;
   }
   const Eigen::Vector3d dtau(effort[0] - ws.tau_fs[0], effort[1] - ws.tau_fs[1], effort[2] - ws.tau_fs[2]);
-  return estimator_.compute_update(ws.estimator, time, Eigen::Vector3d(q[0], q[1], q[2]),
-                                   Eigen::Vector3d(qd[0], qd[1], qd[2]), dtau);
+  estimator_.compute_update(ws.estimator, time, Eigen::Vector3d(q[0], q[1], q[2]), Eigen::Vector3d(qd[0], qd[1], qd[2]),
+                            dtau);
+  // The regime of the sample the estimate is for (the delayed one, if any).
+  OnlineOutput& out = ws.estimator.output;
+  out.regime_flags = regime_.compute_flags(ws.regime, time, q, qd);
+  out.out_of_regime = out.regime_flags != 0;
+  return out;
 }
 
 OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, const OnlineReplayOptions& options,
@@ -259,6 +269,7 @@ OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, c
                                 " joints, the recording has " + std::to_string(r.num_joints()));
   }
   OnlineReplay out;
+  out.regime.known = pipeline.regime_monitor().known();
   const Eigen::Index T = r.time.size();
   out.samples = static_cast<std::size_t>(T);
   // Row-major copies so that each sample is contiguous, as from a live topic.
@@ -281,6 +292,7 @@ OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, c
     if (o.alarm && !out.alarms.empty()) out.alarms.back().peak_force_n = std::max(out.alarms.back().peak_force_n, o.force_norm_n);
     if (o.alarm_cleared && !out.alarms.empty()) out.alarms.back().cleared_s = o.time;
     out.peak_force_n = std::max(out.peak_force_n, o.force_norm_n);
+    out.regime.add(o.time, o.regime_flags);
     if (on_sample) on_sample(o);
   }
   out.mean_update_s = T > 0 ? total / static_cast<double>(T) : 0.0;

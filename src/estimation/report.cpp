@@ -302,6 +302,11 @@ std::filesystem::path write_study_report(const StudyResult& r, const Session& se
   }
   md += "\nPaper (Table IV): mean e 4.2 +- 2.1 mm for D > 20 mm; 10.8-17.2 mm for D <= 20 mm.\n";
 
+  md += "\n## Free-space model regime\n\nSamples of each trial whose position, velocity or acceleration lies beyond "
+        "what the free-space model was fitted on (with margins): its torque, and every force and offset computed from it, "
+        "are extrapolations there.\n\n";
+  for (const auto& t : r.trials) md += fmt::format("- {}: {}\n", t.name, t.regime.to_text());
+
   md += "\n## Solver summaries\n\n| trial | coaxial solve | samples | radial inverse |\n|---|---|---|---|\n";
   for (const auto& t : r.trials)
     md += fmt::format("| {} | {} | {} | {}{} |\n", t.name, t.estimate.solver.brief_report(), t.estimate.samples_used,

@@ -231,6 +231,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
 
   // Step 3: every trial.
   const Eigen::Vector3d tau_fs_paper = compute_settled_free_space_torque(model, session.q0, options.paper_settle_s);
+  const dynamics::RegimeMonitor regime(model.info().regime);
   for (std::size_t i = 0; i < session.trials.size(); ++i) {
     const TrialSpec& spec = session.trials[i];
     const auto trial_start = std::chrono::steady_clock::now();
@@ -241,6 +242,8 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
     out.truth_m = spec.truth_misalignment_m;
     const Recording trial = load_recording(spec.recording, options.read);
     const Eigen::MatrixXd tau_fs = dynamics::predict_torque(model, trial);
+    out.regime = dynamics::compute_regime_summary(regime, trial);
+    if (out.regime.flagged > 0) progress(options.verbose, "  warning: " + out.regime.to_text());
     Eigen::Vector3d dtau_radial = Eigen::Vector3d::Zero();
     std::vector<JointSample> joint_samples;
     if (result.joint_tissue)
@@ -458,6 +461,7 @@ nlohmann::json StudyResult::to_json() const {
     if (t.force_rmse) jt["force_rmse_n"] = vec_json(*t.force_rmse);
     jt["force_offset_used_m"] = t.force_offset_used_m;
     jt["ill_conditioned_samples"] = t.ill_conditioned_samples;
+    jt["regime"] = t.regime.to_json();
     jt["seconds"] = t.seconds;
     if (auto e = t.get_error_m()) ((*t.truth_m)[2] > 0.020 + 1e-9 ? e_far : e_near).push_back(*e);
     if (auto e = t.get_three_step_error_m()) ((*t.truth_m)[2] > 0.020 + 1e-9 ? e3_far : e3_near).push_back(*e);

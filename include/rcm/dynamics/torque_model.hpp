@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "rcm/dynamics/regime.hpp"
 #include "rcm/io/recording.hpp"
 
 namespace rcm::dynamics {
@@ -35,6 +36,8 @@ struct TorqueModelInfo {
   int num_outputs = 0;       // joints predicted: 1..num_outputs (<= num_joints)
   double sample_period_s = 0.0;
   nlohmann::json training = nlohmann::json::object();  // fit summary, informative only
+  // What the fit saw (regime.hpp); empty for a model that does not say.
+  TrainingRegime regime;
 };
 
 // State and buffers of one running model. Create with model.create_workspace().

@@ -38,6 +38,7 @@
 #include <optional>
 #include <vector>
 
+#include "rcm/dynamics/regime.hpp"
 #include "rcm/dynamics/torque_model.hpp"
 
 #include "rcm/estimation/joint.hpp"
@@ -86,6 +87,11 @@ struct OnlineOutput {
   bool alarm = false;                // force above the threshold now
   bool alarm_raised = false;         // ... and this is the sample it rose
   bool alarm_cleared = false;
+  // The sample left the free-space model's training regime (dynamics/regime.hpp):
+  // which joint and quantity, and whether any. The estimate is computed as
+  // always; its torque residual is no longer covered by what the model saw.
+  std::uint32_t regime_flags = 0;
+  bool out_of_regime = false;
 };
 
 class OnlineEstimator {
@@ -144,10 +150,12 @@ class OnlinePipeline {
     // torque trails by d = output_delay() samples; empty when d = 0.
     std::vector<double> delay_line;
     int delay_next = 0, delay_filled = 0;
+    dynamics::RegimeMonitor::Workspace regime;
   };
 
   // Throws std::invalid_argument when the model predicts fewer than 3 joints.
-  OnlinePipeline(std::shared_ptr<const dynamics::TorqueModel> model, OnlineEstimator estimator);
+  OnlinePipeline(std::shared_ptr<const dynamics::TorqueModel> model, OnlineEstimator estimator,
+                 const dynamics::RegimeCheckOptions& regime_options = {});
 
   Workspace create_workspace() const;
   void reset(Workspace& workspace) const;
@@ -161,10 +169,13 @@ class OnlinePipeline {
 
   const dynamics::TorqueModel& model() const { return *model_; }
   const OnlineEstimator& estimator() const { return estimator_; }
+  // Built from the model's training regime; known() is false when it has none.
+  const dynamics::RegimeMonitor& regime_monitor() const { return regime_; }
 
  private:
   std::shared_ptr<const dynamics::TorqueModel> model_;
   OnlineEstimator estimator_;
+  dynamics::RegimeMonitor regime_;
 };
 
 // A whole recording streamed through a pipeline, as `rcm monitor` and the study
@@ -185,6 +196,7 @@ struct OnlineReplay {
   std::vector<OnlineAlarm> alarms;
   double peak_force_n = 0.0;
   double mean_update_s = 0.0, max_update_s = 0.0;  // wall clock per sample, pipeline included
+  dynamics::RegimeSummary regime;  // samples outside the free-space model's training regime
 };
 struct OnlineReplayOptions {
   double settle_band_m = 0.005;

@@ -76,6 +76,8 @@ struct TrialOutcome {
   double force_offset_used_m = 0.0;
   std::optional<Eigen::Vector3d> force_rmse;  // per axis, N
   std::size_t ill_conditioned_samples = 0;
+  // The trial's samples outside the free-space model's training regime.
+  dynamics::RegimeSummary regime;
   double seconds = 0.0;
 
   // The estimate of the study's method: joint when computed, else three-step.

@@ -474,6 +474,7 @@ TorqueModelInfo make_network_info(const std::vector<Recording>& recs, int N, int
   info.num_joints = N;
   info.num_outputs = M;
   info.sample_period_s = median_sample_period(recs);
+  info.regime = compute_training_regime(recs, N);
   return info;
 }
 
@@ -644,10 +645,7 @@ FitResult fit_mlp_torque_model(const std::vector<Recording>& recs, const FitOpti
   summary.best_epoch = stop.best_epoch;
   summary.best_validation_loss = stop.best;
   add_network_warnings(summary, kFewSamplesNetwork / 4);
-  TorqueModelInfo info;
-  info.num_joints = N;
-  info.num_outputs = M;
-  info.sample_period_s = median_sample_period(recs);
+  const TorqueModelInfo info = make_network_info(recs, N, M);
   auto model = std::make_unique<MlpTorqueModel>(info, stacks, data.norm);
   return finish(std::move(model), std::move(summary), recs, split, o, t0, [&](TorqueModelInfo i) {
     return std::make_unique<MlpTorqueModel>(std::move(i), stacks, data.norm);
