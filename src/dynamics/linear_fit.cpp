@@ -1,0 +1,391 @@
+// Fit of the model-based free-space model (linear_model.hpp): the candidate
+// search over each joint's qddot estimate and Dahl displacement, then the
+// rigid-body stage.
+#include "rcm/dynamics/linear_model.hpp"
+
+#include <fmt/format.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+
+#include "acceleration.hpp"
+
+namespace rcm::dynamics {
+
+namespace {
+
+using detail::AccelerationEstimator;
+using detail::compute_zero_phase_acceleration;
+using detail::is_time_sorted;
+using detail::kDefaultAccelerationFilter;
+constexpr int G = LinearTorqueModel::kGravityTerms;
+constexpr int kBlock = 4;  // armature, viscous, coulomb, offset
+
+// Gram matrix of one joint's regressor [gravity (17, joints 1-3), qdd, v, z, 1]
+// and its products with the torque, for one x_c and one qddot candidate.
+struct JointStats {
+  Eigen::MatrixXd C;  // (G + 4)^2
+  Eigen::VectorXd r;
+  double yy = 0.0;
+  JointStats& operator+=(const JointStats& o) {
+    C += o.C;
+    r += o.r;
+    yy += o.yy;
+    return *this;
+  }
+};
+
+// A candidate qddot estimate: window and low-pass time constant, s.
+struct AccelerationChoice {
+  double window_s, filter_s;
+};
+
+// One pass over a joint's samples with every candidate at once: the Gram matrix
+// of [gravity, v, 1, qdd per causal qddot candidate, qdd per zero-phase window,
+// z per x_c candidate] and its products with the torque, from which the
+// statistics of any combination are read without touching the samples again.
+// Acceleration column a < acc.size() is causal candidate a, the others are the
+// zero-phase estimates batch[recording][a - acc.size()] of the joint.
+class JointCandidateStats {
+ public:
+  JointCandidateStats(const std::vector<Recording>& recs, const std::vector<SampleSegment>& segments, int j,
+                      const std::vector<double>& x_c, const std::vector<AccelerationChoice>& acc,
+                      const std::vector<std::vector<Eigen::VectorXd>>& batch, double weight, double sample_period_s)
+      : A_(static_cast<int>(acc.size() + (batch.empty() ? 0 : batch.front().size()))),
+        K_(static_cast<int>(x_c.size())) {
+    const int causal = static_cast<int>(acc.size());
+    const int P = G + 2 + A_ + K_;
+    C_ = Eigen::MatrixXd::Zero(P, P);
+    r_ = Eigen::VectorXd::Zero(P);
+    Eigen::Matrix<double, 3, G> Y;
+    constexpr Eigen::Index kChunk = 4096;
+    Eigen::MatrixXd F(kChunk, P);
+    Eigen::VectorXd y(kChunk);
+    std::vector<AccelerationEstimator> estimators;
+    for (const auto& a : acc) estimators.emplace_back(a.window_s, a.filter_s, sample_period_s);
+    Eigen::VectorXd z(K_);
+    for (const auto& seg : segments) {
+      const auto& rec = recs[seg.recording];
+      // The states need the history from the recording's start; the estimators
+      // are compute_step's, so that fit and prediction agree.
+      for (auto& e : estimators) e.reset();
+      z.setZero();
+      Eigen::Index n = 0;
+      auto flush = [&]() {
+        C_.noalias() += F.topRows(n).transpose() * F.topRows(n);
+        r_.noalias() += F.topRows(n).transpose() * y.head(n);
+        yy_ += y.head(n).squaredNorm();
+        n = 0;
+      };
+      for (Eigen::Index t = 0; t < seg.end; ++t) {
+        if (t > 0)
+          for (int k = 0; k < K_; ++k)
+            z[k] = compute_dahl_state(z[k], rec.position(t, j) - rec.position(t - 1, j), x_c[k]);
+        for (int a = 0; a < causal; ++a) estimators[a].update(rec.time(t), rec.velocity(t, j));
+        if (t < seg.begin) continue;
+        if (j < 3) {
+          double q3[3] = {rec.position(t, 0), rec.position(t, 1), rec.position(t, 2)};
+          LinearTorqueModel::compute_gravity_regressor(q3, Y);
+          F.row(n).head(G) = Y.row(j) * weight;
+        } else {
+          F.row(n).head(G).setZero();
+        }
+        F(n, G + 0) = rec.velocity(t, j) * weight;
+        F(n, G + 1) = weight;
+        for (int a = 0; a < causal; ++a) F(n, G + 2 + a) = estimators[a].value() * weight;
+        for (int a = causal; a < A_; ++a) F(n, G + 2 + a) = batch[seg.recording][a - causal](t) * weight;
+        for (int k = 0; k < K_; ++k) F(n, G + 2 + A_ + k) = z[k] * weight;
+        y(n) = rec.effort(t, j) * weight;
+        if (++n == kChunk) flush();
+      }
+      if (n) flush();
+    }
+  }
+
+  JointStats get_stats(int dahl, int acceleration) const {
+    // Columns of the combination in JointStats order [gravity, qdd, v, z, 1].
+    std::array<int, G + kBlock> idx;
+    for (int k = 0; k < G; ++k) idx[k] = k;
+    idx[G + 0] = G + 2 + acceleration;
+    idx[G + 1] = G;
+    idx[G + 2] = G + 2 + A_ + dahl;
+    idx[G + 3] = G + 1;
+    JointStats s{Eigen::MatrixXd(G + kBlock, G + kBlock), Eigen::VectorXd(G + kBlock), yy_};
+    for (int u = 0; u < G + kBlock; ++u) {
+      s.r(u) = r_(idx[u]);
+      for (int v = 0; v < G + kBlock; ++v) s.C(u, v) = C_(idx[u], idx[v]);
+    }
+    return s;
+  }
+
+ private:
+  int A_, K_;
+  Eigen::MatrixXd C_;
+  Eigen::VectorXd r_;
+  double yy_ = 0.0;
+};
+
+// Index of joint j's block parameter b in the global vector.
+inline int block_index(int j, int b) { return G + kBlock * j + b; }
+
+// Solves the ridge-stabilized normal equations with armature, viscous and Coulomb
+// kept >= 0 by an active set.
+Eigen::VectorXd solve_constrained(const std::vector<const JointStats*>& stats, int M) {
+  const int P = G + kBlock * M;
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(P, P);
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(P);
+  for (int j = 0; j < M; ++j) {
+    const auto& s = *stats[j];
+    std::vector<int> idx;
+    for (int k = 0; k < G; ++k) idx.push_back(k);
+    for (int k = 0; k < kBlock; ++k) idx.push_back(block_index(j, k));
+    for (int u = 0; u < G + kBlock; ++u) {
+      b(idx[u]) += s.r(u);
+      for (int v = 0; v < G + kBlock; ++v) A(idx[u], idx[v]) += s.C(u, v);
+    }
+  }
+  // Collinear columns (e.g. the q3 potential term and the insertion offset) make
+  // A singular; a ridge relative to each diagonal picks the small-norm solution.
+  const double floor = 1e-12 * std::max(1.0, A.diagonal().maxCoeff());
+  for (int k = 0; k < P; ++k) A(k, k) += 1e-9 * A(k, k) + floor;
+  std::vector<bool> fixed(P, false);
+  Eigen::VectorXd theta;
+  for (int iter = 0; iter <= 3 * M; ++iter) {
+    Eigen::MatrixXd Af = A;
+    Eigen::VectorXd bf = b;
+    for (int k = 0; k < P; ++k)
+      if (fixed[k]) {
+        Af.row(k).setZero();
+        Af.col(k).setZero();
+        Af(k, k) = 1.0;
+        bf(k) = 0.0;
+      }
+    theta = Af.ldlt().solve(bf);
+    bool changed = false;
+    for (int j = 0; j < M; ++j)
+      for (int k = 0; k < 3; ++k) {  // armature, viscous, coulomb
+        const int i = block_index(j, k);
+        if (!fixed[i] && theta(i) < 0) {
+          fixed[i] = true;
+          changed = true;
+        }
+      }
+    if (!changed) break;
+  }
+  return theta;
+}
+
+double objective(const std::vector<const JointStats*>& stats, const Eigen::VectorXd& theta, int M) {
+  double e = 0.0;
+  for (int j = 0; j < M; ++j) {
+    Eigen::VectorXd th(G + kBlock);
+    th << theta.head(G), theta.segment(block_index(j, 0), kBlock);
+    const auto& s = *stats[j];
+    e += s.yy - 2.0 * th.dot(s.r) + th.dot(s.C * th);
+  }
+  return e;
+}
+
+}  // namespace
+
+FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, const FitOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  options.check();
+  check_fit_recordings(recordings);
+  const int N = recordings.front().num_joints();
+  const int M = resolve_num_outputs(recordings, options);
+  resolve_output_delay_samples(TorqueModelKind::linear, options, median_sample_period(recordings));
+  const TimeSplit split = split_in_time(recordings, options.train_fraction, options.validation_fraction);
+  if (split.train.empty() || split.validation.empty())
+    throw std::invalid_argument("fit_linear_torque_model: empty training or validation split");
+
+  FitSummary summary;
+  summary.kind = TorqueModelKind::linear;
+  for (const auto& s : split.train) summary.train_samples += s.size();
+  for (const auto& s : split.validation) summary.validation_samples += s.size();
+  for (const auto& s : split.test) summary.test_samples += s.size();
+
+  // Each joint's rows are weighted by 1 / (std of its torque) so that N m and N
+  // joints count alike; the grid of x_c follows each joint's range of motion.
+  std::vector<double> weight(M), range(M);
+  for (int j = 0; j < M; ++j) {
+    double sum = 0, sum2 = 0, lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    double n = 0;
+    for (const auto& seg : split.train) {
+      const auto& rec = recordings[seg.recording];
+      for (Eigen::Index t = seg.begin; t < seg.end; ++t) {
+        sum += rec.effort(t, j);
+        sum2 += rec.effort(t, j) * rec.effort(t, j);
+        lo = std::min(lo, rec.position(t, j));
+        hi = std::max(hi, rec.position(t, j));
+        n += 1;
+      }
+    }
+    const double var = std::max(sum2 / n - (sum / n) * (sum / n), 0.0);
+    weight[j] = var > 0 ? 1.0 / std::sqrt(var) : 1.0;
+    range[j] = std::max(hi - lo, 1e-6);
+  }
+  const double sample_period = median_sample_period(recordings);
+  const std::vector<double> grid = {1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1};
+  // Causal qddot candidates (compute_step): the low-pass of the backward
+  // difference (the first is the default of older model files) and quadratic fits
+  // over 40-120 ms, with or without a light low-pass after them.
+  const std::vector<AccelerationChoice> accelerations = {
+      {0.0, kDefaultAccelerationFilter}, {0.0, 0.01}, {0.0, 0.02}, {0.0, 0.05}, {0.04, 0.0}, {0.06, 0.0},
+      {0.08, 0.0}, {0.10, 0.0}, {0.12, 0.0}, {0.06, 0.01}, {0.10, 0.01}};
+  // Zero-phase windows (predict_torque); the fit regresses on the chosen one.
+  // Recordings read from files have increasing time; one built in memory whose
+  // time goes back gets the causal estimate only.
+  bool sorted = true;
+  for (const auto& r : recordings) sorted = sorted && is_time_sorted(r.time);
+  const std::vector<double> batch_windows =
+      sorted ? std::vector<double>{0.03, 0.05, 0.07, 0.10} : std::vector<double>{};
+  const int K = static_cast<int>(grid.size());
+  const int A = static_cast<int>(accelerations.size());
+  const int B = static_cast<int>(batch_windows.size());
+  // Statistics of every joint and candidate, one pass per joint and split.
+  std::vector<JointCandidateStats> train, val;
+  for (int j = 0; j < M; ++j) {
+    std::vector<double> x_c(K);
+    for (int k = 0; k < K; ++k) x_c[k] = grid[k] * range[j];
+    std::vector<std::vector<Eigen::VectorXd>> batch(recordings.size());
+    for (std::size_t r = 0; r < recordings.size(); ++r)
+      for (double w : batch_windows)
+        batch[r].push_back(compute_zero_phase_acceleration(recordings[r].time, recordings[r].velocity.col(j), w));
+    train.emplace_back(recordings, split.train, j, x_c, accelerations, batch, weight[j], sample_period);
+    val.emplace_back(recordings, split.validation, j, x_c, accelerations, batch, weight[j], sample_period);
+  }
+  struct Choice {
+    int dahl, acceleration;  // acceleration: column, < A causal, >= A zero-phase
+  };
+  // Scoring reads a few hundred combinations; keep each one read.
+  std::vector<std::vector<std::unique_ptr<JointStats>>> cache_train(M), cache_val(M);
+  for (int j = 0; j < M; ++j) {
+    cache_train[j].resize(K * (A + B));
+    cache_val[j].resize(K * (A + B));
+  }
+  auto stats = [&](int j, const Choice& c, bool validation) -> const JointStats& {
+    auto& slot = (validation ? cache_val : cache_train)[j][c.dahl * (A + B) + c.acceleration];
+    if (!slot)
+      slot = std::make_unique<JointStats>((validation ? val : train)[j].get_stats(c.dahl, c.acceleration));
+    return *slot;
+  };
+  auto score = [&](const std::vector<Choice>& c) {
+    std::vector<const JointStats*> tr(M), va(M);
+    for (int j = 0; j < M; ++j) {
+      tr[j] = &stats(j, c[j], false);
+      va[j] = &stats(j, c[j], true);
+    }
+    return objective(va, solve_constrained(tr, M), M);
+  };
+  // Coordinate descent over each joint's x_c and qddot column in [first, end),
+  // scored on the validation split.
+  auto descend = [&](std::vector<Choice> choice, int first, int end, double& best) {
+    best = score(choice);
+    for (int sweep = 0; sweep < 2; ++sweep) {
+      for (int j = 0; j < M; ++j)
+        for (int k = 0; k < K; ++k) {
+          auto trial = choice;
+          trial[j].dahl = k;
+          const double e = score(trial);
+          if (e < best) best = e, choice = trial;
+        }
+      for (int j = 0; j < M; ++j)
+        for (int a = first; a < end; ++a) {
+          auto trial = choice;
+          trial[j].acceleration = a;
+          const double e = score(trial);
+          if (e < best) best = e, choice = trial;
+        }
+    }
+    return choice;
+  };
+  // The causal estimate of compute_step, then x_c and the zero-phase window with
+  // which the coefficients are fitted.
+  double best_causal = 0.0, best = 0.0;
+  const std::vector<Choice> causal = descend(std::vector<Choice>(M, Choice{4, 0}), 0, A, best_causal);
+  std::vector<Choice> choice = causal;
+  best = best_causal;
+  if (B > 0) {
+    for (int j = 0; j < M; ++j) choice[j].acceleration = A + 1;
+    choice = descend(choice, A, A + B, best);
+  }
+  // Final coefficients from train + validation.
+  std::vector<JointStats> both(M);
+  std::vector<const JointStats*> ptr(M);
+  for (int j = 0; j < M; ++j) {
+    both[j] = stats(j, choice[j], false);
+    both[j] += stats(j, choice[j], true);
+    ptr[j] = &both[j];
+  }
+  const Eigen::VectorXd theta = solve_constrained(ptr, M);
+
+  LinearTorqueParameters p;
+  p.gravity = theta.head(G);
+  p.armature.resize(M);
+  p.viscous.resize(M);
+  p.coulomb.resize(M);
+  p.offset.resize(M);
+  p.dahl_displacement.resize(M);
+  p.acceleration_window_s.resize(M);
+  p.acceleration_filter_s.resize(M);
+  p.batch_acceleration_window_s.resize(M);
+  for (int j = 0; j < M; ++j) {
+    // Rows were scaled by weight[j] on both sides, so coefficients are in joint units.
+    p.armature[j] = theta(block_index(j, 0));
+    p.viscous[j] = theta(block_index(j, 1));
+    p.coulomb[j] = theta(block_index(j, 2));
+    p.offset[j] = theta(block_index(j, 3));
+    p.dahl_displacement[j] = grid[choice[j].dahl] * range[j];
+    p.acceleration_window_s[j] = accelerations[causal[j].acceleration].window_s;
+    p.acceleration_filter_s[j] = accelerations[causal[j].acceleration].filter_s;
+    p.batch_acceleration_window_s[j] = B > 0 ? batch_windows[choice[j].acceleration - A] : 0.0;
+  }
+  summary.best_validation_loss = best / static_cast<double>(summary.validation_samples * M);
+
+  // Too few data: fewer than 20 training rows per parameter, or a joint whose
+  // velocity never changes sign (Coulomb and offset cannot be told apart).
+  const std::size_t params = G + kBlock * M;
+  if (summary.train_samples * M < 20 * params)
+    summary.warnings.push_back(fmt::format(
+        "data too few to trust: {} training samples for {} parameters (need >= 20 rows per parameter)",
+        summary.train_samples, params));
+  for (int j = 0; j < M; ++j) {
+    bool pos = false, neg = false;
+    for (const auto& seg : split.train)
+      for (Eigen::Index t = seg.begin; t < seg.end; ++t) {
+        const double v = recordings[seg.recording].velocity(t, j);
+        pos |= v > 0;
+        neg |= v < 0;
+      }
+    if (!(pos && neg))
+      summary.warnings.push_back(fmt::format(
+          "joint {} moves in one direction only in the training data: Coulomb friction and offset are confounded",
+          j + 1));
+  }
+
+  TorqueModelInfo info;
+  info.num_joints = N;
+  info.num_outputs = M;
+  info.sample_period_s = sample_period;
+  info.regime = compute_training_regime(recordings, N);
+  auto model_for_test = std::make_unique<LinearTorqueModel>(info, p);
+  if (!split.test.empty()) summary.test_errors = evaluate_on_segments(*model_for_test, recordings, split.test);
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  info.training = summary.to_json();
+  if (options.verbose) std::cerr << summary.brief_report();
+  FitResult result;
+  result.model = std::make_unique<LinearTorqueModel>(std::move(info), std::move(p));
+  result.summary = std::move(summary);
+  return result;
+}
+
+}  // namespace rcm::dynamics
