@@ -39,6 +39,9 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
   const std::vector<DenseStack> stacks = make_random_mlp_stacks(12, 100, 6, 2, 0.3f);
   models.push_back(std::make_unique<MlpTorqueModel>(info, stacks, norm));
   models.push_back(std::make_unique<LinearTorqueModel>(info, lp));
+  LinearTorqueParameters lp_rigid = lp;  // with the rigid-body inertia of joints 1-3
+  lp_rigid.inertia = Eigen::VectorXd::Constant(19, 0.1);
+  models.push_back(std::make_unique<LinearTorqueModel>(info, lp_rigid));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(12, 32, 1, 16, 6, 2), norm));
   Normalization with_direction = norm;  // the fitted default: three direction features per joint
   with_direction.velocity_tanh_scale = Eigen::VectorXf::LinSpaced(18, 0.003f, 0.03f);

@@ -32,6 +32,7 @@ struct DynamicsArgs {
   bool dedupe = false;
   bool json = false;
   bool streaming = false;
+  bool generic_structure = false;
   std::string model_path;
   double max_minutes = 10.0;
   int hidden = 0, layers = 0, max_epochs = 300, threads = 2, window = 0, streams = 0;
@@ -102,6 +103,9 @@ void run_fit(const DynamicsArgs& a) {
                             fmt::format("expected a finite value >= 0 (s), got {}", *a.output_delay));
     o.output_delay_s = a.output_delay;
   }
+  if (a.generic_structure && kind != TorqueModelKind::linear && kind != TorqueModelKind::hybrid)
+    throw rcm::InputError(rcm::cli::flag_location("--generic-structure"), "is for --model linear or hybrid only");
+  o.rigid_body = !a.generic_structure;
   const auto recs = load_all(a.recordings, a.dedupe);
   if (a.output_delay && kind == TorqueModelKind::lstm && !recs.empty()) {
     // Checked here too, so that a delay longer than the burn-in names the flag.
@@ -135,7 +139,8 @@ void run_fit(const DynamicsArgs& a) {
     j["model"] = a.out;
     rcm::cli::print_json(j);
   } else {
-    std::cout << fit.summary.brief_report() << "model written to " << a.out << "\n";
+    // The fit printed its report on stderr as it ended (FitOptions::verbose).
+    std::cout << (o.verbose ? std::string() : fit.summary.brief_report()) << "model written to " << a.out << "\n";
   }
 }
 
@@ -254,6 +259,9 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
 #if defined(RCM_HAVE_TORCH)
   fit->add_option("--torchscript", args->torchscript_out, "also export the LSTM as TorchScript to this file");
 #endif
+  fit->add_flag("--generic-structure", args->generic_structure,
+                "linear, hybrid: a free 17-term potential and a constant armature per joint instead of the rigid-body "
+                "structure (configuration-dependent inertia, velocity products, rigid links under one gravity direction)");
   fit->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   fit->add_flag("--json", args->json, "print the fit summary as one JSON object");
   fit->callback([args] { run_fit(*args); });

@@ -157,7 +157,10 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("dahl_displacement", &LinearTorqueParameters::dahl_displacement)
       .def_readonly("acceleration_window_s", &LinearTorqueParameters::acceleration_window_s)
       .def_readonly("acceleration_filter_s", &LinearTorqueParameters::acceleration_filter_s)
-      .def_readonly("batch_acceleration_window_s", &LinearTorqueParameters::batch_acceleration_window_s);
+      .def_readonly("batch_acceleration_window_s", &LinearTorqueParameters::batch_acceleration_window_s)
+      .def_readonly("inertia", &LinearTorqueParameters::inertia, "19 rigid-body inertia coefficients (empty: none)")
+      .def_readonly("gravity_direction", &LinearTorqueParameters::gravity_direction,
+                    "the gravity direction the fit found (unit, base frame; empty: free potential)");
   py::class_<LinearTorqueModel, TorqueModel, std::shared_ptr<LinearTorqueModel>>(
       d, "LinearTorqueModel", "Rigid-body terms linear in parameters plus friction with a Dahl state")
       .def_property_readonly("parameters", &LinearTorqueModel::parameters);
@@ -216,6 +219,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readwrite("validation_fraction", &FitOptions::validation_fraction)
       .def_readwrite("num_outputs", &FitOptions::num_outputs, "joints to predict; 0 = every recorded joint")
       .def_readwrite("max_minutes", &FitOptions::max_minutes, "wall-clock budget")
+      .def_readwrite("rigid_body", &FitOptions::rigid_body,
+                     "linear, hybrid: the rigid-body structure of joints 1-3 (default True; False: generic potential)")
       .def("check", &FitOptions::check, "rcm.InputError when a value is out of range");
   py::class_<JointTorqueError>(d, "JointTorqueError", "Table II: per-joint RMSE and NRMSE")
       .def_readonly("index", &JointTorqueError::index, "1-based joint number")
@@ -234,6 +239,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("seconds", &FitSummary::seconds)
       .def_readonly("test_errors", &FitSummary::test_errors, "on the held-out last 10 %")
       .def_readonly("warnings", &FitSummary::warnings)
+      .def_readonly("structure", &FitSummary::structure, "linear: 'rigid-body' or 'generic'")
       .def("brief_report", &FitSummary::brief_report)
       .def("to_dict", [](const FitSummary& s) { return to_python(s.to_json()); });
   py::class_<PyFitResult>(d, "FitResult")

@@ -164,6 +164,7 @@ nlohmann::json FitSummary::to_json() const {
   if (kind == TorqueModelKind::lstm) j["output_delay_samples"] = output_delay_samples;
   j["seconds"] = seconds;
   j["device"] = device;
+  if (!structure.empty()) j["structure"] = structure;
   j["test"] = rcm::dynamics::to_json(test_errors)["joints"];
   j["warnings"] = warnings;
   return j;
@@ -173,6 +174,7 @@ std::string FitSummary::brief_report() const {
   std::string s = fmt::format("{} fit: {} train / {} validation / {} test samples, {:.1f} s on {}",
                               rcm::dynamics::to_string(kind), train_samples, validation_samples, test_samples,
                               seconds, device);
+  if (!structure.empty()) s += fmt::format(", {} structure", structure);
   if (epochs > 0)
     s += fmt::format(", {} epochs (best {}, validation loss {:.4g})", epochs, best_epoch, best_validation_loss);
   s += "\n";

@@ -17,6 +17,7 @@
 #include <stdexcept>
 
 #include "acceleration.hpp"
+#include "rigid_body_fit.hpp"
 
 namespace rcm::dynamics {
 
@@ -28,6 +29,10 @@ using detail::is_time_sorted;
 using detail::kDefaultAccelerationFilter;
 constexpr int G = LinearTorqueModel::kGravityTerms;
 constexpr int kBlock = 4;  // armature, viscous, coulomb, offset
+// The rigid-body structure is kept while its validation loss is within this
+// factor of the generic one's (FitOptions::rigid_body): a time slice of the same
+// motion favours the free potential, which generalises worse across speeds.
+constexpr double kRigidBodyTolerance = 1.25;
 
 // Gram matrix of one joint's regressor [gravity (17, joints 1-3), qdd, v, z, 1]
 // and its products with the torque, for one x_c and one qddot candidate.
@@ -349,11 +354,48 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
     p.acceleration_filter_s[j] = accelerations[causal[j].acceleration].filter_s;
     p.batch_acceleration_window_s[j] = B > 0 ? batch_windows[choice[j].acceleration - A] : 0.0;
   }
+  std::size_t params = G + kBlock * M;
+  summary.structure = "generic";
+
+  // Rigid-body stage: the same estimators, the structure of rigid_body.hpp, kept
+  // unless the validation split says it does not describe this arm.
+  if (options.rigid_body && M >= 3) {
+    std::vector<detail::JointEstimatorChoice> estimators(M);
+    for (int j = 0; j < M; ++j)
+      estimators[j] = {p.dahl_displacement[j], p.acceleration_window_s[j], p.acceleration_filter_s[j],
+                       p.batch_acceleration_window_s[j]};
+    const detail::ModelStats train_stats =
+        detail::accumulate_rigid_body_stats(recordings, split.train, estimators, weight, sample_period);
+    const detail::ModelStats val_stats =
+        detail::accumulate_rigid_body_stats(recordings, split.validation, estimators, weight, sample_period);
+    const double rigid_validation = val_stats.compute_loss(detail::solve_rigid_body(train_stats, M).theta);
+    if (rigid_validation <= kRigidBodyTolerance * best) {
+      detail::ModelStats all = train_stats;
+      all += val_stats;
+      const detail::RigidBodySolution rigid = detail::solve_rigid_body(all, M);
+      p.gravity = rigid.theta.head(G);
+      p.inertia = rigid.theta.segment(G, kInertiaTerms);
+      p.gravity_direction = rigid.gravity_direction;
+      for (int j = 0; j < M; ++j) {
+        p.armature[j] = rigid.theta(detail::rigid_body_block_index(j, 0));
+        p.viscous[j] = rigid.theta(detail::rigid_body_block_index(j, 1));
+        p.coulomb[j] = rigid.theta(detail::rigid_body_block_index(j, 2));
+        p.offset[j] = rigid.theta(detail::rigid_body_block_index(j, 3));
+      }
+      best = rigid_validation;
+      params = kGravityMoments + 2 + kInertiaTerms + kBlock * M;
+      summary.structure = "rigid-body";
+    } else {
+      summary.warnings.push_back(fmt::format(
+          "the rigid-body structure fits the validation split {:.0f} % worse than the generic potential: kept the "
+          "generic one (joints 1-3 may not pivot as yaw, pitch, insertion)",
+          100.0 * (rigid_validation / best - 1.0)));
+    }
+  }
   summary.best_validation_loss = best / static_cast<double>(summary.validation_samples * M);
 
   // Too few data: fewer than 20 training rows per parameter, or a joint whose
   // velocity never changes sign (Coulomb and offset cannot be told apart).
-  const std::size_t params = G + kBlock * M;
   if (summary.train_samples * M < 20 * params)
     summary.warnings.push_back(fmt::format(
         "data too few to trust: {} training samples for {} parameters (need >= 20 rows per parameter)",

@@ -14,6 +14,7 @@
 #include <stdexcept>
 
 #include "acceleration.hpp"
+#include "rcm/dynamics/rigid_body.hpp"
 #include "model_io.hpp"
 
 namespace rcm::dynamics {
@@ -29,10 +30,11 @@ using detail::kDefaultAccelerationWindow;
 constexpr int G = LinearTorqueModel::kGravityTerms;
 
 struct LinearWorkspace final : TorqueModelWorkspace {
-  Eigen::VectorXd prev_q, z;
+  Eigen::VectorXd prev_q, z, acceleration;
   std::vector<AccelerationEstimator> qdd;
   bool has_previous = false;
   Eigen::Matrix<double, 3, G> Y;
+  Eigen::Matrix<double, 3, kInertiaTerms> Y_inertia;
 };
 
 }  // namespace
@@ -69,6 +71,10 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
     throw std::invalid_argument("linear model: parameter sizes do not match num_outputs");
   if ((q.dahl_displacement.array() <= 0).any())
     throw std::invalid_argument("linear model: dahl_displacement must be positive");
+  if (q.inertia.size() != 0 && (q.inertia.size() != kInertiaTerms || M < 3))
+    throw std::invalid_argument("linear model: inertia needs 19 values and joints 1-3 predicted");
+  if (q.gravity_direction.size() != 0 && q.gravity_direction.size() != 3)
+    throw std::invalid_argument("linear model: gravity_direction needs 3 values");
   if (!(q.acceleration_window_s.array() >= 0).all() || !(q.acceleration_filter_s.array() >= 0).all() ||
       !(q.batch_acceleration_window_s.array() >= 0).all())
     throw std::invalid_argument("linear model: the acceleration windows and filters must be >= 0");
@@ -79,6 +85,7 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
   const int M = num_outputs();
   ws->prev_q = Eigen::VectorXd::Zero(M);
   ws->z = Eigen::VectorXd::Zero(M);
+  ws->acceleration = Eigen::VectorXd::Zero(M);
   ws->qdd.reserve(M);
   for (int j = 0; j < M; ++j)
     ws->qdd.emplace_back(parameters_.acceleration_window_s[j], parameters_.acceleration_filter_s[j],
@@ -111,7 +118,12 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
     double value = p.armature[j] * qdd + p.viscous[j] * qd[j] + p.coulomb[j] * ws.z[j] + p.offset[j];
     if (j < 3) value += ws.Y.row(j).dot(p.gravity);
     tau[j] = value;
+    ws.acceleration[j] = qdd;
     ws.prev_q[j] = q[j];
+  }
+  if (p.inertia.size() == kInertiaTerms) {
+    compute_inertia_regressor(q, qd, ws.acceleration.data(), ws.Y_inertia);
+    for (int j = 0; j < 3; ++j) tau[j] += ws.Y_inertia.row(j).dot(p.inertia);
   }
   ws.has_previous = true;
 }
@@ -141,7 +153,7 @@ Eigen::MatrixXd LinearTorqueModel::predict_sequence(const Eigen::VectorXd& time,
 
 nlohmann::json LinearTorqueModel::save_parameters() const {
   const auto& p = parameters_;
-  return {{"gravity", detail::encode_vector(p.gravity)},
+  nlohmann::json j = {{"gravity", detail::encode_vector(p.gravity)},
           {"armature", detail::encode_vector(p.armature)},
           {"viscous", detail::encode_vector(p.viscous)},
           {"coulomb", detail::encode_vector(p.coulomb)},
@@ -150,6 +162,9 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
           {"acceleration_window_s", detail::encode_vector(p.acceleration_window_s)},
           {"acceleration_filter_s", detail::encode_vector(p.acceleration_filter_s)},
           {"batch_acceleration_window_s", detail::encode_vector(p.batch_acceleration_window_s)}};
+  if (p.inertia.size()) j["inertia"] = detail::encode_vector(p.inertia);
+  if (p.gravity_direction.size()) j["gravity_direction"] = detail::encode_vector(p.gravity_direction);
+  return j;
 }
 
 std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info, const nlohmann::json& j,
@@ -185,6 +200,12 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
     p.batch_acceleration_window_s = Eigen::VectorXd::Zero(M);
   if (!(p.batch_acceleration_window_s.array() >= 0).all())
     fail(source, f + ".batch_acceleration_window_s", "expected values >= 0");
+  if (j.contains("inertia")) {
+    if (M < 3) fail(source, f + ".inertia", "needs joints 1-3 predicted");
+    p.inertia = decode_vector_d(j["inertia"], source, f + ".inertia", kInertiaTerms);
+  }
+  if (j.contains("gravity_direction"))
+    p.gravity_direction = decode_vector_d(j["gravity_direction"], source, f + ".gravity_direction", 3);
   if (!(p.acceleration_filter_s.array() >= 0).all())
     fail(source, f + ".acceleration_filter_s", "expected values >= 0");
   if (!(p.acceleration_window_s.array() >= 0).all())

@@ -7,7 +7,10 @@
 // tilt lies in span{a(q1) b(q2) c(q3)}, a in {1, sin, cos}, b in {1, sin, cos},
 // c in {1, q3}; torque_j = dU/dq_j. The 17 coefficients are shared by joints 1-3,
 // which is what makes the fit physically consistent across joints.
-// Inertia: a constant armature per joint times qddot, estimated causally from
+// Inertia: a constant armature per joint times qddot, plus (fitted by default)
+// the configuration-dependent inertia and velocity products of rigid links on
+// joints 1-3 (rigid_body.hpp), with the potential then restricted to rigid
+// links under one gravity direction. qddot is estimated causally from
 // the measured qdot: the slope at the newest sample of a least-squares quadratic
 // through the samples of the last acceleration_window_s (0: the backward
 // difference of the last two samples), then a first-order low-pass with time
@@ -56,6 +59,14 @@ struct LinearTorqueParameters {
   Eigen::VectorXd acceleration_filter_s;  // s, >= 0
   // Zero-phase qddot of predict_torque() per output joint; empty: all 0 (causal).
   Eigen::VectorXd batch_acceleration_window_s;  // s, >= 0
+  // Rigid-body inertia of joints 1-3 (rigid_body.hpp, kInertiaTerms values;
+  // each joint's qddot as for its armature); empty: none, as in files written
+  // before it existed or fitted with FitOptions::rigid_body off.
+  Eigen::VectorXd inertia;
+  // The gravity direction the fit found (unit, base frame, sign free), for
+  // information: `gravity` already holds the potential it implies. Empty when
+  // the potential was fitted free.
+  Eigen::VectorXd gravity_direction;
 };
 
 class LinearTorqueModel final : public TorqueModel {

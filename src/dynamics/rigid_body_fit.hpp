@@ -1,0 +1,60 @@
+#pragma once
+// Internal: the rigid-body stage of the linear model's fit (linear_fit.cpp).
+// Once the candidate search has fixed each joint's qddot estimate and Dahl
+// displacement, the whole model is refitted with the structure of
+// rigid_body.hpp: the 19 inertia terms, and the potential of rigid links under
+// one gravity direction (7 moments and 2 angles instead of 17 coefficients).
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "rcm/dynamics/fit.hpp"
+#include "rcm/dynamics/rigid_body.hpp"
+
+namespace rcm::dynamics::detail {
+
+// One joint's estimators, as chosen by the candidate search.
+struct JointEstimatorChoice {
+  double dahl_displacement = 1e-3;
+  double causal_window_s = 0.0, causal_filter_s = 0.03;  // compute_step's qddot
+  double batch_window_s = 0.0;  // the zero-phase qddot regressed on; 0: the causal one
+};
+
+// Normal equations of the weighted rows of every joint, parameters in the order
+// [gravity 17 | inertia 19 | per joint: armature, viscous, coulomb, offset].
+struct ModelStats {
+  Eigen::MatrixXd A;
+  Eigen::VectorXd b;
+  double yy = 0.0;
+  ModelStats& operator+=(const ModelStats& o);
+  // Weighted sum of squared residuals of theta (full layout).
+  double compute_loss(const Eigen::VectorXd& theta) const;
+};
+constexpr int kRigidBodyShared = 17 + kInertiaTerms;
+inline int rigid_body_block_index(int joint, int k) { return kRigidBodyShared + 4 * joint + k; }
+
+// Rows weighted by weight[j] per joint; states (Dahl, causal qddot) run from the
+// recording's start as in compute_step. Needs M >= 3 outputs.
+ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
+                                       const std::vector<SampleSegment>& segments,
+                                       const std::vector<JointEstimatorChoice>& choices,
+                                       const std::vector<double>& weight, double sample_period_s);
+
+struct RigidBodySolution {
+  Eigen::VectorXd theta;                // full layout, gravity = P(g) v
+  Eigen::Vector3d gravity_direction;    // unit, base frame (sign free)
+  double loss = 0.0;                    // of `stats` it was fitted on
+};
+
+// The gravity direction by a grid over the half sphere (5 deg), refined to
+// 1 deg, each with the moments and every other parameter by least squares
+// (viscous and Coulomb >= 0).
+RigidBodySolution solve_rigid_body(const ModelStats& stats, int num_outputs);
+
+// min |A^(1/2) x - ...|: (A + ridge) x = b with x[i] >= 0 for i in `nonnegative`
+// by an active set; the ridge, relative to each diagonal, picks the small-norm
+// solution along collinear columns.
+Eigen::VectorXd solve_bounded_normal_equations(const Eigen::MatrixXd& A, const Eigen::VectorXd& b,
+                                               const std::vector<int>& nonnegative);
+
+}  // namespace rcm::dynamics::detail

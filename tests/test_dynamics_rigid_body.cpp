@@ -1,0 +1,220 @@
+// The rigid-body structure of the model-based free-space model
+// (dynamics/rigid_body.hpp): both regressors against finite differences of the
+// energies they differentiate, and against a closed-form arm.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "rcm/common/error.hpp"
+#include "rcm/dynamics/fit.hpp"
+#include "rcm/dynamics/linear_model.hpp"
+#include "rcm/dynamics/metrics.hpp"
+#include "rcm/dynamics/rigid_body.hpp"
+
+namespace {
+
+using rcm::dynamics::kGravityMoments;
+using rcm::dynamics::kInertiaTerms;
+
+TEST(RigidBody, GravityMomentMapIsTheGradientOfThePotential) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 50; ++trial) {
+    const Eigen::Vector3d g = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
+    Eigen::Matrix<double, kGravityMoments, 1> v;
+    for (int k = 0; k < kGravityMoments; ++k) v[k] = 3.0 * u(rng);
+    double q[3] = {1.5 * u(rng), 1.2 * u(rng), 0.12 + 0.1 * u(rng)};
+    Eigen::Matrix<double, 17, kGravityMoments> P;
+    rcm::dynamics::compute_gravity_moment_map(g, P);
+    Eigen::Matrix<double, 3, 17> Y;
+    rcm::dynamics::LinearTorqueModel::compute_gravity_regressor(q, Y);
+    const Eigen::Vector3d tau = Y * (P * v);
+    for (int i = 0; i < 3; ++i) {
+      const double h = 1e-6;
+      double qp[3] = {q[0], q[1], q[2]}, qm[3] = {q[0], q[1], q[2]};
+      qp[i] += h;
+      qm[i] -= h;
+      const double fd = (rcm::dynamics::compute_rigid_body_potential(g, v, qp) -
+                         rcm::dynamics::compute_rigid_body_potential(g, v, qm)) / (2 * h);
+      EXPECT_NEAR(tau[i], fd, 1e-7 * (1.0 + std::abs(fd))) << "trial " << trial << ", joint " << i + 1;
+    }
+  }
+}
+
+// A smooth path through joint space and its exact derivatives.
+void path(double t, double* q, double* qd, double* qdd) {
+  const double a[3] = {0.6, 0.5, 0.04}, w[3] = {1.1, 1.7, 2.3}, c[3] = {0.1, -0.2, 0.13};
+  for (int j = 0; j < 3; ++j) {
+    q[j] = c[j] + a[j] * std::sin(w[j] * t + j);
+    qd[j] = a[j] * w[j] * std::cos(w[j] * t + j);
+    qdd[j] = -a[j] * w[j] * w[j] * std::sin(w[j] * t + j);
+  }
+}
+
+TEST(RigidBody, InertiaRegressorIsLagrangesEquationOfItsEnergy) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::Matrix<double, kInertiaTerms, 1> theta;
+  for (int k = 0; k < kInertiaTerms; ++k) theta[k] = u(rng);
+  // dT/dqd_i at a state, by central differences in qd.
+  auto dT_dqd = [&](const double* q, const double* qd, int i) {
+    const double h = 1e-6;
+    double p[3] = {qd[0], qd[1], qd[2]}, m[3] = {qd[0], qd[1], qd[2]};
+    p[i] += h;
+    m[i] -= h;
+    return (rcm::dynamics::compute_inertia_energy(theta, q, p) - rcm::dynamics::compute_inertia_energy(theta, q, m)) /
+           (2 * h);
+  };
+  for (double t : {0.0, 0.7, 1.9, 3.3, 5.1}) {
+    double q[3], qd[3], qdd[3];
+    path(t, q, qd, qdd);
+    Eigen::Matrix<double, 3, kInertiaTerms> Y;
+    rcm::dynamics::compute_inertia_regressor(q, qd, qdd, Y);
+    const Eigen::Vector3d tau = Y * theta;
+    for (int i = 0; i < 3; ++i) {
+      // d/dt along the path, and dT/dq_i at fixed qd.
+      const double dt = 1e-4;
+      double qa[3], qda[3], qdda[3], qb[3], qdb[3], qddb[3];
+      path(t + dt, qa, qda, qdda);
+      path(t - dt, qb, qdb, qddb);
+      const double d_dt = (dT_dqd(qa, qda, i) - dT_dqd(qb, qdb, i)) / (2 * dt);
+      const double h = 1e-6;
+      double qp[3] = {q[0], q[1], q[2]}, qm[3] = {q[0], q[1], q[2]};
+      qp[i] += h;
+      qm[i] -= h;
+      const double dT_dq = (rcm::dynamics::compute_inertia_energy(theta, qp, qd) -
+                            rcm::dynamics::compute_inertia_energy(theta, qm, qd)) / (2 * h);
+      EXPECT_NEAR(tau[i], d_dt - dT_dq, 1e-5 * (1.0 + std::abs(tau[i]))) << "t " << t << ", joint " << i + 1;
+    }
+  }
+}
+
+TEST(RigidBody, PointMassOnTheInsertionAxisIsInTheSpan) {
+  // T = m/2 (q3^2 (qd2^2 + qd1^2 sin^2 q2) + qd3^2) for a mass on the instrument
+  // axis through the RCM: in the basis, qd1^2/2 q3^2 (m/2 - m/2 cos 2q2) and
+  // qd2^2/2 q3^2 m; the qd3^2 part is joint 3's armature, m qdd3.
+  const double m = 0.35;
+  Eigen::Matrix<double, kInertiaTerms, 1> theta = Eigen::Matrix<double, kInertiaTerms, 1>::Zero();
+  theta[1] = 0.5 * m;   // qd1^2: q3^2
+  theta[4] = -0.5 * m;  // qd1^2: cos 2q2 q3^2
+  theta[15] = m;        // qd2^2: q3^2
+  for (double t : {0.2, 1.4, 2.8}) {
+    double q[3], qd[3], qdd[3];
+    path(t, q, qd, qdd);
+    Eigen::Matrix<double, 3, kInertiaTerms> Y;
+    rcm::dynamics::compute_inertia_regressor(q, qd, qdd, Y);
+    Eigen::Vector3d tau = Y * theta;
+    tau[2] += m * qdd[2];
+    const double s = std::sin(q[1]), c = std::cos(q[1]);
+    const Eigen::Vector3d expected(
+        m * (2 * q[2] * qd[2] * s * s * qd[0] + q[2] * q[2] * 2 * s * c * qd[1] * qd[0] + q[2] * q[2] * s * s * qdd[0]),
+        m * (2 * q[2] * qd[2] * qd[1] + q[2] * q[2] * qdd[1]) - m * q[2] * q[2] * qd[0] * qd[0] * s * c,
+        m * qdd[2] - m * q[2] * (qd[1] * qd[1] + qd[0] * qd[0] * s * s));
+    EXPECT_LT((tau - expected).norm(), 1e-12 * (1.0 + expected.norm())) << "t " << t;
+  }
+}
+
+// A rigid arm under a tilted base with Dahl friction, driven along a periodic
+// path at `speed` (1: the fast run; 0.5: the same path points at half the
+// speed, logged at half the rate, as a dVRK identification run).
+rcm::Recording make_rigid_arm_run(double speed, double rate_hz, double duration_s, unsigned seed) {
+  const Eigen::Vector3d g = Eigen::Vector3d(0.25, -0.3, 0.92).normalized();
+  Eigen::Matrix<double, kGravityMoments, 1> v;
+  v << 0.3, -0.4, 1.2, -0.6, 0.2, 2.5, 0.8;
+  Eigen::Matrix<double, 17, kGravityMoments> P;
+  rcm::dynamics::compute_gravity_moment_map(g, P);
+  const Eigen::Matrix<double, 17, 1> gravity = P * v;
+  Eigen::Matrix<double, kInertiaTerms, 1> inertia;
+  inertia << 0.4, 3.0, 0.15, 0.2, -3.0, 0.03, 0.1, 0.5, 0.02, 0.1, 0.4, -0.01, 0.2, 0.3, 0.5, 6.0, 0.01, -0.02, 0.01;
+  const Eigen::Vector3d armature(0.03, 0.04, 0.3), viscous(0.02, 0.03, 0.3), coulomb(0.06, 0.08, 0.4),
+      offset(0.1, -0.15, -1.2), x_c(0.01, 0.01, 0.001);
+  const double a[3][3] = {{0.3, 0.1, 0.05}, {0.35, 0.12, 0.04}, {0.04, 0.02, 0.01}};
+  const double w0 = 2 * M_PI / 4.0;
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  const auto T = static_cast<Eigen::Index>(duration_s * rate_hz);
+  rcm::Recording r;
+  r.source = "rigid arm";
+  r.time.resize(T);
+  r.position.resize(T, 3);
+  r.velocity.resize(T, 3);
+  r.effort.resize(T, 3);
+  Eigen::Vector3d z = Eigen::Vector3d::Zero(), q_prev = Eigen::Vector3d::Zero();
+  for (Eigen::Index t = 0; t < T; ++t) {
+    const double time = static_cast<double>(t) / rate_hz, s = speed * time;
+    double q[3] = {0.0, 0.0, 0.13}, qd[3] = {0, 0, 0}, qdd[3] = {0, 0, 0};
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) {
+        const double w = (k + 1) * w0 * (1.0 + 0.37 * j), phase = 0.7 * j + 1.3 * k;
+        q[j] += a[j][k] * std::sin(w * s + phase);
+        qd[j] += a[j][k] * w * speed * std::cos(w * s + phase);
+        qdd[j] -= a[j][k] * w * w * speed * speed * std::sin(w * s + phase);
+      }
+    Eigen::Matrix<double, 3, 17> Yg;
+    Eigen::Matrix<double, 3, kInertiaTerms> Yi;
+    rcm::dynamics::LinearTorqueModel::compute_gravity_regressor(q, Yg);
+    rcm::dynamics::compute_inertia_regressor(q, qd, qdd, Yi);
+    const Eigen::Vector3d qv(q[0], q[1], q[2]);
+    for (int j = 0; j < 3; ++j) {
+      if (t > 0) z[j] = rcm::dynamics::compute_dahl_state(z[j], qv[j] - q_prev[j], x_c[j]);
+      r.time(t) = time;
+      r.position(t, j) = q[j];
+      r.velocity(t, j) = qd[j];
+      r.effort(t, j) = Yg.row(j).dot(gravity) + Yi.row(j).dot(inertia) + armature[j] * qdd[j] + viscous[j] * qd[j] +
+                       coulomb[j] * z[j] + offset[j] + (j == 2 ? 0.02 : 0.005) * noise(rng);
+    }
+    q_prev = qv;
+  }
+  return r;
+}
+
+TEST(RigidBodyFit, CarriesAFastRunToTheSlowOne) {
+  // What a real PSM does: fitted on a fast identification run, the free
+  // potential and a constant armature mispredict the same path at half speed;
+  // the rigid-body structure carries over.
+  const rcm::Recording fast = make_rigid_arm_run(1.0, 200.0, 60.0, 7), slow = make_rigid_arm_run(0.5, 100.0, 120.0, 8);
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const auto rigid = rcm::dynamics::fit_linear_torque_model({fast}, options);
+  options.rigid_body = false;
+  const auto generic = rcm::dynamics::fit_linear_torque_model({fast}, options);
+  EXPECT_EQ(rigid.summary.structure, "rigid-body");
+  EXPECT_EQ(generic.summary.structure, "generic");
+  const auto e_rigid = rcm::dynamics::evaluate_torque_model(*rigid.model, {slow});
+  const auto e_generic = rcm::dynamics::evaluate_torque_model(*generic.model, {slow});
+  for (int j = 0; j < 3; ++j) {
+    EXPECT_LT(e_rigid[j].nrmse_percent, 2.0) << "joint " << j + 1;
+    EXPECT_LT(e_rigid[j].rmse, 0.5 * e_generic[j].rmse) << "joint " << j + 1 << ": " << e_rigid[j].rmse << " vs " << e_generic[j].rmse;
+  }
+  // The tilt it found is the arm's (up to the sign, which the moments carry).
+  const auto& p = static_cast<const rcm::dynamics::LinearTorqueModel&>(*rigid.model).parameters();
+  ASSERT_EQ(p.gravity_direction.size(), 3);
+  EXPECT_GT(std::abs(Eigen::Vector3d(p.gravity_direction).dot(Eigen::Vector3d(0.25, -0.3, 0.92).normalized())), 0.995);
+  // And it is what compute_step runs, causally, sample by sample.
+  const Eigen::MatrixXd streamed = rcm::dynamics::predict_torque_streaming(*rigid.model, slow);
+  const auto e_streamed = rcm::dynamics::compute_torque_errors(slow.effort, streamed);
+  for (int j = 0; j < 3; ++j) EXPECT_LT(e_streamed[j].nrmse_percent, 3.0) << "joint " << j + 1;
+}
+
+TEST(RigidBodyFit, InertiaTravelsWithTheModelFileAndIsChecked) {
+  const rcm::Recording fast = make_rigid_arm_run(1.0, 200.0, 30.0, 3);
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const auto fit = rcm::dynamics::fit_linear_torque_model({fast}, options);
+  const nlohmann::json doc = rcm::dynamics::torque_model_to_json(*fit.model);
+  ASSERT_TRUE(doc["parameters"].contains("inertia"));
+  const auto back = rcm::dynamics::torque_model_from_json(doc, "m.json");
+  EXPECT_EQ(rcm::dynamics::torque_model_to_json(*back), doc);
+  nlohmann::json bad = doc;
+  bad["parameters"]["inertia"] = doc["parameters"]["gravity_direction"];
+  try {
+    rcm::dynamics::torque_model_from_json(bad, "m.json");
+    ADD_FAILURE() << "accepted 3 inertia values";
+  } catch (const rcm::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("parameters.inertia"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
