@@ -205,6 +205,8 @@ TEST(RigidBodyFit, InertiaTravelsWithTheModelFileAndIsChecked) {
   const auto fit = rcm::dynamics::fit_linear_torque_model({fast}, options);
   const nlohmann::json doc = rcm::dynamics::torque_model_to_json(*fit.model);
   ASSERT_TRUE(doc["parameters"].contains("inertia"));
+  ASSERT_TRUE(doc["parameters"].contains("coulomb_slow"));
+  ASSERT_TRUE(doc["parameters"].contains("sqrt_viscous"));
   const auto back = rcm::dynamics::torque_model_from_json(doc, "m.json");
   EXPECT_EQ(rcm::dynamics::torque_model_to_json(*back), doc);
   nlohmann::json bad = doc;
@@ -214,6 +216,14 @@ TEST(RigidBodyFit, InertiaTravelsWithTheModelFileAndIsChecked) {
     ADD_FAILURE() << "accepted 3 inertia values";
   } catch (const rcm::InputError& e) {
     EXPECT_NE(std::string(e.what()).find("parameters.inertia"), std::string::npos) << e.what();
+  }
+  nlohmann::json half = doc;  // the two friction terms come together
+  half["parameters"].erase("sqrt_viscous");
+  try {
+    rcm::dynamics::torque_model_from_json(half, "m.json");
+    ADD_FAILURE() << "accepted coulomb_slow without sqrt_viscous";
+  } catch (const rcm::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("parameters.sqrt_viscous"), std::string::npos) << e.what();
   }
 }
 

@@ -12,6 +12,7 @@
 
 #include "cli_util.hpp"
 #include "command_registry.hpp"
+#include "study_cli.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/dynamics/linear_model.hpp"
@@ -25,7 +26,7 @@
 namespace {
 
 struct DynamicsArgs {
-  std::string model_kind = "lstm";
+  std::string model_kind;  // empty: the default of rcm run, rcm monitor and the node
   std::string out;
   std::vector<std::string> recordings;
   unsigned seed = 1;
@@ -71,7 +72,8 @@ std::vector<rcm::Recording> load_all(const std::vector<std::string>& paths, bool
 
 void run_fit(const DynamicsArgs& a) {
   using namespace rcm::dynamics;
-  const auto kind = parse_torque_model_kind(a.model_kind, "--model");
+  const auto kind = a.model_kind.empty() ? rcm::cli::get_default_model_kind()
+                                         : parse_torque_model_kind(a.model_kind, "--model");
   rcm::dynamics::FitOptions o;
   o.seed = a.seed;
   o.max_minutes = a.max_minutes;
@@ -226,7 +228,9 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   dyn->require_subcommand(1);
 
   auto* fit = dyn->add_subcommand("fit", "Learn tau_fs from free-space recordings (70/20/10 split in time order)");
-  fit->add_option("--model", args->model_kind, "lstm | mlp | linear | hybrid")->required();
+  fit->add_option("--model", args->model_kind,
+                  fmt::format("lstm | mlp | linear | hybrid (default {}: the model rcm run, rcm monitor and the node fit)",
+                              rcm::dynamics::to_string(rcm::cli::get_default_model_kind())));
   fit->add_option("--out", args->out, "model file to write (rcm-torque-model/1 JSON)")->required();
   fit->add_option("recordings", args->recordings, "free-space recordings (CSV)")->required();
   fit->add_option("--seed", args->seed, "random seed (network initialization and batching)");

@@ -382,8 +382,14 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
         p.coulomb[j] = rigid.theta(detail::rigid_body_block_index(j, 2));
         p.offset[j] = rigid.theta(detail::rigid_body_block_index(j, 3));
       }
+      p.coulomb_slow.resize(M);
+      p.sqrt_viscous.resize(M);
+      for (int j = 0; j < M; ++j) {
+        p.coulomb_slow[j] = rigid.theta(detail::rigid_body_block_index(j, 4));
+        p.sqrt_viscous[j] = rigid.theta(detail::rigid_body_block_index(j, 5));
+      }
       best = rigid_validation;
-      params = kGravityMoments + 2 + kInertiaTerms + kBlock * M;
+      params = kGravityMoments + 2 + kInertiaTerms + detail::kRigidBodyBlock * M;
       summary.structure = "rigid-body";
     } else {
       summary.warnings.push_back(fmt::format(

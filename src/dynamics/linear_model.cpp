@@ -30,7 +30,7 @@ using detail::kDefaultAccelerationWindow;
 constexpr int G = LinearTorqueModel::kGravityTerms;
 
 struct LinearWorkspace final : TorqueModelWorkspace {
-  Eigen::VectorXd prev_q, z, acceleration;
+  Eigen::VectorXd prev_q, z, z_slow, acceleration;
   std::vector<AccelerationEstimator> qdd;
   bool has_previous = false;
   Eigen::Matrix<double, 3, G> Y;
@@ -75,6 +75,9 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
     throw std::invalid_argument("linear model: inertia needs 19 values and joints 1-3 predicted");
   if (q.gravity_direction.size() != 0 && q.gravity_direction.size() != 3)
     throw std::invalid_argument("linear model: gravity_direction needs 3 values");
+  if (q.coulomb_slow.size() != q.sqrt_viscous.size() || (q.coulomb_slow.size() != 0 && q.coulomb_slow.size() != M))
+    throw std::invalid_argument("linear model: coulomb_slow and sqrt_viscous need one value per output joint, or none");
+  has_extra_friction_ = q.coulomb_slow.size() == M;
   if (!(q.acceleration_window_s.array() >= 0).all() || !(q.acceleration_filter_s.array() >= 0).all() ||
       !(q.batch_acceleration_window_s.array() >= 0).all())
     throw std::invalid_argument("linear model: the acceleration windows and filters must be >= 0");
@@ -86,6 +89,7 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
   ws->prev_q = Eigen::VectorXd::Zero(M);
   ws->z = Eigen::VectorXd::Zero(M);
   ws->acceleration = Eigen::VectorXd::Zero(M);
+  ws->z_slow = Eigen::VectorXd::Zero(M);
   ws->qdd.reserve(M);
   for (int j = 0; j < M; ++j)
     ws->qdd.emplace_back(parameters_.acceleration_window_s[j], parameters_.acceleration_filter_s[j],
@@ -96,6 +100,7 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
 void LinearTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   auto& ws = static_cast<LinearWorkspace&>(workspace);
   ws.z.setZero();
+  ws.z_slow.setZero();
   for (auto& e : ws.qdd) e.reset();
   ws.has_previous = false;
 }
@@ -112,11 +117,16 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
   const auto& p = parameters_;
   compute_gravity_regressor(q, ws.Y);
   for (int j = 0; j < num_outputs(); ++j) {
-    if (ws.has_previous) ws.z[j] = compute_dahl_state(ws.z[j], q[j] - ws.prev_q[j], p.dahl_displacement[j]);
+    if (ws.has_previous) {
+      ws.z[j] = compute_dahl_state(ws.z[j], q[j] - ws.prev_q[j], p.dahl_displacement[j]);
+      if (has_extra_friction_)
+        ws.z_slow[j] = compute_dahl_state(ws.z_slow[j], q[j] - ws.prev_q[j], kSlowDahlFactor * p.dahl_displacement[j]);
+    }
     double qdd = ws.qdd[j].update(t, qd[j]);
     if (qdd_batch && p.batch_acceleration_window_s[j] > 0) qdd = qdd_batch[j];
     double value = p.armature[j] * qdd + p.viscous[j] * qd[j] + p.coulomb[j] * ws.z[j] + p.offset[j];
     if (j < 3) value += ws.Y.row(j).dot(p.gravity);
+    if (has_extra_friction_) value += p.coulomb_slow[j] * ws.z_slow[j] + p.sqrt_viscous[j] * compute_sqrt_velocity(qd[j]);
     tau[j] = value;
     ws.acceleration[j] = qdd;
     ws.prev_q[j] = q[j];
@@ -164,6 +174,8 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
           {"batch_acceleration_window_s", detail::encode_vector(p.batch_acceleration_window_s)}};
   if (p.inertia.size()) j["inertia"] = detail::encode_vector(p.inertia);
   if (p.gravity_direction.size()) j["gravity_direction"] = detail::encode_vector(p.gravity_direction);
+  if (p.coulomb_slow.size()) j["coulomb_slow"] = detail::encode_vector(p.coulomb_slow);
+  if (p.sqrt_viscous.size()) j["sqrt_viscous"] = detail::encode_vector(p.sqrt_viscous);
   return j;
 }
 
@@ -206,6 +218,12 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
   }
   if (j.contains("gravity_direction"))
     p.gravity_direction = decode_vector_d(j["gravity_direction"], source, f + ".gravity_direction", 3);
+  if (j.contains("coulomb_slow") != j.contains("sqrt_viscous"))
+    fail(source, f + (j.contains("coulomb_slow") ? ".sqrt_viscous" : ".coulomb_slow"), "missing (the two come together)");
+  if (j.contains("coulomb_slow")) {
+    p.coulomb_slow = decode_vector_d(j["coulomb_slow"], source, f + ".coulomb_slow", M);
+    p.sqrt_viscous = decode_vector_d(j["sqrt_viscous"], source, f + ".sqrt_viscous", M);
+  }
   if (!(p.acceleration_filter_s.array() >= 0).all())
     fail(source, f + ".acceleration_filter_s", "expected values >= 0");
   if (!(p.acceleration_window_s.array() >= 0).all())

@@ -34,7 +34,7 @@ ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
                                        const std::vector<JointEstimatorChoice>& choices,
                                        const std::vector<double>& weight, double sample_period_s) {
   const int M = static_cast<int>(choices.size());
-  const int P = kRigidBodyShared + 4 * M;
+  const int P = kRigidBodyShared + kRigidBodyBlock * M;
   ModelStats s{Eigen::MatrixXd::Zero(P, P), Eigen::VectorXd::Zero(P), 0.0};
   constexpr Eigen::Index kChunk = 4096;
   Eigen::MatrixXd F(kChunk, P);
@@ -43,7 +43,7 @@ ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
   Eigen::Matrix<double, 3, kInertiaTerms> Yi;
   std::vector<AccelerationEstimator> estimators;
   for (const auto& c : choices) estimators.emplace_back(c.causal_window_s, c.causal_filter_s, sample_period_s);
-  Eigen::VectorXd z(M), qdd(M);
+  Eigen::VectorXd z(M), z_slow(M), qdd(M);
   // The zero-phase qddot of each joint whose choice regresses on it, per recording.
   std::vector<std::vector<Eigen::VectorXd>> batch(recordings.size(), std::vector<Eigen::VectorXd>(M));
   for (const auto& seg : segments)
@@ -56,6 +56,7 @@ ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
     const auto& rec = recordings[seg.recording];
     for (auto& e : estimators) e.reset();
     z.setZero();
+    z_slow.setZero();
     Eigen::Index n = 0;
     auto flush = [&]() {
       s.A.noalias() += F.topRows(n).transpose() * F.topRows(n);
@@ -65,8 +66,11 @@ ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
     };
     for (Eigen::Index t = 0; t < seg.end; ++t) {
       for (int j = 0; j < M; ++j) {
-        if (t > 0)
-          z[j] = compute_dahl_state(z[j], rec.position(t, j) - rec.position(t - 1, j), choices[j].dahl_displacement);
+        if (t > 0) {
+          const double dq = rec.position(t, j) - rec.position(t - 1, j);
+          z[j] = compute_dahl_state(z[j], dq, choices[j].dahl_displacement);
+          z_slow[j] = compute_dahl_state(z_slow[j], dq, kSlowDahlFactor * choices[j].dahl_displacement);
+        }
         estimators[j].update(rec.time(t), rec.velocity(t, j));
       }
       if (t < seg.begin) continue;
@@ -87,6 +91,8 @@ ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
         F(n, rigid_body_block_index(j, 1)) = rec.velocity(t, j) * w;
         F(n, rigid_body_block_index(j, 2)) = z[j] * w;
         F(n, rigid_body_block_index(j, 3)) = w;
+        F(n, rigid_body_block_index(j, 4)) = z_slow[j] * w;
+        F(n, rigid_body_block_index(j, 5)) = compute_sqrt_velocity(rec.velocity(t, j)) * w;
         y(n) = rec.effort(t, j) * w;
         if (++n == kChunk) flush();
       }
@@ -129,7 +135,7 @@ RigidBodySolution solve_rigid_body(const ModelStats& stats, int M) {
   const int R = kGravityMoments + rest;
   std::vector<int> nonnegative;  // viscous and Coulomb, in the reduced layout
   for (int j = 0; j < M; ++j)
-    for (int k : {1, 2}) nonnegative.push_back(rigid_body_block_index(j, k) - G + kGravityMoments);
+    for (int k : {1, 2, 4, 5}) nonnegative.push_back(rigid_body_block_index(j, k) - G + kGravityMoments);
   Eigen::Matrix<double, 17, kGravityMoments> Pg;
   Eigen::MatrixXd T = Eigen::MatrixXd::Zero(P, R);
   T.bottomRightCorner(rest, rest).setIdentity();

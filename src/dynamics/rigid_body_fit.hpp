@@ -21,7 +21,8 @@ struct JointEstimatorChoice {
 };
 
 // Normal equations of the weighted rows of every joint, parameters in the order
-// [gravity 17 | inertia 19 | per joint: armature, viscous, coulomb, offset].
+// [gravity 17 | inertia 19 | per joint: armature, viscous, coulomb, offset,
+// slow coulomb, sqrt-viscous] (LinearTorqueParameters).
 struct ModelStats {
   Eigen::MatrixXd A;
   Eigen::VectorXd b;
@@ -31,7 +32,8 @@ struct ModelStats {
   double compute_loss(const Eigen::VectorXd& theta) const;
 };
 constexpr int kRigidBodyShared = 17 + kInertiaTerms;
-inline int rigid_body_block_index(int joint, int k) { return kRigidBodyShared + 4 * joint + k; }
+constexpr int kRigidBodyBlock = 6;
+inline int rigid_body_block_index(int joint, int k) { return kRigidBodyShared + kRigidBodyBlock * joint + k; }
 
 // Rows weighted by weight[j] per joint; states (Dahl, causal qddot) run from the
 // recording's start as in compute_step. Needs M >= 3 outputs.
@@ -48,7 +50,7 @@ struct RigidBodySolution {
 
 // The gravity direction by a grid over the half sphere (5 deg), refined to
 // 1 deg, each with the moments and every other parameter by least squares
-// (viscous and Coulomb >= 0).
+// (viscous, Coulomb, slow Coulomb and sqrt-viscous >= 0).
 RigidBodySolution solve_rigid_body(const ModelStats& stats, int num_outputs);
 
 // min |A^(1/2) x - ...|: (A + ridge) x = b with x[i] >= 0 for i in `nonnegative`

@@ -25,7 +25,11 @@
 // displacement x_c and stays put at rest, so the holding torque remembers the
 // direction of the last motion (a LuGre model without Stribeck):
 //   z <- sign(dq) + (z - sign(dq)) exp(-|dq| / x_c).
-// Viscous and Coulomb coefficients are kept >= 0 (active set).
+// With the rigid-body structure, two more friction terms per joint: a second
+// Dahl state over kSlowDahlFactor times x_c (friction that builds over a longer
+// travel) and sqrt(|dq|) sign(dq), friction that grows with speed but less than
+// linearly (on the real PSM a viscous term fitted at one speed mispredicts the
+// other). Viscous and Coulomb coefficients are kept >= 0 (active set).
 
 #include <Eigen/Core>
 #include <cmath>
@@ -44,6 +48,11 @@ inline double compute_dahl_state(double z, double dq, double x_c) {
   const double s = dq > 0 ? 1.0 : -1.0;
   return s + (z - s) * std::exp(-std::abs(dq) / x_c);
 }
+
+// The slow Dahl state's characteristic displacement, in units of x_c.
+constexpr double kSlowDahlFactor = 10.0;
+// sqrt(|v|) sign(v).
+inline double compute_sqrt_velocity(double v) { return v >= 0 ? std::sqrt(v) : -std::sqrt(-v); }
 
 struct LinearTorqueParameters {
   Eigen::VectorXd gravity;            // 17 shared potential coefficients (joints 1-3)
@@ -67,6 +76,11 @@ struct LinearTorqueParameters {
   // information: `gravity` already holds the potential it implies. Empty when
   // the potential was fitted free.
   Eigen::VectorXd gravity_direction;
+  // Per output joint, with the rigid-body structure (empty: none): the
+  // coefficient of the slow Dahl state (kSlowDahlFactor x_c) and of
+  // compute_sqrt_velocity(qd).
+  Eigen::VectorXd coulomb_slow;
+  Eigen::VectorXd sqrt_viscous;
 };
 
 class LinearTorqueModel final : public TorqueModel {
@@ -94,6 +108,7 @@ class LinearTorqueModel final : public TorqueModel {
   void compute_step_with_acceleration(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                                       const double* qdd, double* tau) const;
   LinearTorqueParameters parameters_;
+  bool has_extra_friction_ = false;  // coulomb_slow and sqrt_viscous present
 };
 
 // Least squares on the training split; x_c and the causal and zero-phase qddot
