@@ -7,6 +7,7 @@
 #include "common.hpp"
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/dynamics/linear_model.hpp"
+#include "rcm/dynamics/rigid_body.hpp"
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/dynamics/networks.hpp"
 #include "rcm/dynamics/torque_model.hpp"
@@ -99,6 +100,28 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("all_flags", &RegimeSummary::all_flags)
       .def("to_dict", [](const RegimeSummary& s) { return to_python(s.to_json()); })
       .def("__str__", &RegimeSummary::to_text);
+  d.def("compute_gravity_regressor", [](py::handle q) {
+    const Eigen::Vector3d qv = to_vector3(q, argument_location("compute_gravity_regressor", "q"));
+    Eigen::Matrix<double, 3, LinearTorqueModel::kGravityTerms> Y;
+    LinearTorqueModel::compute_gravity_regressor(qv.data(), Y);
+    return Eigen::MatrixXd(Y);
+  }, py::arg("q"), "3 x 17: the torque of joints 1-3 per coefficient of the free potential (docs/dynamics.md)");
+  d.def("compute_inertia_regressor", [](py::handle q, py::handle qd, py::handle qdd) {
+    const std::string fn = "compute_inertia_regressor";
+    const Eigen::Vector3d qv = to_vector3(q, argument_location(fn, "q")), qdv = to_vector3(qd, argument_location(fn, "qd")),
+                          qddv = to_vector3(qdd, argument_location(fn, "qdd"));
+    Eigen::Matrix<double, 3, kInertiaTerms> Y;
+    compute_inertia_regressor(qv.data(), qdv.data(), qddv.data(), Y);
+    return Eigen::MatrixXd(Y);
+  }, py::arg("q"), py::arg("qd"), py::arg("qdd"),
+        "3 x 19: the torque of joints 1-3 per rigid-body inertia coefficient (Lagrange, docs/dynamics.md)");
+  d.def("compute_gravity_moment_map", [](py::handle g) {
+    Eigen::Matrix<double, 17, kGravityMoments> P;
+    compute_gravity_moment_map(to_vector3(g, argument_location("compute_gravity_moment_map", "g")), P);
+    return Eigen::MatrixXd(P);
+  }, py::arg("g"), "17 x 7: free-potential coefficients of the 7 mass moments under gravity direction g");
+  d.def("compute_dahl_state", &compute_dahl_state, py::arg("z"), py::arg("dq"), py::arg("x_c"),
+        "the friction state after a displacement dq over characteristic displacement x_c");
   d.def("compute_regime_summary", [](const TorqueModel& model, const rcm::Recording& recording) {
     return compute_regime_summary(RegimeMonitor(model.info().regime), recording);
   }, py::arg("model"), py::arg("recording"),

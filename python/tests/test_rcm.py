@@ -326,6 +326,34 @@ class TestDynamics(unittest.TestCase):
         self.assertIs(rcm.dynamics.TorqueModel, rcm.dynamics.LinearTorqueModel.__mro__[1])
         self.assertIsInstance(rcm.sim.QUICK_PROTOCOL["protocol"]["free_space_s"], float)
 
+    def test_rigid_body_regressors_give_the_model_its_torque(self):
+        # The default linear fit has the rigid-body structure; its offline
+        # torque at one sample is rebuilt from the exposed regressors.
+        model = self.model()
+        p = model.parameters
+        self.assertEqual(_state["fit"].summary.structure, "rigid-body")
+        self.assertEqual(len(p.inertia), 19)
+        self.assertAlmostEqual(float(np.linalg.norm(p.gravity_direction)), 1.0, places=12)
+        q, qd, qdd = [0.2, -0.3, 0.14], [0.5, -0.4, 0.05], [1.0, 2.0, -0.3]
+        Y = rcm.dynamics.compute_inertia_regressor(q, qd, qdd)
+        self.assertEqual(Y.shape, (3, 19))
+        self.assertEqual(rcm.dynamics.compute_gravity_regressor(q).shape, (3, 17))
+        P = rcm.dynamics.compute_gravity_moment_map(p.gravity_direction)
+        self.assertEqual(P.shape, (17, 7))
+        # The fitted potential is one of rigid links under that direction: in P's span.
+        v = np.linalg.lstsq(P, p.gravity, rcond=None)[0]
+        np.testing.assert_allclose(P @ v, p.gravity, atol=1e-9 * (1 + np.abs(p.gravity).max()))
+        # A point mass m on the instrument axis: yaw inertia m q3^2 sin^2 q2.
+        m, theta = 0.3, np.zeros(19)
+        theta[[1, 4, 15]] = [m / 2, -m / 2, m]
+        tau = Y @ theta
+        s2 = np.sin(q[1])
+        expected_yaw = m * (2 * q[2] * qd[2] * s2 ** 2 * qd[0] + q[2] ** 2 * 2 * s2 * np.cos(q[1]) * qd[1] * qd[0]
+                            + q[2] ** 2 * s2 ** 2 * qdd[0])
+        self.assertAlmostEqual(tau[0], expected_yaw, places=12)
+        with self.assertRaises(rcm.InputError):
+            rcm.dynamics.compute_inertia_regressor(q, qd[:2], qdd)
+
     def test_fit_matches_cli_fit(self):
         out = tmp_path("cli_linear.json")
         run_cli("dynamics", "fit", "--model", "linear", "--out", out, session_file("free_space.csv"), json_out=False)

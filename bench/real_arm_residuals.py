@@ -1,0 +1,306 @@
+#!/usr/bin/python3
+"""Where a free-space model's error comes from on real arm recordings.
+
+Each split TRAIN.csv:TEST.csv (recordings in rcm's CSV format, joints 1-3 = yaw,
+pitch, insertion) is fitted with `rcm dynamics fit` and scored with
+`rcm dynamics eval --predictions` on the other recording. The script then:
+
+1. tabulates the torque RMSE (N m, N m, N) per model, the RMS incision force
+   error the residual causes at D = 30 mm and theta = 20 deg (J_D from
+   `rcm kinematics`), and the share of test samples outside the model's
+   training regime;
+2. explains the linear models' test residuals: the share (R^2) that each group
+   of terms absorbs when regressed on them after the fact (rcm's own
+   regressors, through its Python module), their RMS by speed tercile and their
+   mean by direction of motion;
+3. draws the mean residual against velocity per joint.
+
+Run with Debian's Python (numpy, gnuplot) and the built module:
+  PYTHONPATH=build/python /usr/bin/python3 bench/real_arm_residuals.py --build build \\
+      --split "LABEL=DIR/fast.csv:DIR/slow.csv" ... [--models "linear|linear, generic|hybrid"]
+The tables go between the real-arm markers of docs/dynamics.md, with the date
+and machine, and the figure to docs/figures/real_arm_residual_velocity.png.
+The recordings stay where they are; nothing of them is copied.
+"""
+import argparse
+import datetime
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+
+import rcm  # build/python on PYTHONPATH
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DOC = os.path.join(ROOT, "docs", "dynamics.md")
+FIGURE = os.path.join(ROOT, "docs", "figures", "real_arm_residual_velocity.png")
+BEGIN, END = "<!-- real-arm:begin -->", "<!-- real-arm:end -->"
+JOINTS = ("yaw", "pitch", "insertion")
+UNITS = ("N m", "N m", "N")
+
+
+def run(cmd, **kw):
+    print("+", " ".join(cmd), file=sys.stderr, flush=True)
+    return subprocess.run(cmd, check=True, **kw)
+
+
+def cpu_model():
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def load(path):
+    d = np.genfromtxt(path, delimiter=",", names=True)
+    col = lambda name: np.stack([d[f"{name}_{j}"] for j in (1, 2, 3)], 1)
+    return {"t": d["time"], "q": col("position"), "qd": col("velocity"), "tau": col("effort")}
+
+
+def zero_phase_acceleration(t, qd, window=0.1):
+    """Slope of a least-squares quadratic through +- window/2 (as rcm's offline estimate)."""
+    out = np.zeros_like(qd)
+    lo = hi = 0
+    n = len(t)
+    for i in range(n):
+        while t[lo] < t[i] - window / 2:
+            lo += 1
+        hi = max(hi, i + 1)
+        while hi < n and t[hi] <= t[i] + window / 2:
+            hi += 1
+        s = t[lo:hi] - t[i]
+        A = np.stack([np.ones_like(s), s, s * s], 1)
+        out[i] = np.linalg.lstsq(A, qd[lo:hi], rcond=None)[0][1]
+    return out
+
+
+# ------------------------------------------------------------------ regressors
+# rcm's own (Python bindings): n x 3 x p, the torque of joints 1-3 per unit parameter.
+
+def stack(fn, *arrays):
+    return np.stack([fn(*(a[i] for a in arrays)) for i in range(len(arrays[0]))], 0)
+
+
+def per_joint(columns):
+    """n x 3 x (3 k): each of the k per-joint signals (n x 3) on its own joint."""
+    n = columns[0].shape[0]
+    Y = np.zeros((n, 3, 3 * len(columns)))
+    for k, c in enumerate(columns):
+        for j in range(3):
+            Y[:, j, 3 * k + j] = c[:, j]
+    return Y
+
+
+def dahl_states(q, x_c):
+    z = np.zeros_like(q)
+    for j in range(q.shape[1]):
+        for k in range(1, len(q)):
+            z[k, j] = rcm.dynamics.compute_dahl_state(z[k - 1, j], q[k, j] - q[k - 1, j], x_c[j])
+    return z
+
+
+def features(d):
+    if "qdd" not in d:
+        d["qdd"] = zero_phase_acceleration(d["t"], d["qd"])
+        span = d["q"].max(0) - d["q"].min(0)
+        d["z"] = dahl_states(d["q"], 3e-3 * span)       # fast: about the bristle scale
+        d["z_slow"] = dahl_states(d["q"], 3e-2 * span)  # slow: friction that builds over a longer travel
+        d["gravity"] = stack(rcm.dynamics.compute_gravity_regressor, d["q"])
+        d["inertia"] = stack(rcm.dynamics.compute_inertia_regressor, d["q"], d["qd"], d["qdd"])
+    return d
+
+
+# ------------------------------------------------------------------ explanation
+
+def explained(residual, Y):
+    """R^2 of each joint's residual regressed on the group's columns for that joint."""
+    r2 = np.zeros(3)
+    for j in range(3):
+        A = Y[:, j, :]
+        A = A[:, np.abs(A).max(0) > 0]
+        if A.shape[1] == 0:
+            continue
+        th = np.linalg.lstsq(A, residual[:, j], rcond=None)[0]
+        r2[j] = 1.0 - ((residual[:, j] - A @ th) ** 2).sum() / (residual[:, j] ** 2).sum()
+    return r2
+
+
+def groups(d):
+    d = features(d)
+    qd = d["qd"]
+    return {
+        "armature (qddot)": per_joint([d["qdd"]]),
+        "rigid-body inertia, velocity products": d["inertia"],
+        "free potential (position)": d["gravity"],
+        "viscous (qd)": per_joint([qd]),
+        "Dahl, bristle scale": per_joint([d["z"]]),
+        "Dahl, 10x longer": per_joint([d["z_slow"]]),
+        "sqrt(|qd|) sign(qd)": per_joint([np.sign(qd) * np.sqrt(np.abs(qd))]),
+    }
+
+
+def force_error(J, residual):
+    """RMS of |J_D^-T r| over the samples, with J_D fixed at one configuration."""
+    f = np.linalg.solve(J.T, residual.T).T
+    return float(np.sqrt((f ** 2).sum(1).mean()))
+
+
+MODELS = {"linear": [], "linear, generic": ["--generic-structure"], "hybrid": [], "lstm": []}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--build", default="build")
+    ap.add_argument("--split", action="append", required=True,
+                    help="LABEL=TRAIN.csv[+TRAIN2.csv...]:TEST.csv")
+    ap.add_argument("--models", default="linear|linear, generic",
+                    help="'|'-separated: linear, linear generic (the free potential), hybrid, lstm")
+    ap.add_argument("--max-minutes", default="3", help="wall-clock budget of each network fit")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--no-doc", action="store_true", help="print the tables instead of writing docs/dynamics.md")
+    args = ap.parse_args()
+    rcm_cli = os.path.join(args.build, "bin", "rcm")
+    kinds = [k.strip() for k in args.models.split("|")]
+    for k in kinds:
+        if k not in MODELS:
+            ap.error(f"unknown model {k!r}: {', '.join(MODELS)}")
+    kin = json.loads(run([rcm_cli, "kinematics", "--q", "0.3490658504,0,0.12", "--offset", "0.03", "--json"],
+                         capture_output=True, text=True).stdout)
+    J = np.array(kin["J_inc_base"])
+    splits = []
+    for s in args.split:
+        label, files = s.split("=", 1)
+        train, test = files.split(":")
+        splits.append((label, train.split("+"), test))
+
+    out = []
+    stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    out.append(f"Measured by `bench/real_arm_residuals.py` on {stamp}, {cpu_model()}, {os.cpu_count()} cores. "
+               "Each split fits on its first recording and scores on its second.\n")
+
+    # 1. rcm's models.
+    out.append(f"**Torque error** (`rcm dynamics fit --model M --seed {args.seed}` on the first, `rcm dynamics eval` on the "
+               "second; `linear, generic`: `--generic-structure`, the free potential and constant armature; networks "
+               f"with `--max-minutes {args.max_minutes}`), and the RMS incision force error the residual causes at "
+               "D = 30 mm, theta = 20 deg (yaw 20 deg from q0 = [0, 0, 0.12 m]):\n")
+    out.append("| split | model | RMSE yaw / pitch (N m) / insertion (N) | NRMSE % | force error (N) | test samples out of regime |")
+    out.append("|---|---|---|---|---|---|")
+    residuals = {}
+    with tempfile.TemporaryDirectory() as work:
+        for label, train, test in splits:
+            for kind in kinds:
+                model = os.path.join(work, "model.json")
+                pred = os.path.join(work, "pred.csv")
+                cmd = [rcm_cli, "dynamics", "fit", "--model", kind.split(",")[0], "--seed", str(args.seed), "--out", model]
+                if kind in ("hybrid", "lstm"):
+                    cmd += ["--max-minutes", args.max_minutes]
+                run(cmd + MODELS[kind] + train, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                ev = json.loads(run([rcm_cli, "dynamics", "eval", model, test, "--json", "--predictions", pred],
+                                    capture_output=True, text=True).stdout)
+                p = np.genfromtxt(pred, delimiter=",", names=True)
+                r = np.stack([p[f"effort_{j}"] - p[f"tau_fs_{j}"] for j in (1, 2, 3)], 1)
+                residuals[(label, kind)] = r
+                e = ev["joints"]
+                reg = ev["regime"][0]
+                out.append(f"| {label} | {kind} | {e[0]['rmse']:.3f} / {e[1]['rmse']:.3f} / {e[2]['rmse']:.3f} | "
+                           f"{e[0]['nrmse_percent']:.1f} / {e[1]['nrmse_percent']:.1f} / {e[2]['nrmse_percent']:.1f} | "
+                           f"{force_error(J, r):.1f} | {100 * reg['fraction']:.0f} % |")
+
+    data = {}
+
+    def get(path):
+        if path not in data:
+            data[path] = features(load(path))
+        return data[path]
+
+    # 2. What the linear models' test residuals are made of.
+    explained_kinds = [k for k in ("linear, generic", "linear") if k in kinds]
+    names = list(groups(get(splits[0][2])).keys())
+    out.append("\n**What the residual is made of.** R^2: the share of each joint's test residual (its mean square) that "
+               "each group of terms absorbs when regressed on it after the fact, an upper bound on what adding the "
+               "group could gain (the groups overlap; 0: nothing). Speed terciles: RMS of the residual over the slowest, middle and fastest "
+               "third of the samples by |qd|. Direction: mean residual while the joint moves up minus while it moves "
+               "down. Free potential and armature: the structure `--generic-structure` fits; rigid-body inertia: "
+               "rcm's 19 Lagrange terms (both regressors from rcm's Python module); Dahl states at 0.3 % and 3 % of "
+               "each joint's range.\n")
+    out.append("| split | model | joint | RMS | " + " | ".join(f"R^2 {n}" for n in names) +
+               " | RMS by speed tercile | direction |")
+    out.append("|---|---|---|---|" + "---|" * len(names) + "---|---|")
+    for label, train, test in splits:
+        d = get(test)
+        for kind in explained_kinds:
+            r = residuals[(label, kind)]
+            r2 = {n: explained(r, Y) for n, Y in groups(d).items()}
+            for j in range(3):
+                speed = np.abs(d["qd"][:, j])
+                edges = np.quantile(speed, [1 / 3, 2 / 3])
+                bins = [speed <= edges[0], (speed > edges[0]) & (speed <= edges[1]), speed > edges[1]]
+                terc = " / ".join(f"{np.sqrt((r[b, j] ** 2).mean()):.3f}" for b in bins)
+                up, down = d["qd"][:, j] > 0, d["qd"][:, j] < 0
+                direction = r[up, j].mean() - r[down, j].mean()
+                out.append(f"| {label} | {kind} | {JOINTS[j]} | {np.sqrt((r[:, j] ** 2).mean()):.3f} {UNITS[j]} | " +
+                           " | ".join(f"{r2[n][j]:.2f}" for n in names) + f" | {terc} | {direction:+.3f} |")
+
+    # 3. Figure: mean residual against velocity, per model, on the first two splits.
+    with tempfile.TemporaryDirectory() as work:
+        plots = []
+        for k, (label, train, test) in enumerate(splits[:2]):
+            d = get(test)
+            for kind in explained_kinds:
+                r = residuals[(label, kind)]
+                for j in range(3):
+                    v = d["qd"][:, j]
+                    edges = np.linspace(np.quantile(v, 0.01), np.quantile(v, 0.99), 25)
+                    idx = np.digitize(v, edges)
+                    path = os.path.join(work, f"s{k}{kind.replace(' ', '').replace(',', '')}j{j}.dat")
+                    with open(path, "w") as f:
+                        for b in range(1, len(edges)):
+                            m = idx == b
+                            if m.sum() >= 10:
+                                f.write(f"{0.5 * (edges[b - 1] + edges[b])} {r[m, j].mean()}\n")
+                    plots.append((j, f"{label}, {kind}", path))
+        if plots:
+            os.makedirs(os.path.dirname(FIGURE), exist_ok=True)
+            tmp = FIGURE + ".tmp.png"
+            script = ["set terminal pngcairo size 1500,450 font ',10'", f"set output '{tmp}'",
+                      "set multiplot layout 1,3", "set grid", "set key bottom right font ',8'"]
+            for j in range(3):
+                script.append(f"set title 'mean test residual, {JOINTS[j]}'")
+                script.append(f"set xlabel 'velocity ({'rad/s' if j < 2 else 'm/s'})'")
+                script.append(f"set ylabel 'residual ({UNITS[j]})'")
+                series = [f"'{p}' with linespoints title '{lab}'" for (jj, lab, p) in plots if jj == j]
+                script.append("plot " + ", ".join(series))
+            script.append("unset multiplot")
+            run(["gnuplot"], input="\n".join(script), text=True)
+            os.replace(tmp, FIGURE)
+            out.append("\n![mean test residual against velocity](figures/real_arm_residual_velocity.png)")
+
+    block = "\n".join(out)
+    if args.no_doc:
+        print(block)
+        return
+    with open(DOC) as f:
+        text = f.read()
+    if BEGIN in text:
+        head, rest = text.split(BEGIN, 1)
+        text = head + BEGIN + "\n" + block + "\n" + END + rest.split(END, 1)[1]
+    else:
+        text += f"\n{BEGIN}\n{block}\n{END}\n"
+    tmp = DOC + ".tmp"
+    with open(tmp, "w") as f:
+        f.write(text)
+    os.replace(tmp, DOC)
+    print(block)
+
+
+if __name__ == "__main__":
+    main()
