@@ -38,12 +38,7 @@ test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 
 demo: build
-	@if $(BUILD)/bin/rcm demo --help >/dev/null 2>&1; then \
-	  $(BUILD)/bin/rcm demo --out demo-out; \
-	else \
-	  echo "rcm demo is not built yet (issue 6: three-step pipeline); available now:"; \
-	  $(BUILD)/bin/rcm --help; exit 1; \
-	fi
+	$(BUILD)/bin/rcm demo --out demo-out
 
 bench: build
 	$(PYTHON) bench/run_benchmarks.py --build $(BUILD)

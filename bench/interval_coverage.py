@@ -17,38 +17,16 @@ import argparse
 import datetime
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
+
+from doc_tables import cpu_model, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "estimation.md")
 BEGIN, END = "<!-- coverage:begin -->", "<!-- coverage:end -->"
 GRID = {"protocol": {"radial_offsets_m": [[0.0, 0.0], [0.010, 0.015], [-0.012, 0.008]]}}
-
-
-def run(cmd, **kw):
-    print("+", " ".join(cmd), file=sys.stderr, flush=True)
-    return subprocess.run(cmd, check=True, **kw)
-
-
-def cpu_model():
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
-def replace_block(text, block):
-    if BEGIN in text:
-        head, rest = text.split(BEGIN, 1)
-        return head + BEGIN + "\n" + block + "\n" + END + rest.split(END, 1)[1]
-    return text + f"\n{BEGIN}\n{block}\n{END}\n"
 
 
 def mean(v):
@@ -156,11 +134,7 @@ def main():
     block = "\n".join(lines)
     print(block)
     if not args.no_doc:
-        with open(DOC) as f:
-            text = f.read()
-        with open(DOC + ".tmp", "w") as f:
-            f.write(replace_block(text, block))
-        os.replace(DOC + ".tmp", DOC)
+        write_block(DOC, BEGIN, END, block)
         print(f"wrote {DOC}", file=sys.stderr)
 
 

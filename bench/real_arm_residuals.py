@@ -26,12 +26,13 @@ import argparse
 import datetime
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
 
 import numpy as np
+
+from doc_tables import cpu_model, run, write_block
 
 
 import rcm  # build/python on PYTHONPATH
@@ -42,22 +43,6 @@ FIGURE = os.path.join(ROOT, "docs", "figures", "real_arm_residual_velocity.png")
 BEGIN, END = "<!-- real-arm:begin -->", "<!-- real-arm:end -->"
 JOINTS = ("yaw", "pitch", "insertion")
 UNITS = ("N m", "N m", "N")
-
-
-def run(cmd, **kw):
-    print("+", " ".join(cmd), file=sys.stderr, flush=True)
-    return subprocess.run(cmd, check=True, **kw)
-
-
-def cpu_model():
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def load(path):
@@ -288,17 +273,7 @@ def main():
     if args.no_doc:
         print(block)
         return
-    with open(DOC) as f:
-        text = f.read()
-    if BEGIN in text:
-        head, rest = text.split(BEGIN, 1)
-        text = head + BEGIN + "\n" + block + "\n" + END + rest.split(END, 1)[1]
-    else:
-        text += f"\n{BEGIN}\n{block}\n{END}\n"
-    tmp = DOC + ".tmp"
-    with open(tmp, "w") as f:
-        f.write(text)
-    os.replace(tmp, DOC)
+    write_block(DOC, BEGIN, END, block)
     print(block)
 
 

@@ -158,34 +158,11 @@ Eigen::VectorXd solve_constrained(const std::vector<const JointStats*>& stats, i
     }
   }
   // Collinear columns (e.g. the q3 potential term and the insertion offset) make
-  // A singular; a ridge relative to each diagonal picks the small-norm solution.
-  const double floor = 1e-12 * std::max(1.0, A.diagonal().maxCoeff());
-  for (int k = 0; k < P; ++k) A(k, k) += 1e-9 * A(k, k) + floor;
-  std::vector<bool> fixed(P, false);
-  Eigen::VectorXd theta;
-  for (int iter = 0; iter <= 3 * M; ++iter) {
-    Eigen::MatrixXd Af = A;
-    Eigen::VectorXd bf = b;
-    for (int k = 0; k < P; ++k)
-      if (fixed[k]) {
-        Af.row(k).setZero();
-        Af.col(k).setZero();
-        Af(k, k) = 1.0;
-        bf(k) = 0.0;
-      }
-    theta = Af.ldlt().solve(bf);
-    bool changed = false;
-    for (int j = 0; j < M; ++j)
-      for (int k = 0; k < 3; ++k) {  // armature, viscous, coulomb
-        const int i = block_index(j, k);
-        if (!fixed[i] && theta(i) < 0) {
-          fixed[i] = true;
-          changed = true;
-        }
-      }
-    if (!changed) break;
-  }
-  return theta;
+  // A singular; the ridge of solve_bounded_normal_equations picks the small-norm solution.
+  std::vector<int> nonnegative;
+  for (int j = 0; j < M; ++j)
+    for (int k = 0; k < 3; ++k) nonnegative.push_back(block_index(j, k));  // armature, viscous, coulomb
+  return detail::solve_bounded_normal_equations(A, b, nonnegative);
 }
 
 double objective(const std::vector<const JointStats*>& stats, const Eigen::VectorXd& theta, int M) {

@@ -22,7 +22,7 @@
 //   shaft's sliding friction in the tissue remains). The prediction uses the
 //   state before the sample, so the statistic is not fitted to what it tests.
 // - At rest the free-space model's error is the stiction band, a constant torque
-//   that a radial offset would explain just as well (friction memory, #4): rest
+//   that a radial offset would explain just as well (friction memory): rest
 //   samples weigh less (sigma times rest_sigma_factor) and do not feed the onset
 //   test, which therefore needs the configuration-dependent force of motion.
 // The alarm compares the force of the reported model at the current sample with
