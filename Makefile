@@ -12,7 +12,8 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libtorch-dev libopenblas0-openmp \
   pybind11-dev python3-dev python3-numpy python3-torch python3-scipy \
   gnuplot-nox \
-  libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster
+  libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
+  libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev
 
 .PHONY: deps build test demo bench coverage clean
 

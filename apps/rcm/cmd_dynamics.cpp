@@ -232,7 +232,7 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
                   fmt::format("lstm | mlp | linear | hybrid (default {}: the model rcm run, rcm monitor and the node fit)",
                               rcm::dynamics::to_string(rcm::cli::get_default_model_kind())));
   fit->add_option("--out", args->out, "model file to write (rcm-torque-model/1 JSON)")->required();
-  fit->add_option("recordings", args->recordings, "free-space recordings (CSV)")->required();
+  fit->add_option("recordings", args->recordings, "free-space recordings (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   fit->add_option("--seed", args->seed, "random seed (network initialization and batching)");
   fit->add_option("--max-minutes", args->max_minutes, "wall-clock budget of the training (default 10)");
   fit->add_option("--hidden", args->hidden, "LSTM hidden size (default: 128, or 32 on < 5 min of data)");
@@ -272,7 +272,7 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
 
   auto* ev = dyn->add_subcommand("eval", "Per-joint RMSE and NRMSE (%) of a model on recordings (Table II)");
   ev->add_option("model", args->model_path, "model file")->required();
-  ev->add_option("recordings", args->recordings, "recordings (CSV)")->required();
+  ev->add_option("recordings", args->recordings, "recordings (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   ev->add_option("--predictions", args->predictions, "also write the predicted torque of every sample to this CSV");
   ev->add_flag("--streaming", args->streaming,
                "run the model one sample at a time, causally, as the live robot does (default: the offline "

@@ -129,7 +129,7 @@ const bool registered = rcm::cli::register_command({"force", 35, [](CLI::App& ap
   cmd->add_option("--model", o->model_path, "free-space torque model (from `rcm dynamics fit`)")->required();
   cmd->add_option("--offset", o->offset, "coaxial offset D in m")->required();
   cmd->add_option("--q0", o->q0, "docking configuration q0 (rad, rad, m; default: the recording's first sample)");
-  cmd->add_option("RECORDING", o->recording, "recording (rcm CSV or rostopic CSV)")->required();
+  cmd->add_option("RECORDING", o->recording, "recording (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   cmd->add_option("--out", o->out, "write the series as CSV: time,force_x,force_y,force_z,theta,condition,status");
   cmd->add_option("--max-condition", o->max_condition,
                   "condition number of J_D above which a sample is flagged ill-conditioned (default: the library's)");

@@ -6,6 +6,7 @@
 
 #include "cli_util.hpp"
 #include "command_registry.hpp"
+#include "message_cli.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/session.hpp"
@@ -28,6 +29,7 @@ nlohmann::json summary_json(const rcm::Recording& r) {
   nlohmann::json j = {{"file", r.source},
                       {"layout", r.layout == rcm::RecordingLayout::rostopic_csv ? "rostopic"
                                 : r.layout == rcm::RecordingLayout::rosbag     ? "rosbag"
+                                : r.layout == rcm::RecordingLayout::rosbag2    ? "rosbag2"
                                                                                 : "rcm"},
                       {"samples", s.samples},
                       {"joints", s.joints},
@@ -45,6 +47,18 @@ nlohmann::json summary_json(const rcm::Recording& r) {
                       {"velocity_range", ranges(s.velocity)},
                       {"effort_range", ranges(s.effort)}};
   if (s.has_force) j["force_range"] = ranges(s.force);
+  if (const rcm::Rosbag2ReadInfo* b = rcm::cli::find_rosbag2_info(r.source))
+    j["rosbag2"] = {{"storage", b->storage},
+                    {"files", b->files},
+                    {"metadata_version", b->metadata_version},
+                    {"sqlite_schema", b->sqlite_schema},
+                    {"topic", rcm::cli::get_topic_options().topic},
+                    {"time_source", rcm::cli::get_topic_options().time == rcm::MessageTime::receive ? "receive_time"
+                                                                                                    : "header_stamp"},
+                    {"messages", b->messages},
+                    {"zero_stamp_messages", b->zero_stamp_messages},
+                    {"joint_names", b->joint_names},
+                    {"warnings", b->warnings}};
   return j;
 }
 
@@ -60,6 +74,14 @@ void print_recording(const nlohmann::json& j, const std::string& indent) {
                              100.0 * repeated / (j["samples"].get<double>() + (j["repeated_rows_removed"].get<bool>() ? repeated : 0)),
                              j["repeated_rows_removed"].get<bool>() ? ", removed (--dedupe)" : ", kept (use --dedupe to drop them)");
   if (j["time_from_rate"].get<bool>()) std::cout << indent << "  time: numbered from --rate (no time column)\n";
+  if (j.contains("rosbag2")) {
+    const nlohmann::json& b = j["rosbag2"];
+    std::cout << fmt::format("{}  rosbag2 ({}, {} file(s)): {} messages on {}, time {}", indent,
+                             b["storage"].get<std::string>(), b["files"].size(), b["messages"].get<std::size_t>(),
+                             b["topic"].get<std::string>(), b["time_source"].get<std::string>());
+    const std::size_t zero = b["zero_stamp_messages"].get<std::size_t>();
+    std::cout << (zero > 0 ? fmt::format(", {} skipped (zero header.stamp: invalid data)\n", zero) : std::string("\n"));
+  }
   std::vector<std::vector<std::string>> rows;
   for (std::size_t k = 0; k < j["position_range"].size(); ++k) {
     auto f = [&](const char* key) {
@@ -140,8 +162,10 @@ void run(const Options& o) {
 
 const bool registered = rcm::cli::register_command({"inspect", 10, [](CLI::App& app) {
   auto o = std::make_shared<Options>();
-  CLI::App* cmd = app.add_subcommand("inspect", "Validate and summarize a recording (.csv) or a session (.json)");
-  cmd->add_option("FILE", o->file, "recording CSV (rcm or rostopic echo -p layout) or session manifest")->required();
+  CLI::App* cmd = app.add_subcommand("inspect", "Validate and summarize a recording or a session (.json)");
+  cmd->add_option("FILE", o->file,
+                  "recording (rcm or rostopic CSV, ROS 1 .bag, rosbag2 directory, .db3 or .mcap) or session manifest")
+      ->required();
   cmd->add_flag("--json", o->json, "print one JSON object");
   cmd->add_flag("--dedupe", o->dedupe, "drop rows that repeat the previous sample exactly");
   cmd->add_option("--rate", o->rate_hz, "sampling rate (Hz) to assume for files without a time column");

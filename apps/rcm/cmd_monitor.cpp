@@ -168,7 +168,7 @@ const bool registered = rcm::cli::register_command({"monitor", 65, [](CLI::App& 
       "monitor", "Replay a recording as a stream through the online estimator: running estimate of all three offsets, "
                  "onset of the misalignment and incision-force alarms");
   cmd->add_option("--session", o->session, "rcm-session/1 manifest (free-space data, q0, calibration)")->required();
-  cmd->add_option("RECORDING", o->recording, "recording to replay (rcm CSV or rostopic CSV)")->required();
+  cmd->add_option("RECORDING", o->recording, "recording to replay (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   cmd->add_option("--model", o->free_space.model, "free-space model to fit: hybrid (default with LibTorch), lstm, mlp, linear");
   cmd->add_option("--model-file", o->free_space.model_file,
                   "use a saved free-space model (e.g. free_space_model.json of `rcm run`) instead of fitting one");

@@ -75,13 +75,15 @@ void bind_io(py::module_& m) {
   register_recording_reader(".bag", [](const std::filesystem::path& path, const RecordingReadOptions&) -> Recording {
     InputLocation where;
     where.file = path.string();
-    throw InputError(where, "a rosbag: the Python module reads CSV recordings only; convert it with "
+    throw InputError(where, "a ROS 1 bag: the Python module reads CSV and rosbag2 recordings; convert it with "
                             "`rcm convert FILE.bag FILE.csv [--topic T]` (the rcm CLI built with ROS)");
   });
   py::enum_<RecordingLayout>(m, "RecordingLayout", "Where a recording came from")
       .value("rcm_csv", RecordingLayout::rcm_csv, "the contract's CSV (time, position_i, velocity_i, effort_i, force_x..z)")
       .value("rostopic_csv", RecordingLayout::rostopic_csv, "`rostopic echo -p /PSM1/measured_js` output")
-      .value("in_memory", RecordingLayout::in_memory, "built from arrays");
+      .value("in_memory", RecordingLayout::in_memory, "built from arrays")
+      .value("rosbag", RecordingLayout::rosbag, "a ROS 1 bag's JointState topic")
+      .value("rosbag2", RecordingLayout::rosbag2, "a rosbag2 recording's JointState topic (SQLite or MCAP)");
 
   py::class_<Recording, std::shared_ptr<Recording>>(
       m, "Recording",

@@ -20,7 +20,7 @@ LiveMonitor::Verdict LiveMonitor::compute_message(const sensor_msgs::JointState&
   if (map_.num_joints() == 0) {
     // The first message that can define the joint order (allocates, once).
     try {
-      map_ = JointStateMap::make_from_message(m, pipeline_.model().num_joints());
+      map_ = JointStateMap::make_from_message(view_joint_state(m), pipeline_.model().num_joints());
     } catch (const std::invalid_argument&) {  // no joints, or empty or repeated names
       defect_ = {};
       ++counters_.malformed;
@@ -33,7 +33,7 @@ LiveMonitor::Verdict LiveMonitor::compute_message(const sensor_msgs::JointState&
     }
     map_ws_ = map_.create_workspace();
   }
-  defect_ = map_.compute_sample(map_ws_, m);
+  defect_ = map_.compute_sample(map_ws_, view_joint_state(m));
   if (defect_) {
     ++counters_.malformed;
     return Verdict::malformed;
@@ -84,7 +84,7 @@ std::string LiveMonitor::describe_rejection(Verdict v, const sensor_msgs::JointS
     case Verdict::malformed:
       if (map_.num_joints() == 0)
         return m.name.empty() ? "position: missing (empty array)" : "name: joint names must be unique and non-empty";
-      return map_.describe(defect_, m);
+      return map_.describe(defect_, view_joint_state(m));
   }
   return "unknown";
 }

@@ -1,4 +1,4 @@
-#include "rcm/ros/joint_state_map.hpp"
+#include "rcm/io/joint_state_map.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -42,7 +42,7 @@ JointStateMap JointStateMap::make_positional(int num_joints, int message_size) {
   return m;
 }
 
-JointStateMap JointStateMap::make_from_message(const sensor_msgs::JointState& message, int max_joints) {
+JointStateMap JointStateMap::make_from_message(const JointStateView& message, int max_joints) {
   const auto n = static_cast<int>(message.name.empty() ? message.position.size() : message.name.size());
   const int read = max_joints > 0 ? std::min(n, max_joints) : n;
   if (!message.name.empty())
@@ -61,7 +61,7 @@ JointStateMap::Workspace JointStateMap::create_workspace() const {
   return ws;
 }
 
-JointStateDefect JointStateMap::compute_sample(Workspace& ws, const sensor_msgs::JointState& m) const {
+JointStateDefect JointStateMap::compute_sample(Workspace& ws, const JointStateView& m) const {
   const std::vector<double>* arrays[3] = {&m.position, &m.velocity, &m.effort};
   const char* array_names[3] = {"position", "velocity", "effort"};
   for (int a = 0; a < 3; ++a)
@@ -133,7 +133,7 @@ JointStateDefect JointStateMap::compute_sample(Workspace& ws, const sensor_msgs:
   return {};
 }
 
-std::string JointStateMap::describe(const JointStateDefect& d, const sensor_msgs::JointState& m) const {
+std::string JointStateMap::describe(const JointStateDefect& d, const JointStateView& m) const {
   auto joint_name = [&](int j) {
     return by_name() && j >= 0 && j < num_joints_ ? "'" + names_[static_cast<std::size_t>(j)] + "'"
                                                   : "joint " + std::to_string(j + 1);

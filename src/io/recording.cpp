@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <iostream>
 #include <map>
 #include <mutex>
 #include <string_view>
 
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
+#include "rcm/io/rosbag2.hpp"
 
 namespace rcm {
 namespace {
@@ -320,13 +322,23 @@ void register_recording_reader(const std::string& extension, RecordingFileReader
 }
 
 Recording load_recording(const std::filesystem::path& path, const RecordingReadOptions& options) {
+  std::error_code ec;
+  const std::string key = std::filesystem::is_directory(path, ec) ? "/" : path.extension().string();
   RecordingFileReader reader;
   {
     const std::lock_guard<std::mutex> lock(reader_mutex());
-    const auto it = readers().find(path.extension().string());
+    const auto it = readers().find(key);
     if (it != readers().end()) reader = it->second;
   }
   if (reader) return reader(path, options);
+  if (is_rosbag2_path(path)) {
+    TopicReadOptions topic_options;
+    topic_options.read = options;
+    Rosbag2ReadInfo info;
+    Recording rec = load_rosbag2_recording(path, topic_options, &info);
+    for (const std::string& w : info.warnings) std::cerr << "warning: " << w << "\n";
+    return rec;
+  }
   return parse_recording(read_text_file(path), path.string(), options);
 }
 

@@ -53,14 +53,14 @@ class Reader {
     return out;
   }
 
-  // A referenced recording: resolved against the manifest's folder, checked to exist.
+  // A referenced recording (a file, or a rosbag2 directory): resolved against the
+  // manifest's folder, checked to exist.
   std::filesystem::path file_at(const json& v, const std::string& field) const {
     const std::string rel = string_at(v, field);
     if (rel.empty()) fail(field, "empty path");
     const std::filesystem::path p = std::filesystem::path(rel).is_absolute() ? std::filesystem::path(rel) : dir_ / rel;
     std::error_code ec;
     if (!std::filesystem::exists(p, ec)) fail(field, "file not found: " + p.string());
-    if (std::filesystem::is_directory(p, ec)) fail(field, "is a directory, expected a recording: " + p.string());
     return p;
   }
 

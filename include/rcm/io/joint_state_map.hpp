@@ -1,7 +1,10 @@
 #pragma once
 // One sensor_msgs/JointState put in a fixed joint order and checked, without
-// allocating: what the rosbag reader and the live node share, so that a bag and
-// the live topic are held to the same rules.
+// allocating: what the ROS 1 and rosbag2 readers and the live nodes share, so
+// that every recording and every live topic is held to the same rules. The
+// message is seen through JointStateView, so that this layer knows no
+// middleware: ROS 1's generated struct, a CDR-decoded ROS 2 message and a DDS
+// sample all have the same four arrays.
 //
 // Rules (those of the CSV reader, in message terms):
 // - position, velocity and effort must all be present (non-empty);
@@ -15,13 +18,25 @@
 // Time is the caller's business (the bag reader and the node differ on what a
 // bad stamp means: an error or a rejected sample).
 
-#include <sensor_msgs/JointState.h>
-
 #include <cstddef>
 #include <string>
 #include <vector>
 
 namespace rcm {
+
+// The four arrays of a sensor_msgs/JointState, borrowed from the message.
+struct JointStateView {
+  const std::vector<std::string>& name;
+  const std::vector<double>& position;
+  const std::vector<double>& velocity;
+  const std::vector<double>& effort;
+};
+
+// Any message type with the four JointState arrays (ROS 1, decoded ROS 2).
+template <class Message>
+JointStateView view_joint_state(const Message& m) {
+  return {m.name, m.position, m.velocity, m.effort};
+}
 
 // What is wrong with a message; `kind == none` when nothing is. Plain data so
 // that a rejection costs no allocation; describe() makes the text (allocates).
@@ -62,7 +77,7 @@ class JointStateMap {
   static JointStateMap make_positional(int num_joints, int message_size = 0);
   // The order of a first message: by its names when it has any, else positional
   // over its position array; only its first `max_joints` joints when > 0.
-  static JointStateMap make_from_message(const sensor_msgs::JointState& message, int max_joints = 0);
+  static JointStateMap make_from_message(const JointStateView& message, int max_joints = 0);
 
   int num_joints() const { return num_joints_; }
   bool by_name() const { return !names_.empty(); }
@@ -73,10 +88,10 @@ class JointStateMap {
   // Checks `message` and writes its values in this map's order into the
   // workspace. Returns the first defect found (the workspace is then partly
   // written). No allocation.
-  JointStateDefect compute_sample(Workspace& workspace, const sensor_msgs::JointState& message) const;
+  JointStateDefect compute_sample(Workspace& workspace, const JointStateView& message) const;
 
   // "effort[2] ('outer_insertion'): expected a finite number, got nan" and the like.
-  std::string describe(const JointStateDefect& defect, const sensor_msgs::JointState& message) const;
+  std::string describe(const JointStateDefect& defect, const JointStateView& message) const;
 
  private:
   std::vector<std::string> names_;

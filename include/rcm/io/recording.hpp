@@ -2,9 +2,11 @@
 // One recording of the rcm-session/1 contract: time-stamped joint positions,
 // velocities and efforts of N >= 3 joints, optionally the ground-truth force.
 //
-// Two layouts are read: the contract's own CSV (time, position_i, velocity_i,
+// Text layouts read here: the contract's own CSV (time, position_i, velocity_i,
 // effort_i, force_x..z) and what `rostopic echo -p /PSM1/measured_js` writes
 // (%time in ns, field.position0.., field.velocity0.., field.effort0..).
+// Message recordings (ROS 1 bags, rosbag2) have their own readers
+// (io/rosbag2.hpp, ros/bag_reader.hpp) reached through load_recording.
 
 #include <Eigen/Core>
 #include <cstddef>
@@ -16,7 +18,7 @@
 
 namespace rcm {
 
-enum class RecordingLayout { rcm_csv, rostopic_csv, in_memory, rosbag };
+enum class RecordingLayout { rcm_csv, rostopic_csv, in_memory, rosbag, rosbag2 };
 
 struct Recording {
   std::string source;             // file path (for messages) or a description
@@ -61,10 +63,13 @@ struct RecordingReadOptions {
 Recording load_recording(const std::filesystem::path& path,
                          const RecordingReadOptions& options = {});
 
-// Readers of other file formats, chosen by the file's extension (".bag"):
-// load_recording, and so everything that loads a session's files, hands such a
-// file to its reader. rcm::core reads CSV only; the ROS library registers ".bag"
-// (ros/, register_bag_recording_reader). Registering an extension again replaces its reader.
+// Readers of other file formats, chosen by the file's extension (".bag"), or
+// "/" for a directory: load_recording, and so everything that loads a session's
+// files, hands such a file to its reader. rcm::core reads CSV, and rosbag2
+// directories, .db3 and .mcap files (io/rosbag2.hpp, default topic and options)
+// unless a reader is registered for them; the ROS library registers ".bag"
+// (ros/, register_bag_recording_reader), the CLI registers its --topic options.
+// Registering an extension again replaces its reader.
 using RecordingFileReader = std::function<Recording(const std::filesystem::path&, const RecordingReadOptions&)>;
 void register_recording_reader(const std::string& extension, RecordingFileReader reader);
 

@@ -1,9 +1,9 @@
 #pragma once
 // Rosbag recordings: the sensor_msgs/JointState topic of a bag (the dVRK's CRTK
 // /PSM1/measured_js) read into an rcm::Recording, held to the CSV reader's
-// rules (JointStateMap for each message; time strictly increasing; --dedupe
-// drops repeated samples), and optionally a geometry_msgs/WrenchStamped topic
-// as the evaluation-only force columns.
+// rules by the builder that every message reader shares
+// (io/message_recording.hpp), and optionally a geometry_msgs/WrenchStamped
+// topic as the evaluation-only force columns.
 //
 // Time: header.stamp of each message. Only when the topic's first message has a
 // zero stamp (a publisher that never sets it) is the bag's receive time used,
@@ -27,20 +27,13 @@
 #include <string>
 #include <vector>
 
-#include "rcm/io/recording.hpp"
+#include "rcm/io/message_recording.hpp"
 
 namespace rcm {
 
-inline constexpr const char* kDefaultJointStateTopic = "/PSM1/measured_js";
-
-struct BagReadOptions {
-  std::string topic = kDefaultJointStateTopic;  // sensor_msgs/JointState
-  std::string force_topic;                      // geometry_msgs/WrenchStamped; empty: no force columns
-  // Joint order of the recording by name; empty: the first message's order
-  // (by its names, or positional when it has none).
-  std::vector<std::string> joint_names;
-  RecordingReadOptions read;  // dedupe and min_joints apply; assumed_rate_hz is ignored (bags carry time)
-};
+// The options of every message-based reader (io/message_recording.hpp).
+// MessageTime::receive takes the bag's receive time for every message.
+using BagReadOptions = TopicReadOptions;
 
 struct BagReadInfo {
   std::vector<std::string> joint_names;  // the recording's joint order; empty when the messages carry no names

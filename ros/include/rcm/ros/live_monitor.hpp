@@ -20,7 +20,7 @@
 #include <vector>
 
 #include "rcm/estimation/online.hpp"
-#include "rcm/ros/joint_state_map.hpp"
+#include "rcm/io/joint_state_map.hpp"
 
 namespace rcm {
 

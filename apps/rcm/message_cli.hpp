@@ -1,0 +1,25 @@
+#pragma once
+// The options and readers of message recordings (ROS 1 bags, rosbag2) in the
+// CLI: one set of --topic / --force-topic / --time flags for every command.
+
+#include <CLI/CLI.hpp>
+
+#include <filesystem>
+#include <string>
+
+#include "rcm/io/message_recording.hpp"
+#include "rcm/io/rosbag2.hpp"
+
+namespace rcm::cli {
+
+// The options the flags set (one instance: a command line has one set of flags).
+TopicReadOptions& get_topic_options();
+// Adds --topic, --force-topic and --time to `cmd` (once).
+void add_topic_options(CLI::App& cmd);
+// A rosbag2 recording with `options`; prints its warnings and skipped-message
+// count to stderr and keeps its read info for find_rosbag2_info().
+Recording load_rosbag2(const std::filesystem::path& path, const TopicReadOptions& options);
+// The read info of a rosbag2 recording loaded in this run (by path as given), or null.
+const Rosbag2ReadInfo* find_rosbag2_info(const std::string& path);
+
+}  // namespace rcm::cli

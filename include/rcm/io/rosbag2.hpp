@@ -1,0 +1,56 @@
+#pragma once
+// ROS 2 recordings (rosbag2), read without ROS 2: a bag directory
+// (metadata.yaml, versions 1 to 9, and its files, split bags in order), or a
+// bare .db3 (SQLite storage) or .mcap (MCAP storage) file. Messages must be in
+// the "cdr" serialization; the JointState topic is decoded as
+// sensor_msgs/msg/JointState and the force topic as
+// geometry_msgs/msg/WrenchStamped, any other type is an error naming it.
+//
+// Time (integer ns throughout; Recording::time in s from the first sample):
+// - MessageTime::header (default): header.stamp. A zero stamp marks invalid
+//   data (the dVRK since cisst-ros 4.0): such messages are skipped and counted
+//   (Rosbag2ReadInfo), and a topic with no valid message is an error.
+// - MessageTime::receive: the recorder's receive time (SQLite timestamp, MCAP
+//   log_time), for every message.
+//
+// Every message is held to the same rules as a CSV row or a ROS 1 bag message
+// (io/message_recording.hpp), and errors name the file, the topic, the message
+// index (0-based on that topic, across the bag's files) and the field. An MCAP
+// file cut off by a crash (no footer) is read up to its last complete record
+// with a warning; every other defect of a file is an error.
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "rcm/io/message_recording.hpp"
+
+namespace rcm {
+
+struct Rosbag2ReadInfo {
+  std::string storage;                   // "sqlite3" or "mcap"
+  std::vector<std::string> files;        // the storage files read, in order
+  int metadata_version = 0;              // 0: no metadata.yaml (a bare file)
+  int sqlite_schema = 0;                 // SQLite schema version (0: before Humble, or MCAP)
+  std::string ros_distro;                // as recorded, when it is
+  std::vector<std::string> joint_names;  // the recording's joint order; empty when the messages carry no names
+  std::int64_t time_origin_ns = 0;       // absolute time of sample 0
+  std::size_t messages = 0;              // JointState messages on the topic
+  std::size_t zero_stamp_messages = 0;   // of them, skipped for a zero header.stamp
+  std::size_t force_messages = 0;
+  std::size_t force_zero_stamp_messages = 0;
+  std::string force_frame_id;
+  std::vector<std::string> warnings;     // e.g. an MCAP file cut off by a crash
+};
+
+// True when `path` is read as a rosbag2 recording: a directory, or a file
+// ending in .db3 or .mcap.
+bool is_rosbag2_path(const std::filesystem::path& path);
+
+// Throws InputError as described above.
+Recording load_rosbag2_recording(const std::filesystem::path& path, const TopicReadOptions& options = {},
+                                 Rosbag2ReadInfo* info = nullptr);
+
+}  // namespace rcm

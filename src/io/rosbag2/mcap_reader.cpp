@@ -1,0 +1,580 @@
+#include "io/rosbag2/mcap_reader.hpp"
+
+#include <lz4frame.h>
+#include <zstd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <system_error>
+#include <unordered_map>
+#include <utility>
+
+#include "rcm/common/error.hpp"
+
+namespace rcm::mcap {
+namespace {
+
+constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
+constexpr std::uint64_t kPrefix = 9;       // opcode + uint64 content length
+constexpr std::uint64_t kFooterBody = 20;  // summary_start, summary_offset_start, summary_crc
+constexpr std::uint64_t kTail = kPrefix + kFooterBody + sizeof kMagic;
+constexpr std::uint64_t kChunkFixed = 8 + 8 + 8 + 4 + 4;  // times, sizes, crc, compression length
+constexpr std::uint64_t kMessageFixed = 2 + 4 + 8 + 8;
+constexpr std::size_t kReadBlock = 1 << 16;
+
+// clang-format off
+enum Op : std::uint8_t {
+  kHeader = 0x01, kFooter, kSchema, kChannel, kMessage, kChunk, kMessageIndex, kChunkIndex, kAttachment,
+  kAttachmentIndex, kStatistics, kMetadata, kMetadataIndex, kSummaryOffset, kDataEnd
+};
+// clang-format on
+
+std::string record_name(std::uint8_t op) {
+  static const char* const names[] = {"Header",     "Footer",       "Schema",        "Channel",       "Message",
+                                      "Chunk",      "MessageIndex", "ChunkIndex",    "Attachment",    "AttachmentIndex",
+                                      "Statistics", "Metadata",     "MetadataIndex", "SummaryOffset", "DataEnd"};
+  if (op >= kHeader && op <= kDataEnd) return names[op - 1];
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "unknown opcode 0x%02x", op);
+  return buf;
+}
+
+std::string hex32(std::uint32_t v) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "0x%08x", v);
+  return buf;
+}
+
+std::uint64_t le(const std::uint8_t* p, int bytes) {
+  std::uint64_t v = 0;
+  for (int i = bytes - 1; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+
+// CRC-32 as in zlib (reflected polynomial 0xEDB88320), sliced by 8 because the
+// data-section CRC covers every byte of a possibly multi-GB recording.
+struct CrcTables {
+  std::uint32_t t[8][256];
+};
+
+const CrcTables& crc_tables() {
+  static const CrcTables tables = [] {
+    CrcTables c{};
+    for (std::uint32_t i = 0; i < 256; ++i) {
+      std::uint32_t v = i;
+      for (int k = 0; k < 8; ++k) v = (v >> 1) ^ (0xEDB88320u & (0u - (v & 1u)));
+      c.t[0][i] = v;
+    }
+    for (int s = 1; s < 8; ++s)
+      for (int i = 0; i < 256; ++i) c.t[s][i] = (c.t[s - 1][i] >> 8) ^ c.t[0][c.t[s - 1][i] & 0xff];
+    return c;
+  }();
+  return tables;
+}
+
+// Same chaining convention as zlib's crc32(): start from 0, feed pieces in order.
+std::uint32_t crc32_update(std::uint32_t crc, const std::uint8_t* p, std::size_t n) {
+  const auto& t = crc_tables().t;
+  std::uint32_t c = ~crc;
+  for (; n >= 8; p += 8, n -= 8) {
+    const std::uint32_t lo = c ^ static_cast<std::uint32_t>(le(p, 4));
+    const std::uint32_t hi = static_cast<std::uint32_t>(le(p + 4, 4));
+    c = t[7][lo & 0xff] ^ t[6][(lo >> 8) & 0xff] ^ t[5][(lo >> 16) & 0xff] ^ t[4][lo >> 24] ^ t[3][hi & 0xff] ^
+        t[2][(hi >> 8) & 0xff] ^ t[1][(hi >> 16) & 0xff] ^ t[0][hi >> 24];
+  }
+  for (; n > 0; ++p, --n) c = (c >> 8) ^ t[0][(c ^ *p) & 0xff];
+  return ~c;
+}
+
+// Decodes the fields of one record body held in memory. A field that does not
+// fit clears ok() instead of throwing, so that a record is checked once after
+// all its fields are read.
+class Fields {
+ public:
+  Fields(const std::uint8_t* p, std::uint64_t n) : p_(p), n_(n) {}
+  std::uint64_t uint(int bytes) { return take(bytes) ? le(p_ + pos_ - bytes, bytes) : 0; }
+  std::string str() {
+    const std::uint64_t len = uint(4);
+    if (!take(len)) return {};
+    return std::string(reinterpret_cast<const char*>(p_ + pos_ - len), len);
+  }
+  void skip_prefixed() { take(uint(4)); }  // uint32-length bytes or map
+  bool ok() const { return ok_; }
+
+ private:
+  bool take(std::uint64_t k) {
+    if (!ok_ || k > n_ - pos_) return ok_ = false;
+    pos_ += k;
+    return true;
+  }
+  const std::uint8_t* p_;
+  std::uint64_t n_, pos_ = 0;
+  bool ok_ = true;
+};
+
+std::string at(std::uint64_t offset, const std::string& what) {
+  return "byte " + std::to_string(offset) + " (" + what + ")";
+}
+
+// Where a record is; formatted only when an error is reported, so that the
+// per-message path does not build strings.
+struct Where {
+  std::uint64_t offset = 0;  // of the record, in the file or in the chunk's decompressed records
+  std::uint8_t op = 0;
+  bool in_chunk = false;
+  std::uint64_t chunk = 0;  // offset of the enclosing Chunk record
+  std::string str() const {
+    if (!in_chunk) return at(offset, record_name(op) + " record");
+    return at(chunk, "Chunk record") + ", " + at(offset, record_name(op) + " record in its decompressed records");
+  }
+};
+
+// Buffers are reused from record to record and grow geometrically, so that
+// reading allocates a few times per file rather than per chunk or message.
+void grow(std::vector<std::uint8_t>& v, std::uint64_t n) {
+  if (v.size() < n) v.resize(std::max<std::uint64_t>(n, std::min<std::uint64_t>(2 * v.size(), kMaxRecordBytes + 1)));
+}
+
+struct ZstdFree {
+  void operator()(ZSTD_DCtx* c) const { ZSTD_freeDCtx(c); }
+};
+struct Lz4Free {
+  void operator()(LZ4F_dctx* c) const { LZ4F_freeDecompressionContext(c); }
+};
+
+class Reader {
+ public:
+  Reader(const std::filesystem::path& path, const std::function<bool(const Channel&)>& wanted,
+         const std::function<void(const MessageRef&)>& on_message)
+      : path_(path.string()), wanted_(wanted), on_message_(on_message) {}
+
+  ReadResult run() {
+    open();
+    read_data_and_summary();
+    if (complete_) read_footer();
+    return std::move(result_);
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& where, const std::string& what) const {
+    InputLocation loc;
+    loc.file = path_;
+    loc.field = where;
+    loc.kind = InputLocation::Kind::plain;
+    throw InputError(loc, what);
+  }
+  [[noreturn]] void fail(const Where& where, const std::string& what) const { fail(where.str(), what); }
+  static Where at_record(std::uint64_t offset, std::uint8_t op) { return Where{offset, op, false, 0}; }
+
+  void read(std::uint8_t* dst, std::uint64_t n) {
+    in_.read(reinterpret_cast<char*>(dst), static_cast<std::streamsize>(n));
+    if (static_cast<std::uint64_t>(in_.gcount()) != n)
+      fail(at(pos_, "read"), "cannot read " + std::to_string(n) + " bytes (file changed or I/O error)");
+    if (data_crc_on_) data_crc_ = crc32_update(data_crc_, dst, n);
+    pos_ += n;
+  }
+  // Reads rather than seeks: skipped bytes still count in the data-section CRC
+  // (and in `crc` when given).
+  void skip(std::uint64_t n, std::uint32_t* crc = nullptr) {
+    block_.resize(kReadBlock);
+    while (n > 0) {
+      const std::uint64_t k = std::min<std::uint64_t>(n, block_.size());
+      read(block_.data(), k);
+      if (crc) *crc = crc32_update(*crc, block_.data(), k);
+      n -= k;
+    }
+  }
+  void seek(std::uint64_t offset) {
+    in_.clear();
+    in_.seekg(static_cast<std::streamoff>(offset));
+    pos_ = offset;
+  }
+  const std::uint8_t* read_body(std::uint64_t len, std::uint64_t offset, std::uint8_t op) {
+    if (len > kMaxRecordBytes)
+      fail(at_record(offset, op),
+           "record length " + std::to_string(len) + " exceeds the " + std::to_string(kMaxRecordBytes) + "-byte limit");
+    grow(body_, len);
+    read(body_.data(), len);
+    return body_.data();
+  }
+
+  void open() {
+    std::error_code ec;
+    size_ = std::filesystem::file_size(path_, ec);
+    in_.open(path_, std::ios::binary);
+    if (ec || !in_) fail(std::string(), "cannot open the file (" + (ec ? ec.message() : "not readable") + ")");
+    std::uint8_t magic[8] = {};
+    const std::uint64_t have = std::min<std::uint64_t>(size_, sizeof magic);
+    read(magic, have);
+    if (size_ == 0) fail(at(0, "leading magic"), "empty file, not an MCAP file");
+    if (!std::equal(magic, magic + std::min<std::uint64_t>(have, 5), kMagic))
+      fail(at(0, "leading magic"), "not an MCAP file (it does not start with \\x89MCAP)");
+    if (have < sizeof magic)
+      fail(at(0, "leading magic"), "the file ends inside the leading magic (" + std::to_string(size_) + " bytes)");
+    if (magic[5] != kMagic[5])
+      fail(at(5, "leading magic"), "unsupported MCAP version " +
+                                       quote_token(std::string(1, static_cast<char>(magic[5]))) +
+                                       " (this reader knows version '0')");
+    if (!std::equal(magic + 6, magic + 8, kMagic + 6))
+      fail(at(6, "leading magic"), "not an MCAP file (leading magic ends wrong)");
+
+    // A Footer and trailing magic at the very end mean the writer finished: from
+    // then on every inconsistency is corruption, never truncation.
+    if (size_ >= sizeof magic + kTail) {
+      std::uint8_t tail[kTail];
+      seek(size_ - kTail);
+      data_crc_on_ = false;
+      read(tail, kTail);
+      complete_ = tail[0] == kFooter && le(tail + 1, 8) == kFooterBody &&
+                  std::equal(tail + kPrefix + kFooterBody, tail + kTail, kMagic);
+      seek(sizeof magic);
+      data_crc_on_ = true;
+    }
+    end_ = complete_ ? size_ - kTail : size_;
+  }
+
+  // `cut` names what the end of the file interrupts, empty at a record boundary.
+  void truncated_at(std::uint64_t record_start, const std::string& cut) {
+    result_.truncated = true;
+    result_.truncation = "the file ends at byte " + std::to_string(size_) +
+                         (cut.empty() ? " after a complete record"
+                                      : " inside " + cut + " starting at byte " + std::to_string(record_start)) +
+                         " (no complete Footer: the recorder did not finish); read " +
+                         std::to_string(result_.messages) + " messages in " + std::to_string(result_.chunks) +
+                         " complete chunks and the records before byte " + std::to_string(record_start);
+  }
+
+  void read_data_and_summary() {
+    bool seen_header = false, in_summary = false;
+    while (true) {
+      const std::uint64_t start = pos_;
+      const std::uint32_t crc_before = data_crc_;
+      if (complete_ && start == end_) break;
+      if (end_ - start < kPrefix) {
+        truncated_at(start, start == size_ ? "" : "a record header");
+        return;
+      }
+      std::uint8_t prefix[kPrefix];
+      read(prefix, kPrefix);
+      const std::uint8_t op = prefix[0];
+      const std::uint64_t len = le(prefix + 1, 8);
+      if (len > end_ - pos_) {
+        if (complete_)
+          fail(at_record(start, op), "record length " + std::to_string(len) + " runs past the Footer at byte " +
+                                         std::to_string(end_) + ": the file is corrupt");
+        truncated_at(start, "the " + record_name(op) + " record");
+        return;
+      }
+      if (!seen_header && op != kHeader) fail(at_record(start, op), "expected the Header record right after the magic");
+      switch (op) {
+        case kHeader: {
+          if (seen_header) fail(at_record(start, op), "second Header record");
+          seen_header = true;
+          Fields f(read_body(len, start, op), len);
+          result_.profile = f.str();
+          result_.library = f.str();
+          if (!f.ok()) fail(at_record(start, op), "record too short for its profile and library");
+          break;
+        }
+        case kSchema: declare_schema(read_body(len, start, op), len, at_record(start, op)); break;
+        case kChannel: declare_channel(read_body(len, start, op), len, at_record(start, op)); break;
+        case kMessage:
+        case kChunk:
+          if (in_summary) fail(at_record(start, op), "record after DataEnd, in the summary section");
+          if (op == kMessage)
+            read_file_message(start, len);
+          else
+            read_chunk(start, len);
+          break;
+        case kDataEnd: {
+          if (in_summary) fail(at_record(start, op), "second DataEnd record");
+          Fields f(read_body(len, start, op), len);
+          const auto expected = static_cast<std::uint32_t>(f.uint(4));
+          if (!f.ok()) fail(at_record(start, op), "record too short for data_section_crc");
+          // The reference writers start this CRC at the leading magic, not after the Header.
+          if (expected != 0 && expected != crc_before)
+            fail(at_record(start, op), "data section CRC mismatch: DataEnd says " + hex32(expected) + ", bytes 0.." +
+                                           std::to_string(start) + " give " + hex32(crc_before));
+          in_summary = true;
+          data_crc_on_ = false;
+          summary_begin_ = pos_;
+          break;
+        }
+        case kFooter:
+          if (complete_) fail(at_record(start, op), "Footer record before the end of the file");
+          skip(len);
+          result_.truncated = true;
+          result_.truncation = "the file ends at byte " + std::to_string(size_) +
+                               " without its trailing magic after the Footer at byte " + std::to_string(start) +
+                               "; all " + std::to_string(result_.messages) + " messages were read";
+          return;
+        default: skip(len);  // indexes, attachments, metadata, statistics, future opcodes
+      }
+    }
+    if (!seen_header) fail(at(sizeof kMagic, "Header record"), "no Header record before the Footer");
+    // The spec ends every data section with DataEnd; without it a corrupt opcode
+    // could hide the data-section CRC.
+    if (!in_summary) fail(at(end_, "Footer record"), "no DataEnd record before the Footer");
+  }
+
+  void read_footer() {
+    const std::uint64_t start = pos_;
+    std::uint8_t tail[kPrefix + kFooterBody];
+    read(tail, sizeof tail);
+    const std::uint64_t summary_start = le(tail + kPrefix, 8);
+    const std::uint64_t summary_offset_start = le(tail + kPrefix + 8, 8);
+    const auto expected = static_cast<std::uint32_t>(le(tail + kPrefix + 16, 4));
+    if (summary_start > start || summary_offset_start > start)
+      fail(at_record(start, kFooter), "summary_start " + std::to_string(summary_start) + " or summary_offset_start " +
+                                          std::to_string(summary_offset_start) + " lies past the Footer");
+    result_.has_summary = summary_start != 0;
+    if (expected == 0) return;
+    // The summary CRC runs from the summary section (or, without one, from the end
+    // of DataEnd) through the Footer's summary_offset_start field.
+    const std::uint64_t begin = summary_start != 0 ? summary_start : summary_begin_ != 0 ? summary_begin_ : start;
+    const std::uint64_t end = start + kPrefix + 16;
+    std::uint32_t crc = 0;
+    seek(begin);
+    skip(end - begin, &crc);
+    if (crc != expected)
+      fail(at_record(start, kFooter), "summary CRC mismatch: Footer says " + hex32(expected) + ", bytes " +
+                                          std::to_string(begin) + ".." + std::to_string(end) + " give " + hex32(crc));
+  }
+
+  void declare_schema(const std::uint8_t* p, std::uint64_t n, const Where& where) {
+    Fields f(p, n);
+    const auto id = static_cast<std::uint16_t>(f.uint(2));
+    std::string name = f.str(), encoding = f.str();
+    f.skip_prefixed();
+    if (!f.ok()) fail(where, "Schema record too short for its fields");
+    if (id == 0) fail(where, "Schema id 0 is reserved for \"no schema\"");
+    const auto it = schemas_.find(id);
+    if (it == schemas_.end()) {
+      schemas_.emplace(id, std::make_pair(std::move(name), std::move(encoding)));
+    } else if (it->second.first != name || it->second.second != encoding) {
+      fail(where, "Schema " + std::to_string(id) + " redeclared as " + quote_token(name) + " (was " +
+                      quote_token(it->second.first) + ")");
+    }
+  }
+
+  void declare_channel(const std::uint8_t* p, std::uint64_t n, const Where& where) {
+    Fields f(p, n);
+    Channel c;
+    c.id = static_cast<std::uint16_t>(f.uint(2));
+    c.schema_id = static_cast<std::uint16_t>(f.uint(2));
+    c.topic = f.str();
+    c.message_encoding = f.str();
+    f.skip_prefixed();
+    if (!f.ok()) fail(where, "Channel record too short for its fields");
+    if (c.schema_id != 0) {
+      const auto s = schemas_.find(c.schema_id);
+      if (s == schemas_.end())
+        fail(where, "Channel " + std::to_string(c.id) + " (topic " + quote_token(c.topic) + ") names schema " +
+                        std::to_string(c.schema_id) + ", which no earlier Schema record declares");
+      c.schema_name = s->second.first;
+      c.schema_encoding = s->second.second;
+    }
+    const auto it = channel_index_.find(c.id);
+    if (it != channel_index_.end()) {
+      const Channel& old = result_.channels[it->second];
+      // Writers repeat channels in the summary and in every chunk that uses them.
+      if (old.topic != c.topic || old.schema_id != c.schema_id || old.message_encoding != c.message_encoding)
+        fail(where, "Channel " + std::to_string(c.id) + " redeclared as topic " + quote_token(c.topic) + " (was " +
+                        quote_token(old.topic) + ")");
+      return;
+    }
+    channel_index_.emplace(c.id, result_.channels.size());
+    wanted_flags_.push_back(!wanted_ || wanted_(c));
+    result_.channels.push_back(std::move(c));
+  }
+
+  // Returns the channel's index, or fails when no Channel record came first.
+  std::size_t channel_of(std::uint16_t id, const Where& where) const {
+    const auto it = channel_index_.find(id);
+    if (it == channel_index_.end())
+      fail(where, "Message on channel " + std::to_string(id) + ", which no earlier Channel record declares");
+    return it->second;
+  }
+
+  void deliver(std::size_t channel, const std::uint8_t* fixed, const std::uint8_t* data, std::uint64_t size,
+               std::uint64_t record_offset, std::uint64_t chunk_offset) {
+    if (!on_message_) return;
+    MessageRef m;
+    m.channel = &result_.channels[channel];
+    m.sequence = static_cast<std::uint32_t>(le(fixed + 2, 4));
+    m.log_time_ns = le(fixed + 6, 8);
+    m.publish_time_ns = le(fixed + 14, 8);
+    m.data = data;
+    m.size = static_cast<std::size_t>(size);
+    m.record_offset = record_offset;
+    m.chunk_offset = chunk_offset;
+    on_message_(m);
+  }
+
+  void read_file_message(std::uint64_t start, std::uint64_t len) {
+    if (len < kMessageFixed) fail(at_record(start, kMessage), "record too short for its fields");
+    std::uint8_t fixed[kMessageFixed];
+    read(fixed, kMessageFixed);
+    const std::size_t channel = channel_of(static_cast<std::uint16_t>(le(fixed, 2)), at_record(start, kMessage));
+    ++result_.messages;
+    const std::uint64_t size = len - kMessageFixed;
+    if (!wanted_flags_[channel] || !on_message_) return skip(size);
+    const std::uint8_t* data = read_body(size, start, kMessage);
+    deliver(channel, fixed, data, size, start, 0);
+  }
+
+  void read_chunk(std::uint64_t start, std::uint64_t len) {
+    const Where where = at_record(start, kChunk);
+    if (len < kChunkFixed + 8) fail(where, "record too short for its fields");
+    std::uint8_t fixed[kChunkFixed];
+    read(fixed, kChunkFixed);
+    const std::uint64_t uncompressed_size = le(fixed + 16, 8);
+    const auto expected_crc = static_cast<std::uint32_t>(le(fixed + 24, 4));
+    const std::uint64_t name_len = le(fixed + 28, 4);
+    if (name_len > len - kChunkFixed - 8)
+      fail(where, "compression name of " + std::to_string(name_len) + " bytes overruns the record");
+    std::string compression(name_len, '\0');
+    read(reinterpret_cast<std::uint8_t*>(compression.data()), name_len);
+    std::uint8_t records_len_bytes[8];
+    read(records_len_bytes, 8);
+    const std::uint64_t records_len = le(records_len_bytes, 8);
+    const std::uint64_t spare = len - kChunkFixed - name_len - 8;
+    if (records_len > spare) fail(where, "records length " + std::to_string(records_len) + " overruns the record");
+    if (!compression.empty() && compression != "zstd" && compression != "lz4")
+      fail(where,
+           "unsupported chunk compression " + quote_token(compression) + " (supported: none, \"lz4\", \"zstd\")");
+    if (uncompressed_size > kMaxRecordBytes)
+      fail(where, "uncompressed_size " + std::to_string(uncompressed_size) + " exceeds the " +
+                      std::to_string(kMaxRecordBytes) + "-byte limit");
+    if (compression.empty() && uncompressed_size != records_len)
+      fail(where, "uncompressed chunk holds " + std::to_string(records_len) + " bytes but uncompressed_size says " +
+                      std::to_string(uncompressed_size));
+    const std::uint64_t produced = decompress(compression, records_len, uncompressed_size, where);
+    if (produced != uncompressed_size)
+      fail(where, compression + " data decompresses to " +
+                      (produced > uncompressed_size ? "more than" : std::to_string(produced)) +
+                      " bytes, uncompressed_size says " + std::to_string(uncompressed_size));
+    skip(spare - records_len);  // fields added by later spec revisions
+    if (expected_crc != 0) {
+      const std::uint32_t crc = crc32_update(0, records_.data(), uncompressed_size);
+      if (crc != expected_crc)
+        fail(where, "chunk CRC mismatch: uncompressed_crc says " + hex32(expected_crc) +
+                        ", the decompressed records give " + hex32(crc));
+    }
+    read_chunk_records(start, uncompressed_size);
+    ++result_.chunks;
+  }
+
+  // Decompresses into records_, growing it only as output actually arrives, so
+  // that a corrupt uncompressed_size cannot trigger a huge allocation. Room for
+  // one byte more than declared detects data that decompresses to too much.
+  std::uint64_t decompress(const std::string& compression, std::uint64_t in_len, std::uint64_t declared,
+                           const Where& where) {
+    if (compression.empty()) {
+      grow(records_, declared);
+      read(records_.data(), declared);
+      return declared;
+    }
+    const bool zstd = compression == "zstd";
+    if (zstd && !zstd_) zstd_.reset(ZSTD_createDCtx());
+    if (!zstd && !lz4_) {
+      LZ4F_dctx* ctx = nullptr;
+      if (!LZ4F_isError(LZ4F_createDecompressionContext(&ctx, LZ4F_VERSION))) lz4_.reset(ctx);
+    }
+    if (zstd ? !zstd_ : !lz4_) fail(where, "cannot create a " + compression + " decoder");
+    if (zstd)
+      ZSTD_DCtx_reset(zstd_.get(), ZSTD_reset_session_only);
+    else
+      LZ4F_resetDecompressionContext(lz4_.get());
+    const std::uint64_t limit = declared + 1;
+    const std::uint64_t first = std::min<std::uint64_t>(limit, std::max<std::uint64_t>(4 * in_len, kReadBlock));
+    grow(records_, first);
+    packed_.resize(kReadBlock);
+    std::uint64_t produced = 0, left = in_len;
+    std::size_t in_pos = 0, in_end = 0, pending = 1;  // pending == 0: the frame is complete
+    while (true) {
+      if (in_pos == in_end && left > 0) {
+        in_end = static_cast<std::size_t>(std::min<std::uint64_t>(left, packed_.size()));
+        read(packed_.data(), in_end);
+        left -= in_end;
+        in_pos = 0;
+      }
+      if (produced == records_.size() && produced < limit) grow(records_, std::min(limit, 2 * produced));
+      const std::uint64_t room = std::min<std::uint64_t>(limit, records_.size()) - produced;
+      if (room == 0) break;
+      std::size_t wrote = 0;
+      if (zstd) {
+        ZSTD_inBuffer ib{packed_.data(), in_end, in_pos};
+        ZSTD_outBuffer ob{records_.data() + produced, static_cast<std::size_t>(room), 0};
+        pending = ZSTD_decompressStream(zstd_.get(), &ob, &ib);
+        if (ZSTD_isError(pending)) fail(where, std::string("zstd decompression failed: ") + ZSTD_getErrorName(pending));
+        in_pos = ib.pos;
+        wrote = ob.pos;
+      } else {
+        std::size_t dst = static_cast<std::size_t>(room), src = in_end - in_pos;
+        pending = LZ4F_decompress(lz4_.get(), records_.data() + produced, &dst, packed_.data() + in_pos, &src, nullptr);
+        if (LZ4F_isError(pending)) fail(where, std::string("lz4 decompression failed: ") + LZ4F_getErrorName(pending));
+        in_pos += src;
+        wrote = dst;
+      }
+      produced += wrote;
+      // The decoder stops short of the room it had only when it needs more input.
+      if (in_pos == in_end && left == 0 && wrote < room) break;
+    }
+    if (produced <= declared && pending != 0)
+      fail(where, compression + " data ends before the end of its frame (truncated or corrupt chunk)");
+    return produced;
+  }
+
+  void read_chunk_records(std::uint64_t chunk, std::uint64_t size) {
+    for (std::uint64_t p = 0; p < size;) {
+      const std::uint8_t op = records_[p];
+      const Where where{p, op, true, chunk};
+      if (size - p < kPrefix) fail(where, "record header cut by the end of the chunk");
+      const std::uint64_t len = le(&records_[p + 1], 8);
+      if (len > size - p - kPrefix)
+        fail(where, "record length " + std::to_string(len) + " runs past the end of the chunk");
+      const std::uint8_t* body = records_.data() + p + kPrefix;
+      if (op == kSchema) {
+        declare_schema(body, len, where);
+      } else if (op == kChannel) {
+        declare_channel(body, len, where);
+      } else if (op == kMessage) {
+        if (len < kMessageFixed) fail(where, "record too short for its fields");
+        const std::size_t channel = channel_of(static_cast<std::uint16_t>(le(body, 2)), where);
+        ++result_.messages;
+        if (wanted_flags_[channel]) deliver(channel, body, body + kMessageFixed, len - kMessageFixed, p, chunk);
+      }
+      p += kPrefix + len;
+    }
+  }
+
+  std::string path_;
+  const std::function<bool(const Channel&)>& wanted_;
+  const std::function<void(const MessageRef&)>& on_message_;
+  std::ifstream in_;
+  std::uint64_t size_ = 0, pos_ = 0;
+  std::uint64_t end_ = 0;  // where records must end: the Footer, or the end of a cut file
+  bool complete_ = false;  // the file ends with Footer + magic
+  bool data_crc_on_ = true;
+  std::uint32_t data_crc_ = 0;
+  std::uint64_t summary_begin_ = 0;  // first byte after DataEnd
+  ReadResult result_;
+  std::unordered_map<std::uint16_t, std::pair<std::string, std::string>> schemas_;  // name, encoding
+  std::unordered_map<std::uint16_t, std::size_t> channel_index_;
+  std::vector<bool> wanted_flags_;
+  std::vector<std::uint8_t> records_, packed_, body_, block_;  // reused across records
+  std::unique_ptr<ZSTD_DCtx, ZstdFree> zstd_;
+  std::unique_ptr<LZ4F_dctx, Lz4Free> lz4_;
+};
+
+}  // namespace
+
+ReadResult read_mcap(const std::filesystem::path& path, const std::function<bool(const Channel&)>& wanted,
+                     const std::function<void(const MessageRef&)>& on_message) {
+  return Reader(path, wanted, on_message).run();
+}
+
+}  // namespace rcm::mcap

@@ -1,0 +1,526 @@
+// rosbag2 recordings without ROS 2: CDR decoding against hand-laid bytes, the
+// SQLite layouts rosbag2 has written (before Humble, Humble, Jazzy), bag
+// directories with metadata.yaml and split files, MCAP files written by the
+// reference implementation, the time rules (zero stamp = invalid; --time
+// receive), and a located error for every defect.
+#include <gtest/gtest.h>
+#include <sqlite3.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sys/wait.h>
+
+#include <nlohmann/json.hpp>
+
+#include "io/rosbag2/cdr.hpp"
+#include "rcm/common/error.hpp"
+#include "rcm/io/recording.hpp"
+#include "rcm/io/rosbag2.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+class TempDir {
+ public:
+  TempDir() {
+    std::random_device rd;
+    path_ = fs::temp_directory_path() / ("rcm_test_rosbag2_" + std::to_string(rd()));
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+const std::vector<std::string> kNames = {"outer_yaw", "outer_pitch", "outer_insertion", "outer_roll"};
+
+rcm::cdr::JointState joint_state(int k, std::int64_t stamp_ns) {
+  rcm::cdr::JointState m;
+  m.header.sec = static_cast<std::int32_t>(stamp_ns / 1000000000);
+  m.header.nanosec = static_cast<std::uint32_t>(stamp_ns % 1000000000);
+  m.name = kNames;
+  for (int j = 0; j < 4; ++j) {
+    m.position.push_back(0.1 * (j + 1) + 0.001 * k);
+    m.velocity.push_back(0.01 * (j + 1));
+    m.effort.push_back(-0.05 * (j + 1) + 0.0001 * k);
+  }
+  return m;
+}
+
+rcm::cdr::WrenchStamped wrench(int k, std::int64_t stamp_ns) {
+  rcm::cdr::WrenchStamped m;
+  m.header.sec = static_cast<std::int32_t>(stamp_ns / 1000000000);
+  m.header.nanosec = static_cast<std::uint32_t>(stamp_ns % 1000000000);
+  m.header.frame_id = "PSM1";
+  m.force[0] = 1.0 + 0.01 * k;
+  m.force[1] = -2.0;
+  m.force[2] = 0.5;
+  return m;
+}
+
+struct Topic {
+  std::string name, type, format = "cdr";
+};
+struct Message {
+  int topic_id;  // 1-based
+  std::int64_t receive_ns;
+  std::vector<std::uint8_t> data;
+};
+
+void exec(sqlite3* db, const std::string& sql) {
+  char* err = nullptr;
+  ASSERT_EQ(sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &err), SQLITE_OK) << (err ? err : "") << "\n" << sql;
+}
+
+// A .db3 as rosbag2 writes it. schema 0: before Humble (no schema table; with
+// `qos` the offered_qos_profiles column, as Foxy wrote); 3: Humble; 4: Jazzy.
+void write_db3(const fs::path& path, int schema, const std::vector<Topic>& topics, const std::vector<Message>& messages,
+               bool qos = true) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  if (schema >= 3) {
+    exec(db, "CREATE TABLE schema(schema_version INTEGER PRIMARY KEY, ros_distro TEXT NOT NULL);");
+    exec(db, "INSERT INTO schema VALUES (" + std::to_string(schema) + ", '" + (schema == 3 ? "humble" : "jazzy") + "');");
+    exec(db, "CREATE TABLE metadata(id INTEGER PRIMARY KEY, metadata_version INTEGER NOT NULL, metadata TEXT NOT NULL);");
+  }
+  std::string cols = "id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT NOT NULL, serialization_format TEXT NOT NULL";
+  if (qos || schema >= 3) cols += ", offered_qos_profiles TEXT NOT NULL";
+  if (schema >= 4) cols += ", type_description_hash TEXT NOT NULL";
+  exec(db, "CREATE TABLE topics(" + cols + ");");
+  if (schema >= 4)
+    exec(db, "CREATE TABLE message_definitions(id INTEGER PRIMARY KEY, topic_type TEXT NOT NULL, encoding TEXT NOT "
+             "NULL, encoded_message_definition TEXT NOT NULL, type_description_hash TEXT NOT NULL);");
+  exec(db, "CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, timestamp INTEGER NOT NULL, data "
+           "BLOB NOT NULL);");
+  exec(db, "CREATE INDEX timestamp_idx ON messages (timestamp ASC);");
+  for (std::size_t i = 0; i < topics.size(); ++i) {
+    std::string v = std::to_string(i + 1) + ", '" + topics[i].name + "', '" + topics[i].type + "', '" + topics[i].format + "'";
+    if (qos || schema >= 3) v += ", ''";
+    if (schema >= 4) v += ", 'RIHS01_0'";
+    exec(db, "INSERT INTO topics VALUES (" + v + ");");
+    if (schema >= 4)
+      exec(db, "INSERT INTO message_definitions (topic_type, encoding, encoded_message_definition, "
+               "type_description_hash) VALUES ('" + topics[i].type + "', 'ros2msg', '', 'RIHS01_0');");
+  }
+  sqlite3_stmt* s = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, "INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)", -1, &s, nullptr),
+            SQLITE_OK);
+  for (const Message& m : messages) {
+    sqlite3_bind_int(s, 1, m.topic_id);
+    sqlite3_bind_int64(s, 2, m.receive_ns);
+    sqlite3_bind_blob(s, 3, m.data.data(), static_cast<int>(m.data.size()), SQLITE_TRANSIENT);
+    ASSERT_EQ(sqlite3_step(s), SQLITE_DONE);
+    sqlite3_reset(s);
+  }
+  sqlite3_finalize(s);
+  sqlite3_close(db);
+}
+
+constexpr std::int64_t kT0 = 1700000000000000000;  // ns
+constexpr std::int64_t kDt = 10000000;             // 100 Hz
+
+// `n` joint states (topic 1) and `n / 2` wrenches at half the rate (topic 2);
+// receive time 1 ms after the stamp.
+std::vector<Message> make_messages(int n, int first = 0) {
+  std::vector<Message> out;
+  for (int k = first; k < first + n; ++k) {
+    const std::int64_t t = kT0 + k * kDt;
+    out.push_back({1, t + 1000000, rcm::cdr::encode(joint_state(k, t))});
+    if (k % 2 == 0) out.push_back({2, t + 1000000, rcm::cdr::encode(wrench(k, t))});
+  }
+  return out;
+}
+
+const std::vector<Topic> kTopics = {{"/PSM1/measured_js", "sensor_msgs/msg/JointState"},
+                                    {"/PSM1/body/measured_cf", "geometry_msgs/msg/WrenchStamped"}};
+
+void expect_error(const std::function<void()>& f, const std::vector<std::string>& needles) {
+  try {
+    f();
+    ADD_FAILURE() << "accepted; expected an error containing '" << needles.front() << "'";
+  } catch (const rcm::InputError& e) {
+    for (const auto& n : needles)
+      EXPECT_NE(std::string(e.what()).find(n), std::string::npos) << "message: " << e.what() << "\nmissing: " << n;
+  }
+}
+
+void write_text(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
+
+std::string metadata_yaml(int version, const std::string& storage, const std::vector<std::string>& files) {
+  std::string y = "rosbag2_bagfile_information:\n  version: " + std::to_string(version) +
+                  "\n  storage_identifier: " + storage + "\n  relative_file_paths:\n";
+  for (const auto& f : files) y += "    - " + f + "\n";
+  y += "  compression_format: \"\"\n  compression_mode: \"\"\n";
+  return y;
+}
+
+}  // namespace
+
+TEST(Cdr, DecodesHandLaidLittleEndianBytes) {
+  // Alignment counts from the byte after the 4-byte encapsulation header.
+  const std::vector<std::uint8_t> bytes = {
+      0x00, 0x01, 0x00, 0x00,                          // CDR little-endian
+      0x01, 0x00, 0x00, 0x00, 0x02, 0x00, 0x00, 0x00,  // stamp 1 s 2 ns        @0
+      0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,  // frame_id "" + pad 3   @8
+      0x01, 0x00, 0x00, 0x00,                          // 1 name                @16
+      0x02, 0x00, 0x00, 0x00, 'a', 0x00, 0x00, 0x00,   // "a" + pad 2           @20
+      0x01, 0x00, 0x00, 0x00,                          // 1 position            @28
+      0, 0, 0, 0, 0, 0, 0xf8, 0x3f,                    // 1.5 (aligned to 8)    @32
+      0x01, 0x00, 0x00, 0x00, 0, 0, 0, 0,              // 1 velocity + pad 4    @40
+      0, 0, 0, 0, 0, 0, 0x04, 0xc0,                    // -2.5                  @48
+      0x01, 0x00, 0x00, 0x00, 0, 0, 0, 0,              // 1 effort + pad 4      @56
+      0, 0, 0, 0, 0, 0, 0x10, 0x40,                    // 4.0                   @64
+  };
+  rcm::cdr::JointState m;
+  rcm::cdr::decode(bytes.data(), bytes.size(), m);
+  EXPECT_EQ(m.header.sec, 1);
+  EXPECT_EQ(m.header.nanosec, 2u);
+  EXPECT_EQ(m.header.get_stamp_ns(), 1000000002);
+  ASSERT_EQ(m.name.size(), 1u);
+  EXPECT_EQ(m.name[0], "a");
+  EXPECT_EQ(m.position, std::vector<double>{1.5});
+  EXPECT_EQ(m.velocity, std::vector<double>{-2.5});
+  EXPECT_EQ(m.effort, std::vector<double>{4.0});
+  EXPECT_EQ(rcm::cdr::encode(m), bytes);
+}
+
+TEST(Cdr, BigEndianRoundTripAndEveryTruncationIsAnError) {
+  const rcm::cdr::JointState m = joint_state(3, kT0);
+  for (bool big : {false, true}) {
+    const auto bytes = rcm::cdr::encode(m, big);
+    EXPECT_EQ(bytes[1], big ? 0 : 1);
+    rcm::cdr::JointState back;
+    rcm::cdr::decode(bytes.data(), bytes.size(), back);
+    EXPECT_EQ(back.name, m.name);
+    EXPECT_EQ(back.position, m.position);
+    EXPECT_EQ(back.effort, m.effort);
+    EXPECT_EQ(back.header.get_stamp_ns(), kT0);
+    // Cut anywhere before the last field ends: an error, never a read past the end.
+    for (std::size_t n = 0; n + 4 < bytes.size(); ++n)
+      EXPECT_THROW(rcm::cdr::decode(bytes.data(), n, back), rcm::cdr::DecodeError) << n;
+  }
+  std::vector<std::uint8_t> huge = rcm::cdr::encode(m);
+  huge[20] = 0xff;  // the name count: 0xff... elements in a 200-byte message
+  huge[21] = 0xff;
+  huge[22] = 0xff;
+  rcm::cdr::JointState back;
+  try {
+    rcm::cdr::decode(huge.data(), huge.size(), back);
+    ADD_FAILURE() << "accepted a sequence longer than the message";
+  } catch (const rcm::cdr::DecodeError& e) {
+    EXPECT_EQ(e.field(), "name");
+  }
+  std::vector<std::uint8_t> xcdr2 = rcm::cdr::encode(m);
+  xcdr2[1] = 0x07;
+  EXPECT_THROW(rcm::cdr::decode(xcdr2.data(), xcdr2.size(), back), rcm::cdr::DecodeError);
+}
+
+TEST(Rosbag2, ReadsEverySqliteLayout) {
+  TempDir dir;
+  for (int schema : {0, 3, 4}) {
+    for (bool qos : {false, true}) {
+      if (schema > 0 && !qos) continue;
+      const fs::path db = dir.path() / ("s" + std::to_string(schema) + (qos ? "q" : "") + ".db3");
+      write_db3(db, schema, kTopics, make_messages(20));
+      rcm::Rosbag2ReadInfo info;
+      const rcm::Recording r = rcm::load_rosbag2_recording(db, {}, &info);
+      ASSERT_EQ(r.num_samples(), 20u) << db;
+      EXPECT_EQ(r.num_joints(), 4);
+      EXPECT_EQ(r.layout, rcm::RecordingLayout::rosbag2);
+      EXPECT_EQ(info.storage, "sqlite3");
+      EXPECT_EQ(info.sqlite_schema, schema);
+      EXPECT_EQ(info.joint_names, kNames);
+      EXPECT_EQ(info.time_origin_ns, kT0);
+      EXPECT_DOUBLE_EQ(r.time[19], 0.19);
+      EXPECT_DOUBLE_EQ(r.position(7, 2), 0.3 + 0.007);
+      EXPECT_DOUBLE_EQ(r.effort(7, 3), -0.2 + 0.0007);
+      EXPECT_FALSE(r.has_force());
+    }
+  }
+}
+
+TEST(Rosbag2, DirectoryWithSplitFilesAndForce) {
+  TempDir dir;
+  const fs::path bag = dir.path() / "run";
+  fs::create_directories(bag);
+  write_db3(bag / "run_0.db3", 3, kTopics, make_messages(30, 0));
+  write_db3(bag / "run_1.db3", 3, kTopics, make_messages(30, 30));
+  for (int version : {4, 5, 9}) {
+    write_text(bag / "metadata.yaml", metadata_yaml(version, "sqlite3", {"run_0.db3", "run_1.db3"}));
+    rcm::TopicReadOptions o;
+    o.force_topic = "/PSM1/body/measured_cf";
+    rcm::Rosbag2ReadInfo info;
+    const rcm::Recording r = rcm::load_rosbag2_recording(bag, o, &info);
+    ASSERT_EQ(r.num_samples(), 60u);
+    EXPECT_EQ(info.metadata_version, version);
+    EXPECT_EQ(info.files.size(), 2u);
+    EXPECT_EQ(info.force_messages, 30u);
+    EXPECT_EQ(info.force_frame_id, "PSM1");
+    ASSERT_TRUE(r.has_force());
+    // Odd samples fall between two wrenches: the mean of their x.
+    EXPECT_NEAR((*r.force)(31, 0), 1.0 + 0.01 * 31, 1e-12);
+    EXPECT_DOUBLE_EQ((*r.force)(30, 1), -2.0);
+  }
+  // Early rosbag2 named the files relative to the bag's parent directory.
+  write_text(bag / "metadata.yaml", metadata_yaml(4, "sqlite3", {"run/run_0.db3", "run/run_1.db3"}));
+  EXPECT_EQ(rcm::load_rosbag2_recording(bag).num_samples(), 60u);
+  // Through load_recording, as every command and session reads it.
+  EXPECT_EQ(rcm::load_recording(bag).num_samples(), 60u);
+  EXPECT_EQ(rcm::load_recording(bag / "run_1.db3").num_samples(), 30u);
+
+  // A recorder that did not finish: no metadata.yaml, files in split order.
+  fs::remove(bag / "metadata.yaml");
+  rcm::Rosbag2ReadInfo info;
+  EXPECT_EQ(rcm::load_rosbag2_recording(bag, {}, &info).num_samples(), 60u);
+  ASSERT_EQ(info.warnings.size(), 1u);
+  EXPECT_NE(info.warnings[0].find("no metadata.yaml"), std::string::npos);
+
+  write_text(bag / "metadata.yaml", metadata_yaml(5, "sqlite3", {"run_0.db3", "run_7.db3"}));
+  expect_error([&] { rcm::load_rosbag2_recording(bag); },
+               {"metadata.yaml", "relative_file_paths[1]", "'run_7.db3': no such file"});
+  write_text(bag / "metadata.yaml", "rosbag2_bagfile_information:\n  version: [\n");
+  expect_error([&] { rcm::load_rosbag2_recording(bag); }, {"metadata.yaml:", "not valid YAML"});
+  std::string compressed = metadata_yaml(5, "sqlite3", {"run_0.db3"});
+  compressed.replace(compressed.find("compression_mode: \"\""), 20, "compression_mode: FILE");
+  write_text(bag / "metadata.yaml", compressed);
+  expect_error([&] { rcm::load_rosbag2_recording(bag); }, {"compression_mode", "'FILE'", "not read"});
+}
+
+TEST(Rosbag2, ZeroStampsAreInvalidDataSkippedAndCounted) {
+  TempDir dir;
+  std::vector<Message> msgs = make_messages(10);
+  // Messages 3 and 4 of the joint topic carry a zero stamp.
+  int k = 0;
+  for (Message& m : msgs) {
+    if (m.topic_id != 1) continue;
+    if (k == 3 || k == 4) {
+      rcm::cdr::JointState js;
+      rcm::cdr::decode(m.data.data(), m.data.size(), js);
+      js.header.sec = 0;
+      js.header.nanosec = 0;
+      m.data = rcm::cdr::encode(js);
+    }
+    ++k;
+  }
+  const fs::path db = dir.path() / "zero.db3";
+  write_db3(db, 4, kTopics, msgs);
+  rcm::Rosbag2ReadInfo info;
+  const rcm::Recording r = rcm::load_rosbag2_recording(db, {}, &info);
+  EXPECT_EQ(r.num_samples(), 8u);
+  EXPECT_EQ(info.messages, 10u);
+  EXPECT_EQ(info.zero_stamp_messages, 2u);
+  EXPECT_DOUBLE_EQ(r.time[3], 0.05);  // message 5
+
+  // --time receive keeps them all, on the recorder's clock.
+  rcm::TopicReadOptions o;
+  o.time = rcm::MessageTime::receive;
+  const rcm::Recording rr = rcm::load_rosbag2_recording(db, o, &info);
+  EXPECT_EQ(rr.num_samples(), 10u);
+  EXPECT_EQ(info.time_origin_ns, kT0 + 1000000);
+
+  // No valid message at all: an error that says what to do.
+  std::vector<Message> zeros;
+  for (int i = 0; i < 3; ++i) zeros.push_back({1, kT0 + i * kDt, rcm::cdr::encode(joint_state(i, 0))});
+  const fs::path z = dir.path() / "zeros.db3";
+  write_db3(z, 3, kTopics, zeros);
+  expect_error([&] { rcm::load_rosbag2_recording(z); }, {"zeros.db3", "/PSM1/measured_js", "3 messages, none valid",
+                                                        "--time receive"});
+}
+
+TEST(Rosbag2, LocatedErrors) {
+  TempDir dir;
+  const fs::path db = dir.path() / "bad.db3";
+  // A NaN effort in message 6.
+  std::vector<Message> msgs = make_messages(10);
+  {
+    rcm::cdr::JointState js = joint_state(6, kT0 + 6 * kDt);
+    js.effort[2] = std::nan("");
+    for (Message& m : msgs)
+      if (m.topic_id == 1 && m.receive_ns == kT0 + 6 * kDt + 1000000) m.data = rcm::cdr::encode(js);
+  }
+  write_db3(db, 3, kTopics, msgs);
+  expect_error([&] { rcm::load_rosbag2_recording(db); },
+               {"bad.db3", "/PSM1/measured_js message 6 (t = 0.06 s)", "effort[2]", "'outer_insertion'", "finite"});
+
+  // A message cut short.
+  msgs = make_messages(10);
+  for (Message& m : msgs)
+    if (m.topic_id == 1 && m.receive_ns == kT0 + 4 * kDt + 1000000) m.data.resize(60);
+  fs::remove(db);
+  write_db3(db, 3, kTopics, msgs);
+  expect_error([&] { rcm::load_rosbag2_recording(db); },
+               {"bad.db3", "/PSM1/measured_js message 4", "cannot be decoded as sensor_msgs/msg/JointState", "CDR byte"});
+
+  // Time going back.
+  msgs = make_messages(10);
+  for (Message& m : msgs)
+    if (m.topic_id == 1 && m.receive_ns == kT0 + 5 * kDt + 1000000) m.data = rcm::cdr::encode(joint_state(5, kT0));
+  fs::remove(db);
+  write_db3(db, 3, kTopics, msgs);
+  expect_error([&] { rcm::load_rosbag2_recording(db); },
+               {"message 5", "header.stamp", "time must increase strictly"});
+
+  // The topic is absent, or of another type, or another serialization.
+  fs::remove(db);
+  write_db3(db, 3, kTopics, make_messages(5));
+  rcm::TopicReadOptions o;
+  o.topic = "/PSM2/measured_js";
+  expect_error([&] { rcm::load_rosbag2_recording(db, o); },
+               {"/PSM2/measured_js", "no such JointState topic", "/PSM1/measured_js (sensor_msgs/msg/JointState)"});
+  o.topic = "/PSM1/body/measured_cf";
+  expect_error([&] { rcm::load_rosbag2_recording(db, o); },
+               {"has type geometry_msgs/msg/WrenchStamped, expected sensor_msgs/msg/JointState"});
+  const fs::path json = dir.path() / "json.db3";
+  write_db3(json, 3, {{"/PSM1/measured_js", "sensor_msgs/msg/JointState", "json"}}, {});
+  expect_error([&] { rcm::load_rosbag2_recording(json); }, {"serialization format 'json'", "'cdr'"});
+
+  // Not a database at all, and a database that is not a bag.
+  const fs::path junk = dir.path() / "junk.db3";
+  write_text(junk, std::string(5000, 'x'));
+  expect_error([&] { rcm::load_rosbag2_recording(junk); }, {"junk.db3"});
+  const fs::path other = dir.path() / "other.db3";
+  {
+    sqlite3* h = nullptr;
+    sqlite3_open(other.c_str(), &h);
+    exec(h, "CREATE TABLE t(x);");
+    sqlite3_close(h);
+  }
+  expect_error([&] { rcm::load_rosbag2_recording(other); }, {"other.db3", "no 'topics' table"});
+  expect_error([&] { rcm::load_rosbag2_recording(dir.path() / "absent.db3"); }, {"absent.db3", "no such file"});
+  const fs::path empty_dir = dir.path() / "empty";
+  fs::create_directories(empty_dir);
+  expect_error([&] { rcm::load_recording(empty_dir); }, {"not a rosbag2 recording"});
+}
+
+TEST(Rosbag2, TruncatedSqliteFilesNeverCrash) {
+  TempDir dir;
+  const fs::path db = dir.path() / "whole.db3";
+  write_db3(db, 3, kTopics, make_messages(200));
+  std::ifstream in(db, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const fs::path cut = dir.path() / "cut.db3";
+  for (std::size_t n = 0; n < bytes.size(); n += 997) {
+    write_text(cut, bytes.substr(0, n));
+    try {
+      const rcm::Recording r = rcm::load_rosbag2_recording(cut);
+      EXPECT_LE(r.num_samples(), 200u);
+    } catch (const rcm::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("cut.db3"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// Files written by the reference MCAP implementation (tests/data/rosbag2/README.md).
+TEST(Rosbag2, ReadsMcapFromTheReferenceWriter) {
+  const fs::path data = fs::path(RCM_SOURCE_DIR) / "tests" / "data" / "rosbag2";
+  int files = 0;
+  for (const auto& e : fs::directory_iterator(data)) {
+    if (e.path().extension() != ".mcap") continue;
+    ++files;
+    rcm::TopicReadOptions o;
+    o.force_topic = "/PSM1/body/measured_cf";
+    rcm::Rosbag2ReadInfo info;
+    const rcm::Recording r = rcm::load_rosbag2_recording(e.path(), o, &info);
+    EXPECT_EQ(info.storage, "mcap");
+    ASSERT_EQ(r.num_samples(), 50u) << e.path();
+    EXPECT_EQ(r.num_joints(), 7);
+    EXPECT_EQ(info.joint_names.front(), "outer_yaw");
+    EXPECT_EQ(info.joint_names.back(), "jaw");
+    for (Eigen::Index k = 0; k < 50; ++k) {
+      EXPECT_NEAR(r.time[k], 0.01 * static_cast<double>(k), 1e-12);
+      EXPECT_DOUBLE_EQ(r.position(k, 2), 0.3 + 0.001 * static_cast<double>(k));
+      EXPECT_DOUBLE_EQ(r.velocity(k, 6), 0.07);
+      EXPECT_DOUBLE_EQ(r.effort(k, 0), -0.05 + 0.0001 * static_cast<double>(k));
+    }
+    ASSERT_TRUE(r.has_force());
+    EXPECT_EQ(info.force_messages, 20u);
+    EXPECT_DOUBLE_EQ((*r.force)(0, 0), 1.0);
+    EXPECT_DOUBLE_EQ((*r.force)(10, 1), -2.0);
+    EXPECT_TRUE(info.warnings.empty());
+  }
+  EXPECT_GE(files, 5);
+}
+
+namespace {
+struct CliRun {
+  int status;
+  std::string out;
+};
+CliRun run_cli(const std::string& args) {
+  const std::string cmd = std::string(RCM_CLI_PATH) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  char buf[4096];
+  while (std::fgets(buf, sizeof buf, p)) out += buf;
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+}  // namespace
+
+TEST(Rosbag2Cli, InspectConvertAndSessions) {
+  TempDir dir;
+  const fs::path bag = dir.path() / "run";
+  fs::create_directories(bag);
+  std::vector<Message> msgs = make_messages(40);
+  // One invalid (zero-stamp) message, as cisst-ros 4.0 publishes before its data is valid.
+  msgs.insert(msgs.begin(), Message{1, kT0 - kDt, rcm::cdr::encode(joint_state(0, 0))});
+  write_db3(bag / "run_0.db3", 4, kTopics, msgs);
+  write_text(bag / "metadata.yaml", metadata_yaml(9, "sqlite3", {"run_0.db3"}));
+
+  const CliRun inspect = run_cli("inspect --json " + bag.string());
+  ASSERT_EQ(inspect.status, 0) << inspect.out;
+  const auto j = nlohmann::json::parse(inspect.out.substr(inspect.out.find('{')));
+  EXPECT_EQ(j["layout"], "rosbag2");
+  EXPECT_EQ(j["samples"], 40);
+  EXPECT_EQ(j["rosbag2"]["storage"], "sqlite3");
+  EXPECT_EQ(j["rosbag2"]["metadata_version"], 9);
+  EXPECT_EQ(j["rosbag2"]["sqlite_schema"], 4);
+  EXPECT_EQ(j["rosbag2"]["messages"], 41);
+  EXPECT_EQ(j["rosbag2"]["zero_stamp_messages"], 1);
+  const CliRun text = run_cli("inspect " + bag.string());
+  EXPECT_NE(text.out.find("1 skipped (zero header.stamp: invalid data)"), std::string::npos) << text.out;
+
+  const CliRun receive = run_cli("inspect --json --time receive " + bag.string());
+  ASSERT_EQ(receive.status, 0) << receive.out;
+  EXPECT_EQ(nlohmann::json::parse(receive.out)["samples"], 41);
+
+  const fs::path csv = dir.path() / "run.csv";
+  const CliRun convert =
+      run_cli("convert " + bag.string() + " " + csv.string() + " --force-topic /PSM1/body/measured_cf --json");
+  ASSERT_EQ(convert.status, 0) << convert.out;
+  const auto c = nlohmann::json::parse(convert.out.substr(convert.out.find('{')));
+  EXPECT_EQ(c["zero_stamp_messages"], 1);
+  EXPECT_EQ(c["force_messages"], 20);
+  const rcm::Recording from_csv = rcm::load_recording(csv);
+  rcm::TopicReadOptions o;
+  o.force_topic = "/PSM1/body/measured_cf";
+  const rcm::Recording from_bag = rcm::load_rosbag2_recording(bag, o);
+  EXPECT_EQ(from_csv.position, from_bag.position);
+  EXPECT_EQ(from_csv.effort, from_bag.effort);
+  EXPECT_EQ(*from_csv.force, *from_bag.force);
+
+  // A session names the bag directory like any recording.
+  write_text(dir.path() / "session.json",
+             R"({"format": "rcm-session/1", "robot": "dvrk-psm-classic", "q0": [0.0, 0.0, 0.12], "free_space": ["run"]})");
+  const CliRun session = run_cli("inspect " + (dir.path() / "session.json").string());
+  EXPECT_EQ(session.status, 0) << session.out;
+  EXPECT_NE(session.out.find("rosbag2 (sqlite3"), std::string::npos) << session.out;
+
+  // Bad input: exit status 2 and the file named.
+  write_text(dir.path() / "bad.mcap", "\x89MCAP0\r\nnot really");
+  const CliRun bad = run_cli("inspect " + (dir.path() / "bad.mcap").string());
+  EXPECT_EQ(bad.status, 2) << bad.out;
+  EXPECT_NE(bad.out.find("bad.mcap"), std::string::npos) << bad.out;
+  const CliRun absent = run_cli("inspect --topic /PSM2/measured_js " + bag.string());
+  EXPECT_EQ(absent.status, 2);
+  EXPECT_NE(absent.out.find("no such JointState topic"), std::string::npos) << absent.out;
+}
