@@ -19,6 +19,7 @@
 #include "rcm/common/error.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/rosbag2.hpp"
+#include "support/rosbag2_writer.hpp"
 
 namespace fs = std::filesystem;
 
@@ -67,62 +68,14 @@ rcm::cdr::WrenchStamped wrench(int k, std::int64_t stamp_ns) {
   return m;
 }
 
-struct Topic {
-  std::string name, type, format = "cdr";
-};
-struct Message {
-  int topic_id;  // 1-based
-  std::int64_t receive_ns;
-  std::vector<std::uint8_t> data;
-};
+using Topic = rcm::test::BagTopic;
+using Message = rcm::test::BagMessage;
+using rcm::test::metadata_yaml;
+using rcm::test::write_db3;
 
 void exec(sqlite3* db, const std::string& sql) {
   char* err = nullptr;
   ASSERT_EQ(sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &err), SQLITE_OK) << (err ? err : "") << "\n" << sql;
-}
-
-// A .db3 as rosbag2 writes it. schema 0: before Humble (no schema table; with
-// `qos` the offered_qos_profiles column, as Foxy wrote); 3: Humble; 4: Jazzy.
-void write_db3(const fs::path& path, int schema, const std::vector<Topic>& topics, const std::vector<Message>& messages,
-               bool qos = true) {
-  sqlite3* db = nullptr;
-  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
-  if (schema >= 3) {
-    exec(db, "CREATE TABLE schema(schema_version INTEGER PRIMARY KEY, ros_distro TEXT NOT NULL);");
-    exec(db, "INSERT INTO schema VALUES (" + std::to_string(schema) + ", '" + (schema == 3 ? "humble" : "jazzy") + "');");
-    exec(db, "CREATE TABLE metadata(id INTEGER PRIMARY KEY, metadata_version INTEGER NOT NULL, metadata TEXT NOT NULL);");
-  }
-  std::string cols = "id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT NOT NULL, serialization_format TEXT NOT NULL";
-  if (qos || schema >= 3) cols += ", offered_qos_profiles TEXT NOT NULL";
-  if (schema >= 4) cols += ", type_description_hash TEXT NOT NULL";
-  exec(db, "CREATE TABLE topics(" + cols + ");");
-  if (schema >= 4)
-    exec(db, "CREATE TABLE message_definitions(id INTEGER PRIMARY KEY, topic_type TEXT NOT NULL, encoding TEXT NOT "
-             "NULL, encoded_message_definition TEXT NOT NULL, type_description_hash TEXT NOT NULL);");
-  exec(db, "CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, timestamp INTEGER NOT NULL, data "
-           "BLOB NOT NULL);");
-  exec(db, "CREATE INDEX timestamp_idx ON messages (timestamp ASC);");
-  for (std::size_t i = 0; i < topics.size(); ++i) {
-    std::string v = std::to_string(i + 1) + ", '" + topics[i].name + "', '" + topics[i].type + "', '" + topics[i].format + "'";
-    if (qos || schema >= 3) v += ", ''";
-    if (schema >= 4) v += ", 'RIHS01_0'";
-    exec(db, "INSERT INTO topics VALUES (" + v + ");");
-    if (schema >= 4)
-      exec(db, "INSERT INTO message_definitions (topic_type, encoding, encoded_message_definition, "
-               "type_description_hash) VALUES ('" + topics[i].type + "', 'ros2msg', '', 'RIHS01_0');");
-  }
-  sqlite3_stmt* s = nullptr;
-  ASSERT_EQ(sqlite3_prepare_v2(db, "INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)", -1, &s, nullptr),
-            SQLITE_OK);
-  for (const Message& m : messages) {
-    sqlite3_bind_int(s, 1, m.topic_id);
-    sqlite3_bind_int64(s, 2, m.receive_ns);
-    sqlite3_bind_blob(s, 3, m.data.data(), static_cast<int>(m.data.size()), SQLITE_TRANSIENT);
-    ASSERT_EQ(sqlite3_step(s), SQLITE_DONE);
-    sqlite3_reset(s);
-  }
-  sqlite3_finalize(s);
-  sqlite3_close(db);
 }
 
 constexpr std::int64_t kT0 = 1700000000000000000;  // ns
@@ -154,14 +107,6 @@ void expect_error(const std::function<void()>& f, const std::vector<std::string>
 }
 
 void write_text(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
-
-std::string metadata_yaml(int version, const std::string& storage, const std::vector<std::string>& files) {
-  std::string y = "rosbag2_bagfile_information:\n  version: " + std::to_string(version) +
-                  "\n  storage_identifier: " + storage + "\n  relative_file_paths:\n";
-  for (const auto& f : files) y += "    - " + f + "\n";
-  y += "  compression_format: \"\"\n  compression_mode: \"\"\n";
-  return y;
-}
 
 }  // namespace
 

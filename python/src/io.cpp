@@ -4,6 +4,7 @@
 
 #include "common.hpp"
 #include "rcm/io/recording.hpp"
+#include "rcm/io/rosbag2.hpp"
 #include "rcm/io/session.hpp"
 
 namespace rcm::python {
@@ -129,16 +130,44 @@ void bind_io(py::module_& m) {
       });
 
   m.def("load_recording",
-        [](const std::filesystem::path& path, bool dedupe, std::optional<double> rate, int min_joints) {
+        [](const std::filesystem::path& path, bool dedupe, std::optional<double> rate, int min_joints,
+           std::optional<std::string> topic, std::optional<std::string> force_topic, const std::string& time) {
           const RecordingReadOptions o = make_read_options(dedupe, rate, min_joints);
-          py::gil_scoped_release release;
-          return std::make_shared<Recording>(load_recording(path, o));
+          if (time != "header" && time != "receive")
+            throw InputError(argument_location("rcm.load_recording", "time"), "'header' or 'receive', got '" + time + "'");
+          const bool bag_options = topic || force_topic || time != "header";
+          if (!is_rosbag2_path(path)) {
+            if (bag_options)
+              throw InputError(argument_location("rcm.load_recording", topic ? "topic" : force_topic ? "force_topic" : "time"),
+                               "applies to rosbag2 recordings (a bag directory, .db3 or .mcap), not to " + path.string());
+            py::gil_scoped_release release;
+            return std::make_shared<Recording>(load_recording(path, o));
+          }
+          TopicReadOptions t;
+          t.read = o;
+          if (topic) t.topic = *topic;
+          if (force_topic) t.force_topic = *force_topic;
+          t.time = time == "receive" ? MessageTime::receive : MessageTime::header;
+          Rosbag2ReadInfo info;
+          std::shared_ptr<Recording> rec;
+          {
+            py::gil_scoped_release release;
+            rec = std::make_shared<Recording>(load_rosbag2_recording(path, t, &info));
+          }
+          for (const std::string& w : info.warnings) PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1);
+          return rec;
         },
         py::arg("path"), py::kw_only(), py::arg("dedupe") = false, py::arg("assumed_rate_hz") = py::none(),
-        py::arg("min_joints") = 3,
-        "Read and validate a recording: the contract's CSV or `rostopic echo -p /PSM1/measured_js` output.\n"
+        py::arg("min_joints") = 3, py::arg("topic") = py::none(), py::arg("force_topic") = py::none(),
+        py::arg("time") = "header",
+        "Read and validate a recording: the contract's CSV, `rostopic echo -p /PSM1/measured_js` output, or a\n"
+        "rosbag2 recording (a bag directory, .db3 or .mcap; no ROS 2 needed).\n"
         "dedupe: drop rows repeating the previous one; assumed_rate_hz: sampling rate of a file without a\n"
-        "time column (never invented otherwise). rcm.InputError names file, line and column of any defect.");
+        "time column (never invented otherwise). rosbag2 only: topic (sensor_msgs/msg/JointState, default\n"
+        "/PSM1/measured_js), force_topic (geometry_msgs/msg/WrenchStamped read as the force columns), time\n"
+        "('header': header.stamp, zero-stamp messages skipped as invalid data; 'receive': the recorder's\n"
+        "clock); a cut-off MCAP file is read up to its last complete record with a UserWarning.\n"
+        "rcm.InputError names file, line and column (or topic, message and field) of any defect.");
   m.def("parse_recording",
         [](const std::string& text, const std::string& source, bool dedupe, std::optional<double> rate, int min_joints) {
           const RecordingReadOptions o = make_read_options(dedupe, rate, min_joints);

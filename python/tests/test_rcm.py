@@ -256,6 +256,28 @@ class TestRecording(unittest.TestCase):
         self.assertIn("simulator", session.extra)
 
 
+    def test_rosbag2_mcap_with_topics_and_cli_agreement(self):
+        here = os.path.dirname(os.path.abspath(__file__))
+        path = os.path.join(here, "..", "..", "tests", "data", "rosbag2", "joint_states_zstd.mcap")
+        rec = rcm.load_recording(path, force_topic="/PSM1/body/measured_cf")
+        self.assertEqual(rec.layout, rcm.RecordingLayout.rosbag2)
+        self.assertEqual(rec.position.shape, (50, 7))
+        np.testing.assert_allclose(rec.time, 0.01 * np.arange(50), atol=1e-12)
+        np.testing.assert_array_equal(rec.velocity[:, 6], np.full(50, 0.07))
+        self.assertTrue(rec.has_force)
+        cli = run_cli("inspect", "--json", "--force-topic", "/PSM1/body/measured_cf", path)
+        np.testing.assert_array_equal(np.array(rcm.summarize_recording(rec).to_dict()["force"]), np.array(cli["force_range"]))
+        with self.assertRaises(rcm.InputError) as cm:
+            rcm.load_recording(path, topic="/PSM1/body/measured_cf")
+        self.assertIn("expected sensor_msgs/msg/JointState", str(cm.exception))
+        with self.assertRaises(rcm.InputError) as cm:
+            rcm.load_recording(path, time="bag")
+        self.assertIn("'header' or 'receive'", str(cm.exception))
+        with self.assertRaises(rcm.InputError) as cm:
+            rcm.load_recording(_state["manifest"].replace("session.json", "free_space.csv"), topic="/x")
+        self.assertIn("applies to rosbag2 recordings", str(cm.exception))
+
+
 class TestKinematics(unittest.TestCase):
     CASES = [
         ([0.3, -0.2, 0.15], [0.0, 0.0, 0.12], 0.03),

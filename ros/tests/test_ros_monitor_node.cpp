@@ -32,6 +32,7 @@
 #include <thread>
 
 #include "rcm/io/recording.hpp"
+#include "child_process.hpp"
 #include "ros_test_util.hpp"
 
 namespace {
@@ -39,77 +40,8 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
-
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-// A child process in its own process group, output to a log file, stopped
-// (SIGINT, then SIGKILL after a grace period) when this object goes away.
-class ChildProcess {
- public:
-  ChildProcess(const std::vector<std::string>& args, const fs::path& log) : log_(log) {
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    const std::string log_path = log.string();
-    const pid_t parent = ::getpid();
-    pid_ = ::fork();
-    if (pid_ == 0) {  // only async-signal-safe calls until exec
-      ::setpgid(0, 0);
-      ::prctl(PR_SET_PDEATHSIG, SIGKILL);
-      if (::getppid() != parent) ::_exit(127);
-      const int fd = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      if (fd >= 0) {
-        ::dup2(fd, 1);
-        ::dup2(fd, 2);
-      }
-      ::execv(argv[0], argv.data());
-      ::_exit(127);
-    }
-    if (pid_ > 0) ::setpgid(pid_, pid_);
-  }
-  ChildProcess(const ChildProcess&) = delete;
-  ChildProcess& operator=(const ChildProcess&) = delete;
-  ~ChildProcess() { stop(2s); }
-
-  bool started() const { return pid_ > 0; }
-  bool alive() {
-    if (pid_ <= 0 || exited_) return false;
-    int status = 0;
-    if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-      exited_ = true;
-      status_ = status;
-      return false;
-    }
-    return true;
-  }
-  // SIGINT to the group, SIGKILL after `grace`; the exit code, or -signal.
-  int stop(std::chrono::milliseconds grace) {
-    if (pid_ <= 0) return -1;
-    if (alive()) {
-      ::kill(-pid_, SIGINT);
-      const auto deadline = Clock::now() + grace;
-      while (alive() && Clock::now() < deadline) std::this_thread::sleep_for(20ms);
-      if (alive()) {
-        ::kill(-pid_, SIGKILL);
-        ::waitpid(pid_, &status_, 0);
-        exited_ = true;
-      }
-    }
-    return WIFEXITED(status_) ? WEXITSTATUS(status_) : -WTERMSIG(status_);
-  }
-  std::string log() const { return read_text(log_); }
-
- private:
-  fs::path log_;
-  pid_t pid_ = -1;
-  bool exited_ = false;
-  int status_ = 0;
-};
+using rcm::test::ChildProcess;
+using rcm::test::wait_for;
 
 int find_free_port() {
   const int s = ::socket(AF_INET, SOCK_STREAM, 0);
@@ -124,15 +56,6 @@ int find_free_port() {
   const int port = ntohs(addr.sin_port);
   ::close(s);
   return port;
-}
-
-bool wait_for(const std::function<bool()>& done, std::chrono::milliseconds timeout) {
-  const auto deadline = Clock::now() + timeout;
-  while (!done()) {
-    if (Clock::now() > deadline) return false;
-    std::this_thread::sleep_for(20ms);
-  }
-  return true;
 }
 
 // What the node published, as received.

@@ -249,9 +249,17 @@ Recording load_rosbag2_recording(const std::filesystem::path& path, const TopicR
   std::map<std::string, TopicSeen> seen;
   cdr::JointState js;
   cdr::WrenchStamped wrench;
+  // Once per topic and file: every file of a bag declares its topics again.
+  bool joint_topic_checked = false, force_topic_checked = false;
+  std::string checked_file;
   for_each_message(bag.files, topics, info, seen, [&](const std::filesystem::path& file, const RawMessage& raw) {
+    if (file.native() != checked_file) {
+      checked_file = file.native();
+      joint_topic_checked = force_topic_checked = false;
+    }
     if (*raw.topic == options.topic) {
-      check_topic(file.string(), seen, options.topic, kJointStateType, "JointState");
+      if (!joint_topic_checked) check_topic(file.string(), seen, options.topic, kJointStateType, "JointState");
+      joint_topic_checked = true;
       const std::size_t k = info.messages++;
       decode_or_throw(file, options.topic, k, raw, js);
       if (header_time && js.header.is_zero()) {
@@ -260,7 +268,8 @@ Recording load_rosbag2_recording(const std::filesystem::path& path, const TopicR
       }
       builder.add(k, header_time ? js.header.get_stamp_ns() : raw.receive_ns, view_joint_state(js));
     } else {
-      check_topic(file.string(), seen, options.force_topic, kWrenchType, "force");
+      if (!force_topic_checked) check_topic(file.string(), seen, options.force_topic, kWrenchType, "force");
+      force_topic_checked = true;
       const std::size_t k = info.force_messages++;
       decode_or_throw(file, options.force_topic, k, raw, wrench);
       if (header_time && wrench.header.is_zero()) {

@@ -1,19 +1,20 @@
 #pragma once
-// The per-message path of rcm_monitor_node without the node: one
-// sensor_msgs/JointState in, checked (joint order by name, finite values,
-// lengths, time strictly increasing), the online pipeline of `rcm monitor`
-// stepped once. Bad messages are rejected and counted, never thrown on, so a
-// live stream survives them.
+// The per-message path of the live nodes (ROS 1 and DDS) without any
+// middleware: one sensor_msgs/JointState in (seen through JointStateView),
+// checked (joint order by name, finite values, lengths, time strictly
+// increasing), the online pipeline of `rcm monitor` stepped once. Bad messages
+// are rejected and counted, never thrown on, so a live stream survives them.
 //
-// Time: header.stamp, or the receive time when the stream's first accepted
-// message has a zero stamp (then for every message). The estimator sees seconds
-// from the first accepted sample, computed in integer nanoseconds, as the bag
-// reader does, so that a bag and its live replay give the same numbers.
+// Time: header.stamp. What a zero stamp means is the middleware's convention
+// (ZeroStamp): for ROS 1 publishers that never set stamps, the receive time
+// when the stream's first accepted message has a zero stamp (then for every
+// message); for the dVRK on ROS 2 (cisst-ros 4.0 and later), invalid data,
+// rejected and counted. The estimator sees seconds from the first accepted
+// sample, computed in integer nanoseconds, as the bag readers do, so that a
+// bag and its live replay give the same numbers.
 //
 // No allocation per message once the first message has been accepted (the
 // joint order and the buffers are set up then).
-
-#include <sensor_msgs/JointState.h>
 
 #include <cstdint>
 #include <string>
@@ -30,7 +31,7 @@ class LiveMonitor {
     accepted,
     duplicate_stamp,   // the same time as the last accepted sample
     out_of_order,      // earlier than the last accepted sample
-    bad_stamp,         // zero stamp in a stream that has stamps
+    bad_stamp,         // zero stamp: invalid data, or a stream that has stamps
     malformed,         // see get_last_defect()
     too_few_joints,    // the first message has fewer joints than the model reads
   };
@@ -40,12 +41,19 @@ class LiveMonitor {
     std::uint64_t get_rejected() const { return duplicate_stamp + out_of_order + bad_stamp + malformed + too_few_joints; }
   };
 
+  enum class ZeroStamp {
+    receive_time_when_unstamped,  // ROS 1: a stream whose first message has no stamp uses the receive time
+    invalid,                      // ROS 2 dVRK: a zero stamp marks invalid data
+  };
+
   // `pipeline` must outlive the monitor. `joint_names`: the joint order the
   // free-space model was trained on, by name; empty: the first message's order.
-  LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string> joint_names = {});
+  LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string> joint_names = {},
+              ZeroStamp zero_stamp = ZeroStamp::receive_time_when_unstamped);
 
-  // One message; `receive_time_ns` is used only when the stream carries no stamps.
-  Verdict compute_message(const sensor_msgs::JointState& message, std::int64_t receive_time_ns);
+  // One message with its header stamp (0: zero stamp); `receive_time_ns` is
+  // used only when the stream carries no stamps.
+  Verdict compute_message(const JointStateView& message, std::int64_t stamp_ns, std::int64_t receive_time_ns);
 
   const OnlineOutput& get_output() const { return get_online_output(workspace_.estimator); }
   const Counters& get_counters() const { return counters_; }
@@ -58,12 +66,13 @@ class LiveMonitor {
   const JointStateDefect& get_last_defect() const { return defect_; }
 
   // A sentence for a log line about the last rejection (allocates).
-  std::string describe_rejection(Verdict verdict, const sensor_msgs::JointState& message) const;
+  std::string describe_rejection(Verdict verdict, const JointStateView& message, std::int64_t stamp_ns) const;
 
  private:
   const OnlinePipeline& pipeline_;
   OnlinePipeline::Workspace workspace_;
   std::vector<std::string> wanted_names_;
+  ZeroStamp zero_stamp_;
   JointStateMap map_;
   JointStateMap::Workspace map_ws_;
   bool started_ = false, receive_time_ = false;

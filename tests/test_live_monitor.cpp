@@ -1,5 +1,5 @@
-// rcm::LiveMonitor, the per-message path of rcm_monitor_node, without a ROS
-// master: the same numbers as the pipeline fed directly, joints mapped by name
+// rcm::LiveMonitor, the per-message path of the live nodes (ROS 1, DDS), without
+// any middleware: the same numbers as the pipeline fed directly, joints mapped by name
 // whatever their order in the message, bad messages rejected and counted
 // (never thrown), and no allocation per message after the first.
 
@@ -13,7 +13,8 @@
 
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/estimation/online.hpp"
-#include "rcm/ros/live_monitor.hpp"
+#include "rcm/live/live_monitor.hpp"
+#include "rcm/live/monitor_node.hpp"
 
 using rcm::test::g_allocations;
 using Verdict = rcm::LiveMonitor::Verdict;
@@ -58,10 +59,17 @@ Sample make_sample(int k) {
   return s;
 }
 
+// A JointState as any middleware delivers it: the four arrays and the stamp.
+struct Message {
+  std::int64_t stamp_ns = 0;
+  std::vector<std::string> name;
+  std::vector<double> position, velocity, effort;
+};
+
 // A JointState of sample k with the joints in `order` (indices into kNames).
-sensor_msgs::JointState make_message(const Sample& s, const std::vector<int>& order, std::int64_t base_ns) {
-  sensor_msgs::JointState m;
-  m.header.stamp.fromNSec(static_cast<std::uint64_t>(base_ns + std::llround(s.t * 1e9)));
+Message make_message(const Sample& s, const std::vector<int>& order, std::int64_t base_ns) {
+  Message m;
+  m.stamp_ns = base_ns + std::llround(s.t * 1e9);
   for (int j : order) {
     m.name.push_back(kNames[static_cast<std::size_t>(j)]);
     m.position.push_back(s.q[j]);
@@ -69,6 +77,14 @@ sensor_msgs::JointState make_message(const Sample& s, const std::vector<int>& or
     m.effort.push_back(s.effort[j]);
   }
   return m;
+}
+
+// A node's calls: the message seen as a view, its stamp in ns.
+Verdict compute(rcm::LiveMonitor& monitor, const Message& m, std::int64_t receive_time_ns) {
+  return monitor.compute_message(rcm::view_joint_state(m), m.stamp_ns, receive_time_ns);
+}
+std::string describe(const rcm::LiveMonitor& monitor, Verdict v, const Message& m) {
+  return monitor.describe_rejection(v, rcm::view_joint_state(m), m.stamp_ns);
 }
 
 constexpr std::int64_t kBase = 1700000000LL * 1000000000LL;
@@ -81,7 +97,7 @@ TEST(LiveMonitor, SameAsThePipelineWhateverTheJointOrder) {
     const Sample s = make_sample(k);
     // The first message sets the order; later ones come shuffled now and then.
     const std::vector<int> order = k % 7 == 3 ? std::vector<int>{3, 1, 0, 2} : std::vector<int>{0, 1, 2, 3};
-    ASSERT_EQ(monitor.compute_message(make_message(s, order, kBase), 0), Verdict::accepted) << k;
+    ASSERT_EQ(compute(monitor, make_message(s, order, kBase), 0), Verdict::accepted) << k;
     const double t = static_cast<double>(std::llround(s.t * 1e9)) * 1e-9;
     const rcm::OnlineOutput& direct = pipeline->compute_sample(ws, t, s.q, s.qd, s.effort);
     ASSERT_EQ(monitor.get_output().misalignment_m, direct.misalignment_m) << k;
@@ -97,19 +113,19 @@ TEST(LiveMonitor, RejectsAndCountsBadMessages) {
   const auto pipeline = make_pipeline();
   rcm::LiveMonitor monitor(*pipeline);
   const std::vector<int> order = {0, 1, 2, 3};
-  ASSERT_EQ(monitor.compute_message(make_message(make_sample(0), order, kBase), 0), Verdict::accepted);
-  ASSERT_EQ(monitor.compute_message(make_message(make_sample(1), order, kBase), 0), Verdict::accepted);
+  ASSERT_EQ(compute(monitor, make_message(make_sample(0), order, kBase), 0), Verdict::accepted);
+  ASSERT_EQ(compute(monitor, make_message(make_sample(1), order, kBase), 0), Verdict::accepted);
   const Eigen::Vector3d after_two = monitor.get_output().misalignment_m;
 
-  auto expect = [&](const sensor_msgs::JointState& m, Verdict v, const std::string& text) {
-    EXPECT_EQ(monitor.compute_message(m, 0), v) << text;
-    EXPECT_NE(monitor.describe_rejection(v, m).find(text), std::string::npos) << monitor.describe_rejection(v, m);
+  auto expect = [&](const Message& m, Verdict v, const std::string& text) {
+    EXPECT_EQ(compute(monitor, m, 0), v) << text;
+    EXPECT_NE(describe(monitor, v, m).find(text), std::string::npos) << describe(monitor, v, m);
     EXPECT_EQ(monitor.get_output().misalignment_m, after_two);  // nothing reached the estimator
   };
   expect(make_message(make_sample(1), order, kBase), Verdict::duplicate_stamp, "repeats");
   expect(make_message(make_sample(0), order, kBase), Verdict::out_of_order, "earlier");
-  sensor_msgs::JointState m = make_message(make_sample(2), order, kBase);
-  m.header.stamp = ros::Time();
+  Message m = make_message(make_sample(2), order, kBase);
+  m.stamp_ns = 0;
   expect(m, Verdict::bad_stamp, "zero");
   m = make_message(make_sample(2), order, kBase);
   m.effort[2] = std::numeric_limits<double>::quiet_NaN();
@@ -133,10 +149,10 @@ TEST(LiveMonitor, RejectsAndCountsBadMessages) {
   EXPECT_EQ(c.malformed, 5u);
   EXPECT_EQ(c.get_rejected(), 8u);
   // The stream goes on. A joint the model does not read (outer_roll) is not checked.
-  EXPECT_EQ(monitor.compute_message(make_message(make_sample(2), order, kBase), 0), Verdict::accepted);
+  EXPECT_EQ(compute(monitor, make_message(make_sample(2), order, kBase), 0), Verdict::accepted);
   m = make_message(make_sample(3), {3, 0, 1, 2}, kBase);
   m.effort[0] = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_EQ(monitor.compute_message(m, 0), Verdict::accepted);
+  EXPECT_EQ(compute(monitor, m, 0), Verdict::accepted);
   EXPECT_EQ(c.accepted, 4u);
   EXPECT_EQ(monitor.get_joint_map().names(), std::vector<std::string>({"outer_yaw", "outer_pitch", "outer_insertion"}));
 }
@@ -146,52 +162,52 @@ TEST(LiveMonitor, PositionalStreamsReadTheFirstJoints) {
   rcm::LiveMonitor monitor(*pipeline);
   auto ws = pipeline->create_workspace();
   for (int k = 0; k < 10; ++k) {
-    sensor_msgs::JointState m = make_message(make_sample(k), {0, 1, 2, 3}, kBase);
+    Message m = make_message(make_sample(k), {0, 1, 2, 3}, kBase);
     m.name.clear();
-    ASSERT_EQ(monitor.compute_message(m, 0), Verdict::accepted) << k;
+    ASSERT_EQ(compute(monitor, m, 0), Verdict::accepted) << k;
     const Sample s = make_sample(k);
     EXPECT_EQ(monitor.get_output().misalignment_m,
               pipeline->compute_sample(ws, static_cast<double>(std::llround(s.t * 1e9)) * 1e-9, s.q, s.qd, s.effort).misalignment_m);
   }
-  sensor_msgs::JointState m = make_message(make_sample(10), {0, 1, 2}, kBase);  // a joint fewer than the stream's
+  Message m = make_message(make_sample(10), {0, 1, 2}, kBase);  // a joint fewer than the stream's
   m.name.clear();
-  EXPECT_EQ(monitor.compute_message(m, 0), Verdict::malformed);
-  EXPECT_NE(monitor.describe_rejection(Verdict::malformed, m).find("3 entries, expected 4"), std::string::npos)
-      << monitor.describe_rejection(Verdict::malformed, m);
+  EXPECT_EQ(compute(monitor, m, 0), Verdict::malformed);
+  EXPECT_NE(describe(monitor, Verdict::malformed, m).find("3 entries, expected 4"), std::string::npos)
+      << describe(monitor, Verdict::malformed, m);
 }
 
 TEST(LiveMonitor, ZeroStampsUseTheReceiveTime) {
   const auto pipeline = make_pipeline();
   rcm::LiveMonitor monitor(*pipeline);
   for (int k = 0; k < 5; ++k) {
-    sensor_msgs::JointState m = make_message(make_sample(k), {0, 1, 2, 3}, kBase);
-    m.header.stamp = ros::Time();
-    ASSERT_EQ(monitor.compute_message(m, kBase + 2000000LL * k), Verdict::accepted);
+    Message m = make_message(make_sample(k), {0, 1, 2, 3}, kBase);
+    m.stamp_ns = 0;
+    ASSERT_EQ(compute(monitor, m, kBase + 2000000LL * k), Verdict::accepted);
   }
   EXPECT_TRUE(monitor.uses_receive_time());
   EXPECT_EQ(monitor.get_last_time_ns(), kBase + 8000000LL);
-  sensor_msgs::JointState m = make_message(make_sample(9), {0, 1, 2, 3}, kBase);
-  m.header.stamp = ros::Time();
-  EXPECT_EQ(monitor.compute_message(m, kBase + 8000000LL), Verdict::duplicate_stamp);
+  Message m = make_message(make_sample(9), {0, 1, 2, 3}, kBase);
+  m.stamp_ns = 0;
+  EXPECT_EQ(compute(monitor, m, kBase + 8000000LL), Verdict::duplicate_stamp);
 }
 
 TEST(LiveMonitor, GivenJointNamesAndTooFewJoints) {
   const auto pipeline = make_pipeline();
   // The model reads 3 joints: a stream of 2 is rejected until a longer one comes.
   rcm::LiveMonitor monitor(*pipeline);
-  sensor_msgs::JointState short_msg = make_message(make_sample(0), {0, 1}, kBase);
-  EXPECT_EQ(monitor.compute_message(short_msg, 0), Verdict::too_few_joints);
-  EXPECT_EQ(monitor.compute_message(make_message(make_sample(1), {0, 1, 2}, kBase), 0), Verdict::accepted);
+  Message short_msg = make_message(make_sample(0), {0, 1}, kBase);
+  EXPECT_EQ(compute(monitor, short_msg, 0), Verdict::too_few_joints);
+  EXPECT_EQ(compute(monitor, make_message(make_sample(1), {0, 1, 2}, kBase), 0), Verdict::accepted);
 
   // Given names fix the order; messages without names are then rejected.
   rcm::LiveMonitor named(*pipeline, {"outer_yaw", "outer_pitch", "outer_insertion"});
-  EXPECT_EQ(named.compute_message(make_message(make_sample(0), {2, 3, 0, 1}, kBase), 0), Verdict::accepted);
+  EXPECT_EQ(compute(named, make_message(make_sample(0), {2, 3, 0, 1}, kBase), 0), Verdict::accepted);
   auto ws = pipeline->create_workspace();
   const Sample s = make_sample(0);
   EXPECT_EQ(named.get_output().misalignment_m, pipeline->compute_sample(ws, 0.0, s.q, s.qd, s.effort).misalignment_m);
-  sensor_msgs::JointState unnamed = make_message(make_sample(1), {0, 1, 2, 3}, kBase);
+  Message unnamed = make_message(make_sample(1), {0, 1, 2, 3}, kBase);
   unnamed.name.clear();
-  EXPECT_EQ(named.compute_message(unnamed, 0), Verdict::malformed);
+  EXPECT_EQ(compute(named, unnamed, 0), Verdict::malformed);
   EXPECT_THROW(rcm::LiveMonitor(*pipeline, {"a", "b"}), std::invalid_argument);       // fewer than the model reads
   EXPECT_THROW(rcm::LiveMonitor(*pipeline, {"a", "b", "a"}), std::invalid_argument);  // repeated
 }
@@ -203,7 +219,7 @@ TEST(LiveMonitor, NoAllocationPerMessageAfterTheFirst) {
 
   const auto pipeline = make_pipeline();
   rcm::LiveMonitor monitor(*pipeline);
-  std::vector<sensor_msgs::JointState> messages;
+  std::vector<Message> messages;
   for (int k = 0; k < 2000; ++k) {
     messages.push_back(make_message(make_sample(k), k % 5 == 2 ? std::vector<int>{1, 3, 2, 0} : std::vector<int>{0, 1, 2, 3}, kBase));
     if (k % 97 == 50) messages.push_back(messages.back());  // a duplicate stamp
@@ -212,13 +228,94 @@ TEST(LiveMonitor, NoAllocationPerMessageAfterTheFirst) {
       messages.back().position[1] = std::numeric_limits<double>::quiet_NaN();
     }
   }
-  ASSERT_EQ(monitor.compute_message(messages.front(), 0), Verdict::accepted);
+  ASSERT_EQ(compute(monitor, messages.front(), 0), Verdict::accepted);
   const long before = g_allocations;
-  for (std::size_t k = 1; k < messages.size(); ++k) monitor.compute_message(messages[k], 0);
+  for (std::size_t k = 1; k < messages.size(); ++k) compute(monitor, messages[k], 0);
   EXPECT_EQ(g_allocations - before, 0);
   EXPECT_EQ(monitor.get_counters().accepted, 2000u);
   EXPECT_GT(monitor.get_counters().duplicate_stamp, 0u);
   EXPECT_GT(monitor.get_counters().malformed, 0u);
+}
+
+TEST(LiveMonitor, ZeroStampsAreInvalidDataOnRos2) {
+  const auto pipeline = make_pipeline();
+  rcm::LiveMonitor monitor(*pipeline, {}, rcm::LiveMonitor::ZeroStamp::invalid);
+  const std::vector<int> order = {0, 1, 2, 3};
+  constexpr std::int64_t kBase = 1700000000000000000;
+  Message zero = make_message(make_sample(0), order, kBase);
+  zero.stamp_ns = 0;
+  // Even the first message: invalid data never starts the stream on the receive clock.
+  EXPECT_EQ(compute(monitor, zero, kBase), Verdict::bad_stamp);
+  EXPECT_FALSE(monitor.started());
+  EXPECT_EQ(compute(monitor, make_message(make_sample(1), order, kBase), 0), Verdict::accepted);
+  EXPECT_FALSE(monitor.uses_receive_time());
+  EXPECT_EQ(compute(monitor, zero, kBase), Verdict::bad_stamp);
+  EXPECT_EQ(describe(monitor, Verdict::bad_stamp, zero), "header.stamp is zero: invalid data");
+  EXPECT_EQ(monitor.get_counters().bad_stamp, 2u);
+  EXPECT_EQ(monitor.get_counters().accepted, 1u);
+}
+
+// What a node's middleware receives from rcm::MonitorNode.
+struct RecordingSink : rcm::MonitorSink {
+  std::vector<std::int64_t> estimate_stamps;
+  std::vector<std::pair<rcm::MonitorFlag, bool>> flags;
+  std::vector<std::uint64_t> rejected;
+  std::vector<std::string> lines;
+  void publish_estimate(std::int64_t stamp_ns, const rcm::OnlineOutput&) override { estimate_stamps.push_back(stamp_ns); }
+  void publish_flag(rcm::MonitorFlag flag, bool value) override { flags.emplace_back(flag, value); }
+  void publish_rejected(std::uint64_t total) override { rejected.push_back(total); }
+  void log(rcm::LogLevel, const std::string& text, double) override { lines.push_back(text); }
+};
+
+TEST(MonitorNodeCore, PublishesEveryNthEstimateFlagsOnChangeAndCountsRejections) {
+  rcm::MonitorNodeParameters p;
+  p.session = "s.json";
+  p.model_file = "m.json";
+  p.publish_every = 3;
+  p.status_period_s = 0;
+  RecordingSink sink;
+  rcm::MonitorNode node(p, std::make_unique<rcm::OnlinePipeline>(*make_pipeline()),
+                        rcm::LiveMonitor::ZeroStamp::invalid, sink);
+  node.start("rt/PSM1/measured_js");
+  // The latched outputs start known: no onset, no alarm, in regime, nothing rejected.
+  ASSERT_EQ(sink.flags.size(), 3u);
+  for (const auto& f : sink.flags) EXPECT_FALSE(f.second);
+  EXPECT_EQ(sink.rejected, std::vector<std::uint64_t>{0});
+  const std::vector<int> order = {0, 1, 2, 3};
+  constexpr std::int64_t kBase = 1700000000000000000;
+  for (int k = 0; k < 10; ++k) {
+    const Message m = make_message(make_sample(k), order, kBase);
+    node.compute_message(rcm::view_joint_state(m), m.stamp_ns, 0);
+    if (k == 4) node.compute_message(rcm::view_joint_state(m), 0, 0);  // a zero stamp
+  }
+  // Estimates 3, 6 and 9 (1-based), stamped with their samples' stamps.
+  ASSERT_EQ(sink.estimate_stamps.size(), 3u);
+  EXPECT_EQ(sink.estimate_stamps[0], kBase + std::llround(make_sample(2).t * 1e9));
+  EXPECT_EQ(sink.estimate_stamps[2], kBase + std::llround(make_sample(8).t * 1e9));
+  EXPECT_EQ(sink.rejected.back(), 1u);
+  const std::string summary = node.get_summary();
+  EXPECT_NE(summary.find("10 samples accepted, 1 rejected (duplicate stamp 0, out of order 0, zero stamp 1,"),
+            std::string::npos)
+      << summary;
+  bool first_sample_logged = false;
+  for (const auto& l : sink.lines) first_sample_logged |= l.find("3 joints by name: outer_yaw, outer_pitch, outer_insertion (the first message") != std::string::npos;
+  EXPECT_TRUE(first_sample_logged);
+
+  rcm::MonitorNodeParameters bad = p;
+  bad.publish_every = 0;
+  auto where = [](const std::string& name) {
+    rcm::InputLocation l;
+    l.field = name;
+    l.kind = rcm::InputLocation::Kind::plain;
+    return l;
+  };
+  EXPECT_THROW(bad.check(where), rcm::InputError);
+  bad = p;
+  bad.joint_names = {"a", "a"};
+  EXPECT_THROW(bad.check(where), rcm::InputError);
+  EXPECT_EQ(rcm::parse_joint_names("[outer_yaw, 'outer_pitch']", where("joint_names")),
+            (std::vector<std::string>{"outer_yaw", "outer_pitch"}));
+  EXPECT_THROW(rcm::parse_joint_names("a,,b", where("joint_names")), rcm::InputError);
 }
 
 }  // namespace

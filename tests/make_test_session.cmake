@@ -1,4 +1,4 @@
-# CTest fixture of the ROS tests: a quick simulated session (30 s trials at
+# CTest fixture of the live-node tests (ROS 1, DDS): a quick simulated session (30 s trials at
 # 200 Hz) and a linear free-space model fitted on it, in OUT (about 2 s).
 #   cmake -DRCM=<rcm> -DOUT=<dir> -P make_test_session.cmake
 file(REMOVE_RECURSE ${OUT})

@@ -1,11 +1,14 @@
-#include "rcm/ros/live_monitor.hpp"
+#include "rcm/live/live_monitor.hpp"
 
 #include <stdexcept>
 
 namespace rcm {
 
-LiveMonitor::LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string> joint_names)
-    : pipeline_(pipeline), workspace_(pipeline.create_workspace()), wanted_names_(std::move(joint_names)) {
+LiveMonitor::LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string> joint_names, ZeroStamp zero_stamp)
+    : pipeline_(pipeline),
+      workspace_(pipeline.create_workspace()),
+      wanted_names_(std::move(joint_names)),
+      zero_stamp_(zero_stamp) {
   if (!wanted_names_.empty()) {
     map_ = JointStateMap(wanted_names_);  // throws std::invalid_argument on empty or repeated names
     if (map_.num_joints() < pipeline_.model().num_joints())
@@ -16,11 +19,16 @@ LiveMonitor::LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string
   }
 }
 
-LiveMonitor::Verdict LiveMonitor::compute_message(const sensor_msgs::JointState& m, std::int64_t receive_time_ns) {
+LiveMonitor::Verdict LiveMonitor::compute_message(const JointStateView& m, std::int64_t stamp_ns,
+                                                  std::int64_t receive_time_ns) {
+  if (stamp_ns == 0 && zero_stamp_ == ZeroStamp::invalid) {
+    ++counters_.bad_stamp;
+    return Verdict::bad_stamp;
+  }
   if (map_.num_joints() == 0) {
     // The first message that can define the joint order (allocates, once).
     try {
-      map_ = JointStateMap::make_from_message(view_joint_state(m), pipeline_.model().num_joints());
+      map_ = JointStateMap::make_from_message(m, pipeline_.model().num_joints());
     } catch (const std::invalid_argument&) {  // no joints, or empty or repeated names
       defect_ = {};
       ++counters_.malformed;
@@ -33,7 +41,7 @@ LiveMonitor::Verdict LiveMonitor::compute_message(const sensor_msgs::JointState&
     }
     map_ws_ = map_.create_workspace();
   }
-  defect_ = map_.compute_sample(map_ws_, view_joint_state(m));
+  defect_ = map_.compute_sample(map_ws_, m);
   if (defect_) {
     ++counters_.malformed;
     return Verdict::malformed;
@@ -41,14 +49,14 @@ LiveMonitor::Verdict LiveMonitor::compute_message(const sensor_msgs::JointState&
 
   std::int64_t t_ns = 0;
   if (!started_) {
-    receive_time_ = m.header.stamp.isZero();
-    origin_ns_ = receive_time_ ? receive_time_ns : static_cast<std::int64_t>(m.header.stamp.toNSec());
+    receive_time_ = stamp_ns == 0;
+    origin_ns_ = receive_time_ ? receive_time_ns : stamp_ns;
   } else {
-    if (!receive_time_ && m.header.stamp.isZero()) {
+    if (!receive_time_ && stamp_ns == 0) {
       ++counters_.bad_stamp;
       return Verdict::bad_stamp;
     }
-    t_ns = (receive_time_ ? receive_time_ns : static_cast<std::int64_t>(m.header.stamp.toNSec())) - origin_ns_;
+    t_ns = (receive_time_ ? receive_time_ns : stamp_ns) - origin_ns_;
     if (t_ns == last_ns_) {
       ++counters_.duplicate_stamp;
       return Verdict::duplicate_stamp;
@@ -66,8 +74,8 @@ LiveMonitor::Verdict LiveMonitor::compute_message(const sensor_msgs::JointState&
   return Verdict::accepted;
 }
 
-std::string LiveMonitor::describe_rejection(Verdict v, const sensor_msgs::JointState& m) const {
-  const double stamp = m.header.stamp.toSec();
+std::string LiveMonitor::describe_rejection(Verdict v, const JointStateView& m, std::int64_t stamp_ns) const {
+  const double stamp = static_cast<double>(stamp_ns) * 1e-9;
   switch (v) {
     case Verdict::accepted:
       return "accepted";
@@ -77,14 +85,15 @@ std::string LiveMonitor::describe_rejection(Verdict v, const sensor_msgs::JointS
       return "stamp " + std::to_string(stamp) + " s is earlier than the last accepted sample's (" +
              std::to_string(static_cast<double>(get_last_time_ns()) * 1e-9) + " s)";
     case Verdict::bad_stamp:
-      return "header.stamp is zero in a stream whose first message had a stamp";
+      return zero_stamp_ == ZeroStamp::invalid ? "header.stamp is zero: invalid data"
+                                               : "header.stamp is zero in a stream whose first message had a stamp";
     case Verdict::too_few_joints:
       return "the message has " + std::to_string(m.position.size()) + " joints, the free-space model reads " +
              std::to_string(pipeline_.model().num_joints());
     case Verdict::malformed:
       if (map_.num_joints() == 0)
         return m.name.empty() ? "position: missing (empty array)" : "name: joint names must be unique and non-empty";
-      return map_.describe(defect_, view_joint_state(m));
+      return map_.describe(defect_, m);
   }
   return "unknown";
 }

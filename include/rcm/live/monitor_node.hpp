@@ -1,0 +1,112 @@
+#pragma once
+// What every live node does, whatever its middleware: the parameters, the
+// pipeline built from a session and a saved model (as `rcm monitor` builds
+// it), and per joint-state message what to publish and what to log. The ROS 1
+// node and the DDS node each supply a MonitorSink (their publishers and their
+// logger) and feed messages; the decisions (publish every n-th estimate, flags
+// on change, status lines, the exit summary) live here once.
+//
+// Outputs, in the arm's namespace (`<arm>/rcm/...`): misalignment and
+// misalignment_sd (Vector3Stamped, incision frame, m), incision_force
+// (WrenchStamped, base frame, N), onset, alarm, out_of_regime (Bool, latched)
+// and rejected_samples (UInt64, latched).
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "rcm/common/error.hpp"
+#include "rcm/dynamics/regime.hpp"
+#include "rcm/estimation/online.hpp"
+#include "rcm/live/live_monitor.hpp"
+
+namespace rcm {
+
+// The node parameters, one declaration for every node (docs/ros.md, docs/ros2.md).
+struct MonitorNodeParameters {
+  std::string session, model_file;
+  std::string arm = "PSM1";
+  std::vector<std::string> joint_names;  // empty: the first message's order
+  double alarm_force_n = 10.0;
+  double onset_threshold = OnlineEstimatorOptions{}.onset_threshold;
+  int publish_every = 1;
+  int queue_size = 1000;
+  std::string base_frame, incision_frame;  // empty: <arm>_base, <arm>_incision
+  bool dedupe = false;
+  int seed = 1;
+  double status_period_s = 5.0;
+
+  // Throws InputError at `where(name)` for a missing or out-of-range value.
+  void check(const std::function<InputLocation(const std::string&)>& where) const;
+  std::string get_base_frame() const { return base_frame.empty() ? arm + "_base" : base_frame; }
+  std::string get_incision_frame() const { return incision_frame.empty() ? arm + "_incision" : incision_frame; }
+  // "<arm>/rcm/" ("rcm/" without an arm) and "<arm>/measured_js".
+  std::string get_output_prefix() const { return arm.empty() ? std::string("rcm/") : arm + "/rcm/"; }
+  std::string get_input_topic() const { return arm.empty() ? std::string("measured_js") : arm + "/measured_js"; }
+};
+
+// Joint names from a comma-separated string ("outer_yaw,outer_pitch,..."; brackets
+// and quotes ignored); checked non-empty and unique, errors at `where`.
+std::vector<std::string> parse_joint_names(const std::string& text, const InputLocation& where);
+
+// Everything `rcm monitor --session S --model-file M` builds before replaying;
+// `description` receives a line on the models for the node's log.
+std::unique_ptr<OnlinePipeline> make_monitor_pipeline(const MonitorNodeParameters& parameters,
+                                                      std::string* description = nullptr);
+
+enum class MonitorFlag { onset, alarm, out_of_regime };
+enum class LogLevel { info, warn, error };
+
+// The middleware's side of a node.
+class MonitorSink {
+ public:
+  virtual ~MonitorSink() = default;
+  // misalignment, misalignment_sd and incision_force, all with `stamp_ns`.
+  virtual void publish_estimate(std::int64_t stamp_ns, const OnlineOutput& output) = 0;
+  virtual void publish_flag(MonitorFlag flag, bool value) = 0;
+  virtual void publish_rejected(std::uint64_t total) = 0;
+  // `throttle_s` > 0: the sink may drop lines of the same call site closer than that.
+  virtual void log(LogLevel level, const std::string& text, double throttle_s = 0.0) = 0;
+};
+
+class MonitorNode {
+ public:
+  // `pipeline` from make_monitor_pipeline; `sink` must outlive the node.
+  MonitorNode(const MonitorNodeParameters& parameters, std::unique_ptr<OnlinePipeline> pipeline,
+              LiveMonitor::ZeroStamp zero_stamp, MonitorSink& sink);
+
+  // Publishes the latched outputs' initial values and logs what the node does.
+  void start(const std::string& input_topic_name);
+  // One joint-state message (`stamp_ns` 0 for a zero stamp). No allocation once
+  // the first message is accepted, except to log.
+  void compute_message(const JointStateView& message, std::int64_t stamp_ns, std::int64_t receive_time_ns);
+
+  const LiveMonitor& get_monitor() const { return monitor_; }
+  // The exit summary: counts, per-sample timing, regime, final estimate (lines).
+  std::string get_summary() const;
+
+ private:
+  struct TimingStats {
+    std::uint64_t count = 0;
+    double sum_s = 0.0, max_s = 0.0;
+    void add(double s);
+    double mean_us() const { return count ? 1e6 * sum_s / static_cast<double>(count) : 0.0; }
+  };
+  void on_first_sample(std::int64_t stamp_ns);
+  void on_rejected(LiveMonitor::Verdict verdict, const JointStateView& message, std::int64_t stamp_ns);
+
+  MonitorNodeParameters params_;
+  std::unique_ptr<OnlinePipeline> pipeline_;
+  LiveMonitor monitor_;
+  MonitorSink& sink_;
+  bool onset_ = false, alarm_ = false, out_of_regime_ = false;
+  dynamics::RegimeSummary regime_;
+  int since_publish_ = 0;
+  double next_status_s_ = 0.0;
+  TimingStats step_, callback_;
+};
+
+}  // namespace rcm
