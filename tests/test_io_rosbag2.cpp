@@ -19,6 +19,7 @@
 #include "rcm/common/error.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/rosbag2.hpp"
+#include "rcm/io/session.hpp"
 #include "support/rosbag2_writer.hpp"
 
 namespace fs = std::filesystem;
@@ -431,6 +432,13 @@ TEST(Rosbag2Cli, InspectConvertAndSessions) {
   EXPECT_EQ(j["rosbag2"]["sqlite_schema"], 4);
   EXPECT_EQ(j["rosbag2"]["messages"], 41);
   EXPECT_EQ(j["rosbag2"]["zero_stamp_messages"], 1);
+  // Every topic with its type, count and rate, as the recorder received them.
+  ASSERT_EQ(j["rosbag2"]["topics"].size(), 2u);
+  EXPECT_EQ(j["rosbag2"]["topics"][0]["name"], "/PSM1/body/measured_cf");
+  EXPECT_EQ(j["rosbag2"]["topics"][0]["messages"], 20);
+  EXPECT_NEAR(j["rosbag2"]["topics"][0]["rate_hz"].get<double>(), 50.0, 1e-9);
+  EXPECT_EQ(j["rosbag2"]["topics"][1]["type"], "sensor_msgs/msg/JointState");
+  EXPECT_EQ(j["rosbag2"]["topics"][1]["messages"], 41);
   const CliRun text = run_cli("inspect " + bag.string());
   EXPECT_NE(text.out.find("1 skipped (zero header.stamp: invalid data)"), std::string::npos) << text.out;
 
@@ -468,4 +476,44 @@ TEST(Rosbag2Cli, InspectConvertAndSessions) {
   const CliRun absent = run_cli("inspect --topic /PSM2/measured_js " + bag.string());
   EXPECT_EQ(absent.status, 2);
   EXPECT_NE(absent.out.find("no such JointState topic"), std::string::npos) << absent.out;
+  // What is there comes first: layout and the topic table.
+  EXPECT_NE(absent.out.find("rosbag2 recording: SQLite schema 4 (1 file(s), metadata.yaml version 9, ROS jazzy)"),
+            std::string::npos)
+      << absent.out;
+  EXPECT_NE(absent.out.find("/PSM1/body/measured_cf  geometry_msgs/msg/WrenchStamped"), std::string::npos) << absent.out;
+}
+
+// A session names its bags' topics; the command line overrides them.
+TEST(Rosbag2Cli, SessionTopicsAndFlagsOverride) {
+  TempDir dir;
+  const std::vector<Topic> psm2 = {{"/PSM2/measured_js", "sensor_msgs/msg/JointState"},
+                                   {"/PSM2/body/measured_cf", "geometry_msgs/msg/WrenchStamped"}};
+  write_db3(dir.path() / "free.db3", 4, psm2, make_messages(40));
+  const fs::path manifest = dir.path() / "session.json";
+  const std::string base =
+      R"({"format": "rcm-session/1", "robot": "dvrk-psm-classic", "q0": [0.0, 0.0, 0.12], "free_space": ["free.db3"])";
+  write_text(manifest, base + R"(, "topics": {"joints": "/PSM2/measured_js", "force": "/PSM2/body/measured_cf"}})");
+  const rcm::Session session = rcm::load_session(manifest);
+  EXPECT_EQ(session.joint_topic, "/PSM2/measured_js");
+  EXPECT_EQ(session.force_topic, "/PSM2/body/measured_cf");
+  const rcm::Recording r = rcm::load_recording(session.free_space[0], rcm::get_read_options(session, {}));
+  EXPECT_EQ(r.num_samples(), 40u);
+  EXPECT_TRUE(r.has_force());
+
+  const CliRun ok = run_cli("inspect --json " + manifest.string());
+  ASSERT_EQ(ok.status, 0) << ok.out;
+  const auto j = nlohmann::json::parse(ok.out.substr(ok.out.find('{')));
+  EXPECT_EQ(j["free_space"][0]["rosbag2"]["topic"], "/PSM2/measured_js");
+  EXPECT_EQ(j["free_space"][0]["has_force"], true);
+  const CliRun flag = run_cli("inspect --topic /PSM1/measured_js " + manifest.string());
+  EXPECT_EQ(flag.status, 2);
+  EXPECT_NE(flag.out.find("/PSM1/measured_js: no such JointState topic"), std::string::npos) << flag.out;
+
+  // Without "topics" the default topic is read, and is absent here.
+  write_text(manifest, base + "}");
+  EXPECT_EQ(run_cli("inspect " + manifest.string()).status, 2);
+  write_text(manifest, base + R"(, "topics": {"joint": "/PSM2/measured_js"}})");
+  expect_error([&] { rcm::load_session(manifest); }, {"session.json", "topics.joint", "unknown"});
+  write_text(manifest, base + R"(, "topics": {"joints": ""}})");
+  expect_error([&] { rcm::load_session(manifest); }, {"topics.joints", "empty topic name"});
 }

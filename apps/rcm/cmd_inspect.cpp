@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <iostream>
+#include <optional>
 
 #include "cli_util.hpp"
 #include "command_registry.hpp"
@@ -52,9 +53,8 @@ nlohmann::json summary_json(const rcm::Recording& r) {
                     {"files", b->files},
                     {"metadata_version", b->metadata_version},
                     {"sqlite_schema", b->sqlite_schema},
-                    {"topic", rcm::cli::get_topic_options().topic},
-                    {"time_source", rcm::cli::get_topic_options().time == rcm::MessageTime::receive ? "receive_time"
-                                                                                                    : "header_stamp"},
+                    {"topic", b->topic},
+                    {"time_source", b->receive_time ? "receive_time" : "header_stamp"},
                     {"messages", b->messages},
                     {"zero_stamp_messages", b->zero_stamp_messages},
                     {"joint_names", b->joint_names},
@@ -102,13 +102,42 @@ void print_recording(const nlohmann::json& j, const std::string& indent) {
     std::cout << indent << "  force columns: none\n";
 }
 
+void print_contents(const rcm::Rosbag2Contents& c) {
+  std::cout << fmt::format("rosbag2 recording: {} ({} file(s){}{})\n", c.layout, c.files.size(),
+                           c.metadata_version ? fmt::format(", metadata.yaml version {}", c.metadata_version) : "",
+                           c.ros_distro.empty() ? "" : ", ROS " + c.ros_distro);
+  std::vector<std::vector<std::string>> rows;
+  for (const auto& t : c.topics)
+    rows.push_back({t.name, t.type, t.serialization, std::to_string(t.messages),
+                    t.get_rate_hz() > 0 ? fmt::format("{:.1f}", t.get_rate_hz()) : "-"});
+  std::string table = rcm::cli::format_table({"topic", "type", "format", "messages", "rate Hz"}, rows);
+  for (std::size_t p = 0; (p = table.find('\n', p)) != std::string::npos && p + 1 < table.size(); p += 3)
+    table.insert(p + 1, "  ");
+  std::cout << "  " << table;
+}
+
+nlohmann::json contents_json(const rcm::Rosbag2Contents& c) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const auto& t : c.topics)
+    a.push_back({{"name", t.name}, {"type", t.type}, {"serialization", t.serialization}, {"messages", t.messages},
+                 {"rate_hz", t.get_rate_hz()}});
+  return a;
+}
+
 void run(const Options& o) {
   rcm::RecordingReadOptions read;
   read.dedupe = o.dedupe;
   if (o.rate_hz > 0) read.assumed_rate_hz = o.rate_hz;
   const bool is_json = o.file.size() > 5 && o.file.substr(o.file.size() - 5) == ".json";
   if (!is_json) {
-    const nlohmann::json j = summary_json(rcm::load_recording(o.file, read));
+    // A rosbag2 recording: what it holds first, so that a missing topic shows what is there.
+    std::optional<rcm::Rosbag2Contents> contents;
+    if (rcm::is_rosbag2_path(o.file)) {
+      contents = rcm::list_rosbag2_contents(o.file);
+      if (!o.json) print_contents(*contents);
+    }
+    nlohmann::json j = summary_json(rcm::load_recording(o.file, read));
+    if (contents) j["rosbag2"]["topics"] = contents_json(*contents);
     if (o.json) rcm::cli::print_json(j);
     else print_recording(j, "");
     return;
@@ -116,7 +145,8 @@ void run(const Options& o) {
   const rcm::Session s = rcm::load_session(o.file);
   nlohmann::json out = {{"file", o.file}, {"format", "rcm-session/1"}, {"robot", s.robot},
                         {"q0", rcm::cli::to_json(s.q0)}};
-  auto load = [&](const std::filesystem::path& p) { return summary_json(rcm::load_recording(p, read)); };
+  const rcm::RecordingReadOptions session_read = rcm::get_read_options(s, read);
+  auto load = [&](const std::filesystem::path& p) { return summary_json(rcm::load_recording(p, session_read)); };
   out["free_space"] = nlohmann::json::array();
   for (const auto& p : s.free_space) out["free_space"].push_back(load(p));
   if (s.baseline) out["baseline"] = load(*s.baseline);

@@ -107,7 +107,7 @@ void run(const Options& o) {
                             "the session has no calibration recording (paper step 2)");
     }
     if (!D_star) D_star = session.calibration->coaxial_offset_m;
-    *recording = rcm::load_recording(session.calibration->recording);
+    *recording = rcm::load_recording(session.calibration->recording, rcm::get_read_options(session, {}));
     progress(o, fmt::format("calibration {}: {} samples, D* = {:.4f} m", recording->source,
                             recording->num_samples(), *D_star));
     rcm::TissuePairOptions pair_options;

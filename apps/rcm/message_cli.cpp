@@ -11,6 +11,7 @@
 #include <map>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include "command_registry.hpp"
 #include "message_cli.hpp"
@@ -40,15 +41,39 @@ TopicReadOptions& get_topic_options() {
   return options;
 }
 
+namespace {
+// The --topic and --force-topic options of every command, to tell whether the
+// command line named a topic (it then overrides a session's).
+std::vector<CLI::Option*>& topic_flags() {
+  static std::vector<CLI::Option*> v;
+  return v;
+}
+std::vector<CLI::Option*>& force_topic_flags() {
+  static std::vector<CLI::Option*> v;
+  return v;
+}
+bool any_given(const std::vector<CLI::Option*>& options) {
+  for (const CLI::Option* o : options)
+    if (o->count() > 0) return true;
+  return false;
+}
+}  // namespace
+
+TopicReadOptions get_topic_options(const RecordingReadOptions& read) {
+  return with_session_topics(get_topic_options(), read, any_given(topic_flags()), any_given(force_topic_flags()));
+}
+
 void add_topic_options(CLI::App& cmd) {
   if (cmd.get_option_no_throw("--topic") != nullptr) return;
-  cmd.add_option("--topic", get_topic_options().topic,
-                 "bags (.bag, rosbag2 directory, .db3, .mcap): the sensor_msgs/JointState topic "
-                 "(default /PSM1/measured_js)")
-      ->group("Bags");
-  cmd.add_option("--force-topic", get_topic_options().force_topic,
-                 "bags: a geometry_msgs/WrenchStamped topic read as the force columns (evaluation only, base frame)")
-      ->group("Bags");
+  topic_flags().push_back(cmd.add_option("--topic", get_topic_options().topic,
+                                         "bags (.bag, rosbag2 directory, .db3, .mcap): the sensor_msgs/JointState "
+                                         "topic (default /PSM1/measured_js, or the session's \"topics\")")
+                               ->group("Bags"));
+  force_topic_flags().push_back(
+      cmd.add_option("--force-topic", get_topic_options().force_topic,
+                     "bags: a geometry_msgs/WrenchStamped topic read as the force columns (evaluation only, base "
+                     "frame; default: the session's \"topics\", else none)")
+          ->group("Bags"));
   cmd.add_option("--time", get_topic_options().time,
                  "bags: 'header' (header.stamp; rosbag2 messages with a zero stamp are invalid data, skipped and "
                  "counted) or 'receive' (the recorder's receive time)")
@@ -62,7 +87,7 @@ Recording load_rosbag2(const std::filesystem::path& path, const TopicReadOptions
   Recording rec = load_rosbag2_recording(path, options, &info);
   for (const std::string& w : info.warnings) std::cerr << "warning: " << w << "\n";
   if (info.zero_stamp_messages > 0)
-    std::cerr << "note: " << path.string() << " " << options.topic << ": " << info.zero_stamp_messages << " of "
+    std::cerr << "note: " << path.string() << " " << info.topic << ": " << info.zero_stamp_messages << " of "
               << info.messages << " messages skipped (zero header.stamp: invalid data)\n";
   const std::lock_guard<std::mutex> lock(info_mutex());
   infos()[path.string()] = info;
@@ -90,16 +115,12 @@ void add_options_to_readers(CLI::App& app) {
 const bool registered = register_command({"(message recordings)", 1000, [](CLI::App& app) {
   add_options_to_readers(app);
   auto rosbag2_reader = [](const std::filesystem::path& path, const RecordingReadOptions& read) {
-    TopicReadOptions options = get_topic_options();
-    options.read = read;
-    return load_rosbag2(path, options);
+    return load_rosbag2(path, get_topic_options(read));
   };
   for (const char* key : {".db3", ".mcap", "/"}) register_recording_reader(key, rosbag2_reader);
 #if RCM_HAVE_ROS
   register_recording_reader(".bag", [](const std::filesystem::path& path, const RecordingReadOptions& read) {
-    TopicReadOptions options = get_topic_options();
-    options.read = read;
-    return load_bag_recording(path, options);
+    return load_bag_recording(path, get_topic_options(read));
   });
 #else
   register_recording_reader(".bag", [](const std::filesystem::path& path, const RecordingReadOptions&) -> Recording {

@@ -14,6 +14,9 @@ namespace rcm::cli {
 
 // The options the flags set (one instance: a command line has one set of flags).
 TopicReadOptions& get_topic_options();
+// The options for one recording read with `read`: the session's topics in
+// `read` apply unless the command line named others.
+TopicReadOptions get_topic_options(const RecordingReadOptions& read);
 // Adds --topic, --force-topic and --time to `cmd` (once).
 void add_topic_options(CLI::App& cmd);
 // A rosbag2 recording with `options`; prints its warnings and skipped-message

@@ -158,9 +158,7 @@ Recording load_bag_recording(const std::filesystem::path& path, const BagReadOpt
 
 void register_bag_recording_reader(const BagReadOptions& options) {
   register_recording_reader(".bag", [options](const std::filesystem::path& path, const RecordingReadOptions& read) {
-    BagReadOptions o = options;
-    o.read = read;
-    return load_bag_recording(path, o);
+    return load_bag_recording(path, with_session_topics(options, read));
   });
 }
 

@@ -85,7 +85,7 @@ FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOption
   FreeSpaceModelStep out;
   out.kind = options.model_kind;
   std::vector<Recording> free_space;
-  for (const auto& p : session.free_space) free_space.push_back(load_recording(p, options.read));
+  for (const auto& p : session.free_space) free_space.push_back(load_recording(p, get_read_options(session, options.read)));
   if (options.model_file) {
     progress(options.verbose, "loading free-space model " + options.model_file->string());
     out.model = dynamics::load_torque_model(*options.model_file);
@@ -131,7 +131,7 @@ MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options
   }
   MonitorSetup setup{fit_free_space_step(session, options, fitter), make_incision_frame(session.q0), {}, {}};
   setup.joint_options = make_joint_options_for_model(options.joint, setup.free_space);
-  const Recording calibration = load_recording(session.calibration->recording, options.read);
+  const Recording calibration = load_recording(session.calibration->recording, get_read_options(session, options.read));
   progress(options.verbose, "identifying the tissue model in torque space on " + calibration.source);
   const Eigen::MatrixXd tau_fs_cal = dynamics::predict_torque(*setup.free_space.model, calibration);
   setup.tissue = fit_joint_tissue_model(
@@ -176,7 +176,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   const dynamics::TorqueModel& model = *result.model;
 
   // Step 2: the tissue law from the calibration at D*.
-  const Recording calibration = load_recording(session.calibration->recording, options.read);
+  const Recording calibration = load_recording(session.calibration->recording, get_read_options(session, options.read));
   result.calibration_offset_m = session.calibration->coaxial_offset_m;
   progress(options.verbose, "identifying the tissue law on " + calibration.source);
   const Eigen::MatrixXd tau_fs_cal = dynamics::predict_torque(model, calibration);
@@ -207,7 +207,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   if (options.method == "joint") {
     joint_options = make_joint_options_for_model(options.joint, free_space_step);
     if (session.baseline) {
-      const Recording baseline = load_recording(*session.baseline, options.read);
+      const Recording baseline = load_recording(*session.baseline, get_read_options(session, options.read));
       try {
         result.baseline_hold = compute_model_hold(model, baseline, session.q0, options);
         joint_options.torque_bias = result.baseline_hold->get_dtau();
@@ -240,7 +240,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
     TrialOutcome out;
     out.name = spec.name;
     out.truth_m = spec.truth_misalignment_m;
-    const Recording trial = load_recording(spec.recording, options.read);
+    const Recording trial = load_recording(spec.recording, get_read_options(session, options.read));
     const Eigen::MatrixXd tau_fs = dynamics::predict_torque(model, trial);
     out.regime = dynamics::compute_regime_summary(regime, trial);
     if (out.regime.flagged > 0) progress(options.verbose, "  warning: " + out.regime.to_text());
@@ -249,7 +249,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
     if (result.joint_tissue)
       joint_samples = make_joint_samples(incision, trial, tau_fs, options.three_step.coaxial.max_theta_rad);
     if (spec.static_recording) {
-      const Recording hold_rec = load_recording(*spec.static_recording, options.read);
+      const Recording hold_rec = load_recording(*spec.static_recording, get_read_options(session, options.read));
       Eigen::MatrixXd tau_fs_hold;
       out.hold = compute_model_hold(model, hold_rec, session.q0, options, &tau_fs_hold);
       dtau_radial = out.hold->get_dtau();

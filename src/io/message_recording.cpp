@@ -29,6 +29,14 @@ double seconds_between(std::int64_t t_ns, std::int64_t origin_ns) { return stati
 
 }  // namespace
 
+TopicReadOptions with_session_topics(TopicReadOptions options, const RecordingReadOptions& read, bool keep_topic,
+                                     bool keep_force_topic) {
+  options.read = read;
+  if (!keep_topic && !read.joint_topic.empty()) options.topic = read.joint_topic;
+  if (!keep_force_topic && !read.force_topic.empty()) options.force_topic = read.force_topic;
+  return options;
+}
+
 std::string describe_message_place(const std::string& topic, std::size_t index, std::optional<std::int64_t> t_ns,
                                    std::int64_t origin_ns) {
   std::string s = topic + " message " + std::to_string(index);

@@ -332,10 +332,8 @@ Recording load_recording(const std::filesystem::path& path, const RecordingReadO
   }
   if (reader) return reader(path, options);
   if (is_rosbag2_path(path)) {
-    TopicReadOptions topic_options;
-    topic_options.read = options;
     Rosbag2ReadInfo info;
-    Recording rec = load_rosbag2_recording(path, topic_options, &info);
+    Recording rec = load_rosbag2_recording(path, with_session_topics({}, options), &info);
     for (const std::string& w : info.warnings) std::cerr << "warning: " << w << "\n";
     return rec;
   }

@@ -1,5 +1,7 @@
 #include "rcm/io/session.hpp"
 
+#include "rcm/io/recording.hpp"
+
 #include <cmath>
 #include <set>
 
@@ -143,7 +145,21 @@ Session load_session(const std::filesystem::path& manifest) {
     }
   }
 
-  static const std::set<std::string> known = {"format", "robot", "q0", "free_space", "baseline", "calibration", "trials"};
+  if (doc.contains("topics") && !doc["topics"].is_null()) {
+    const json& t = doc["topics"];
+    if (!t.is_object()) r.fail("topics", "expected an object {joints, force} of topic names");
+    for (auto it = t.begin(); it != t.end(); ++it) {
+      if (it.key() != "joints" && it.key() != "force")
+        r.fail("topics." + it.key(), "unknown: the topics are \"joints\" (sensor_msgs JointState) and \"force\" "
+                                     "(geometry_msgs WrenchStamped)");
+      const std::string name = r.string_at(it.value(), "topics." + it.key());
+      if (name.empty()) r.fail("topics." + it.key(), "empty topic name");
+      (it.key() == "joints" ? s.joint_topic : s.force_topic) = name;
+    }
+  }
+
+  static const std::set<std::string> known = {"format", "robot", "q0", "free_space", "baseline", "calibration",
+                                              "trials", "topics"};
   for (auto it = doc.begin(); it != doc.end(); ++it)
     if (!known.count(it.key())) s.extra[it.key()] = it.value();
   return s;
@@ -175,7 +191,18 @@ void save_session(const std::filesystem::path& manifest, const Session& s) {
     }
     doc["trials"].push_back(jt);
   }
+  if (!s.joint_topic.empty() || !s.force_topic.empty()) {
+    doc["topics"] = json::object();
+    if (!s.joint_topic.empty()) doc["topics"]["joints"] = s.joint_topic;
+    if (!s.force_topic.empty()) doc["topics"]["force"] = s.force_topic;
+  }
   save_json_file(manifest, doc);
+}
+
+RecordingReadOptions get_read_options(const Session& session, RecordingReadOptions base) {
+  if (!session.joint_topic.empty()) base.joint_topic = session.joint_topic;
+  if (!session.force_topic.empty()) base.force_topic = session.force_topic;
+  return base;
 }
 
 }  // namespace rcm

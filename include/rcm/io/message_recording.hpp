@@ -52,6 +52,13 @@ struct TopicReadOptions {
   RecordingReadOptions read;  // dedupe and min_joints apply; assumed_rate_hz is ignored (messages carry time)
 };
 
+// `options` for one recording read with `read`: `read` replaces options.read,
+// and the session's topics it carries (read.joint_topic, read.force_topic)
+// replace options' topics unless the command line named them (`keep_topic`,
+// `keep_force_topic`).
+TopicReadOptions with_session_topics(TopicReadOptions options, const RecordingReadOptions& read,
+                                     bool keep_topic = false, bool keep_force_topic = false);
+
 // "/PSM1/measured_js message 12 (t = 0.12 s)"; t relative to `origin_ns`, left
 // out when unknown.
 std::string describe_message_place(const std::string& topic, std::size_t index, std::optional<std::int64_t> t_ns,

@@ -55,6 +55,10 @@ struct RecordingReadOptions {
   std::optional<double> assumed_rate_hz;
   // Minimum number of joints the caller needs.
   int min_joints = 3;
+  // Message recordings (bags) of a session whose manifest names its topics
+  // ("topics": {"joints": ..., "force": ...}): the topics to read unless the
+  // command line names others. Empty: the reader's own (default or flags).
+  std::string joint_topic, force_topic;
 };
 
 // Reads and validates a recording. Throws InputError naming file, line and

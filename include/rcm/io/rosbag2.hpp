@@ -35,6 +35,8 @@ struct Rosbag2ReadInfo {
   int metadata_version = 0;              // 0: no metadata.yaml (a bare file)
   int sqlite_schema = 0;                 // SQLite schema version (0: before Humble, or MCAP)
   std::string ros_distro;                // as recorded, when it is
+  std::string topic, force_topic;        // the topics read (force_topic empty: none)
+  bool receive_time = false;             // MessageTime::receive
   std::vector<std::string> joint_names;  // the recording's joint order; empty when the messages carry no names
   std::int64_t time_origin_ns = 0;       // absolute time of sample 0
   std::size_t messages = 0;              // JointState messages on the topic
@@ -44,6 +46,29 @@ struct Rosbag2ReadInfo {
   std::string force_frame_id;
   std::vector<std::string> warnings;     // e.g. an MCAP file cut off by a crash
 };
+
+// What a rosbag2 recording holds, whatever its topics: for `rcm inspect`,
+// also when the JointState topic is missing.
+struct Rosbag2Contents {
+  std::string storage;                  // "sqlite3" or "mcap"
+  std::vector<std::string> files;
+  int metadata_version = 0, sqlite_schema = 0;
+  std::string ros_distro;
+  std::string layout;                   // e.g. "SQLite schema 4", "MCAP, 5 chunks, with summary"
+  struct Topic {
+    std::string name, type, serialization;
+    std::size_t messages = 0;
+    std::int64_t first_ns = 0, last_ns = 0;  // receive time
+    double get_rate_hz() const {
+      return messages > 1 && last_ns > first_ns ? static_cast<double>(messages - 1) * 1e9 / static_cast<double>(last_ns - first_ns) : 0.0;
+    }
+  };
+  std::vector<Topic> topics;            // by name
+  std::vector<std::string> warnings;
+};
+// Reads every file of the recording (every message of an MCAP file). Throws
+// InputError for a file that cannot be read, as load_rosbag2_recording.
+Rosbag2Contents list_rosbag2_contents(const std::filesystem::path& path);
 
 // True when `path` is read as a rosbag2 recording: a directory, or a file
 // ending in .db3 or .mcap.

@@ -32,6 +32,9 @@ struct Session {
   std::optional<std::filesystem::path> baseline;
   std::optional<CalibrationSpec> calibration;
   std::vector<TrialSpec> trials;
+  // "topics": {"joints": "/PSM1/measured_js", "force": "/PSM1/body/measured_cf"}:
+  // the topics of the session's bags, so that the session describes itself.
+  std::string joint_topic, force_topic;  // empty: not given
   nlohmann::json extra = nlohmann::json::object();  // unknown top-level fields, kept
 };
 
@@ -40,6 +43,10 @@ struct Session {
 // resolved against the manifest's directory. Throws InputError naming the
 // manifest and the JSON field.
 Session load_session(const std::filesystem::path& manifest);
+
+// `base` with the session's topics: what every reader of its recordings is given.
+struct RecordingReadOptions;
+RecordingReadOptions get_read_options(const Session& session, RecordingReadOptions base);
 
 // Writes a manifest (atomically) with paths made relative to its directory.
 void save_session(const std::filesystem::path& manifest, const Session& session);

@@ -215,6 +215,71 @@ void decode_or_throw(const std::filesystem::path& file, const std::string& topic
 
 }  // namespace
 
+Rosbag2Contents list_rosbag2_contents(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw InputError(locate(path.string(), ""), "no such file or directory");
+  const BagFiles bag = std::filesystem::is_directory(path, ec) ? read_metadata(path) : BagFiles{{path}, 0, {}};
+  Rosbag2Contents out;
+  out.metadata_version = bag.metadata_version;
+  out.warnings = bag.warnings;
+  std::map<std::string, Rosbag2Contents::Topic> topics;
+  std::size_t chunks = 0;
+  bool summary = true;
+  for (const auto& file : bag.files) {
+    const std::string ext = lower_extension(file);
+    if (ext == ".db3") {
+      const rosbag2::SqliteBagInfo db = rosbag2::read_sqlite_bag(
+          file, [](const rosbag2::SqliteTopic&) { return false; }, [](const rosbag2::SqliteMessage&) {});
+      for (const auto& st : rosbag2::count_sqlite_messages(file))
+        for (const auto& t : db.topics)
+          if (t.id == st.topic_id) {
+            Rosbag2Contents::Topic& x = topics[t.name];
+            if (x.messages == 0 || st.first_ns < x.first_ns) x.first_ns = st.first_ns;
+            x.last_ns = std::max(x.last_ns, st.last_ns);
+            x.messages += st.messages;
+          }
+      for (const auto& t : db.topics) {
+        Rosbag2Contents::Topic& x = topics[t.name];
+        x.name = t.name;
+        x.type = t.type;
+        x.serialization = t.serialization_format;
+      }
+      out.storage = "sqlite3";
+      out.sqlite_schema = db.schema_version;
+      if (!db.ros_distro.empty()) out.ros_distro = db.ros_distro;
+    } else if (ext == ".mcap") {
+      const mcap::ReadResult r = mcap::read_mcap(
+          file, [](const mcap::Channel&) { return true; },
+          [&](const mcap::MessageRef& m) {
+            Rosbag2Contents::Topic& x = topics[m.channel->topic];
+            const auto t = static_cast<std::int64_t>(m.log_time_ns);
+            if (x.messages == 0 || t < x.first_ns) x.first_ns = t;
+            x.last_ns = std::max(x.last_ns, t);
+            ++x.messages;
+          });
+      for (const auto& c : r.channels) {
+        Rosbag2Contents::Topic& x = topics[c.topic];
+        x.name = c.topic;
+        x.type = c.schema_name;
+        x.serialization = c.message_encoding;
+      }
+      out.storage = "mcap";
+      chunks += r.chunks;
+      summary = summary && r.has_summary;
+      if (r.truncated) out.warnings.push_back(file.string() + ": " + r.truncation);
+    } else {
+      throw InputError(locate(file.string(), ""), "storage file of unknown kind; rosbag2 storage is .db3 or .mcap");
+    }
+    out.files.push_back(file.string());
+  }
+  out.layout = out.storage == "mcap" ? "MCAP, " + (chunks ? std::to_string(chunks) + " chunks" : std::string("unchunked")) +
+                                           (summary ? ", with summary" : ", no summary")
+                                     : "SQLite " + (out.sqlite_schema ? "schema " + std::to_string(out.sqlite_schema)
+                                                                      : std::string("(before Humble, no schema table)"));
+  for (auto& [name, t] : topics) out.topics.push_back(std::move(t));
+  return out;
+}
+
 bool is_rosbag2_path(const std::filesystem::path& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) return true;
@@ -236,6 +301,9 @@ Recording load_rosbag2_recording(const std::filesystem::path& path, const TopicR
   }
   info.metadata_version = bag.metadata_version;
   info.warnings = bag.warnings;
+  info.topic = options.topic;
+  info.force_topic = options.force_topic;
+  info.receive_time = options.time == MessageTime::receive;
 
   const bool header_time = options.time == MessageTime::header;
   const std::string source = path.string();

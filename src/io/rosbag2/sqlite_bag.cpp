@@ -43,21 +43,41 @@ std::string column_text(sqlite3_stmt* s, int i) {
   return t ? reinterpret_cast<const char*>(t) : std::string();
 }
 
-}  // namespace
+using Database = std::unique_ptr<sqlite3, CloseDb>;
 
-SqliteBagInfo read_sqlite_bag(const std::filesystem::path& path, const std::function<bool(const SqliteTopic&)>& wanted,
-                              const std::function<void(const SqliteMessage&)>& on_message) {
+// Opens read-only and checks rosbag2's two tables are there.
+Database open_bag(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) fail(path, "no such file");
   sqlite3* raw = nullptr;
   const int rc = sqlite3_open_v2(path.c_str(), &raw, SQLITE_OPEN_READONLY, nullptr);
-  std::unique_ptr<sqlite3, CloseDb> db(raw);
+  Database db(raw);
   if (rc != SQLITE_OK) fail(path, std::string("cannot open as SQLite: ") + (raw ? sqlite3_errmsg(raw) : "out of memory"));
-
-  SqliteBagInfo info;
   for (const char* table : {"topics", "messages"})
     if (!has_table(db.get(), path, table))
       fail(path, std::string("no '") + table + "' table: not a rosbag2 SQLite file");
+  return db;
+}
+
+}  // namespace
+
+std::vector<SqliteTopicStats> count_sqlite_messages(const std::filesystem::path& path) {
+  const Database db = open_bag(path);
+  Statement s = prepare(db.get(), path,
+                        "SELECT topic_id, COUNT(*), MIN(timestamp), MAX(timestamp) FROM messages GROUP BY topic_id");
+  std::vector<SqliteTopicStats> out;
+  int step;
+  while ((step = sqlite3_step(s.get())) == SQLITE_ROW)
+    out.push_back({sqlite3_column_int64(s.get(), 0), static_cast<std::size_t>(sqlite3_column_int64(s.get(), 1)),
+                   sqlite3_column_int64(s.get(), 2), sqlite3_column_int64(s.get(), 3)});
+  if (step != SQLITE_DONE) fail(path, std::string("counting messages: ") + sqlite3_errmsg(db.get()));
+  return out;
+}
+
+SqliteBagInfo read_sqlite_bag(const std::filesystem::path& path, const std::function<bool(const SqliteTopic&)>& wanted,
+                              const std::function<void(const SqliteMessage&)>& on_message) {
+  const Database db = open_bag(path);
+  SqliteBagInfo info;
   if (has_table(db.get(), path, "schema")) {
     Statement s = prepare(db.get(), path, "SELECT schema_version, ros_distro FROM schema");
     if (sqlite3_step(s.get()) == SQLITE_ROW) {

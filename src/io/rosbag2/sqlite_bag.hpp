@@ -39,4 +39,13 @@ struct SqliteBagInfo {
 SqliteBagInfo read_sqlite_bag(const std::filesystem::path& path, const std::function<bool(const SqliteTopic&)>& wanted,
                               const std::function<void(const SqliteMessage&)>& on_message);
 
+// Per topic (by id): message count and first and last receive time, in one
+// pass over the messages table.
+struct SqliteTopicStats {
+  std::int64_t topic_id = 0;
+  std::size_t messages = 0;
+  std::int64_t first_ns = 0, last_ns = 0;
+};
+std::vector<SqliteTopicStats> count_sqlite_messages(const std::filesystem::path& path);
+
 }  // namespace rcm::rosbag2
