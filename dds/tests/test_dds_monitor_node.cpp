@@ -319,7 +319,7 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
   EXPECT_EQ(node_exit, 0) << node_log;
   std::cout << "[ node     ] " << T << " samples + " << injected << " bad messages published at 1.5 kHz in " << seconds
             << " s\n";
-  for (const char* key : {"samples accepted", "per sample:"}) {
+  for (const char* key : {"samples accepted", "per sample:", "publishing (own thread)"}) {
     const auto p = node_log.find(key);
     if (p != std::string::npos) {
       const auto b = node_log.rfind('\n', p) + 1, e = node_log.find('\n', p);
@@ -335,6 +335,7 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
             std::string::npos)
       << node_log;
   EXPECT_NE(node_log.find("zero stamp 1,"), std::string::npos) << node_log;
+  EXPECT_NE(node_log.find(", 0 outputs dropped"), std::string::npos) << node_log;
   EXPECT_NE(node_log.find("3 joints by name: outer_yaw, outer_pitch, outer_insertion; time from header.stamp"),
             std::string::npos)
       << node_log;
