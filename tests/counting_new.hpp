@@ -10,11 +10,20 @@
 
 namespace rcm::test {
 inline std::atomic<long> g_allocations{0};
+// The largest single allocation since it was last reset: a reader must not
+// allocate what a corrupt size field claims.
+inline std::atomic<std::size_t> g_largest_allocation{0};
 inline long get_allocation_count() { return g_allocations.load(); }
 }  // namespace rcm::test
 
+// GCC cannot see that these replacements pair malloc with free.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 void* operator new(std::size_t n) {
   ++rcm::test::g_allocations;
+  std::size_t seen = rcm::test::g_largest_allocation.load();
+  while (n > seen && !rcm::test::g_largest_allocation.compare_exchange_weak(seen, n)) {
+  }
   if (void* p = std::malloc(n ? n : 1)) return p;
   throw std::bad_alloc();
 }
@@ -23,3 +32,4 @@ void operator delete(void* p) noexcept { std::free(p); }
 void operator delete[](void* p) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+#pragma GCC diagnostic pop

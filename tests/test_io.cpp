@@ -6,6 +6,7 @@
 #include <fstream>
 #include <random>
 
+#include "temp_dir.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/recording.hpp"
@@ -15,26 +16,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class TempDir {
- public:
-  TempDir() {
-    std::random_device rd;
-    path_ = fs::temp_directory_path() / ("rcm_test_io_" + std::to_string(rd()));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  fs::path write(const std::string& name, const std::string& text) const {
-    const fs::path p = path_ / name;
-    std::ofstream(p, std::ios::binary) << text;
-    return p;
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
+// Temporary directories of this file are named rcm_test_io_<n>.
+struct TempDir : rcm::test::TempDir {
+  TempDir() : rcm::test::TempDir("rcm_test_io_") {}
 };
 
 const char* kHeader = "time,position_1,position_2,position_3,velocity_1,velocity_2,velocity_3,effort_1,effort_2,effort_3";

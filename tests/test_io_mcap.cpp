@@ -26,28 +26,9 @@
 
 // Largest single allocation and allocation count, to prove that corrupt sizes
 // are not allocated and that the per-message path allocates nothing.
-namespace {
-std::atomic<std::size_t> g_largest_allocation{0};
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-// GCC cannot see that these replacements pair malloc with free.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-void* operator new(std::size_t n) {
-  ++g_allocations;
-  std::size_t seen = g_largest_allocation.load();
-  while (n > seen && !g_largest_allocation.compare_exchange_weak(seen, n)) {
-  }
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) { return operator new(n); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-#pragma GCC diagnostic pop
+#include "counting_new.hpp"
+using rcm::test::g_allocations;
+using rcm::test::g_largest_allocation;
 
 namespace {
 
@@ -63,7 +44,8 @@ constexpr std::size_t kJointStateBytes = 332;  // CDR of 7 named joints, empty f
 constexpr std::size_t kWrenchBytes = 76;       // CDR with frame_id "PSM1"
 
 const char* const kFixtures[] = {"joint_states_unchunked.mcap", "joint_states_zstd.mcap", "joint_states_lz4.mcap",
-                                 "joint_states_none.mcap", "joint_states_no_summary.mcap"};
+                                 "joint_states_none.mcap", "joint_states_no_summary.mcap",
+                                 "joint_states_unindexed.mcap"};
 
 fs::path fixture(const std::string& name) { return fs::path(RCM_SOURCE_DIR) / "tests/data/rosbag2" / name; }
 

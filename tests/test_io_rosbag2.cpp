@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "io/rosbag2/cdr.hpp"
+#include "temp_dir.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/rosbag2.hpp"
@@ -26,21 +27,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class TempDir {
- public:
-  TempDir() {
-    std::random_device rd;
-    path_ = fs::temp_directory_path() / ("rcm_test_rosbag2_" + std::to_string(rd()));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
+// Temporary directories of this file are named rcm_test_rosbag2_<n>.
+struct TempDir : rcm::test::TempDir {
+  TempDir() : rcm::test::TempDir("rcm_test_rosbag2_") {}
 };
 
 const std::vector<std::string> kNames = {"outer_yaw", "outer_pitch", "outer_insertion", "outer_roll"};

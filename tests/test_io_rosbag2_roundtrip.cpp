@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "temp_dir.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/rosbag2.hpp"
@@ -28,21 +29,9 @@ using Storage = Rosbag2WriteOptions::Storage;
 
 namespace {
 
-class TempDir {
- public:
-  TempDir() {
-    std::random_device rd;
-    path_ = fs::temp_directory_path() / ("rcm_test_rosbag2_roundtrip_" + std::to_string(rd()));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
+// Temporary directories of this file are named rcm_test_rosbag2_roundtrip_<n>.
+struct TempDir : rcm::test::TempDir {
+  TempDir() : rcm::test::TempDir("rcm_test_rosbag2_roundtrip_") {}
 };
 
 constexpr const char* kForceTopic = "/PSM1/body/measured_cf";

@@ -17,6 +17,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "temp_dir.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/rosbag2.hpp"
 #include "support/rosbag2_writer.hpp"
@@ -26,24 +27,12 @@ using rcm::test::Rosbag2WriteOptions;
 
 namespace {
 
-constexpr const char* kForceTopic = "/PSM1/body/measured_cf";
-
-class TempDir {
- public:
-  TempDir() {
-    std::random_device rd;
-    path_ = fs::temp_directory_path() / ("rcm_test_rosbag2_session_" + std::to_string(rd()));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
+// Temporary directories of this file are named rcm_test_rosbag2_session_<n>.
+struct TempDir : rcm::test::TempDir {
+  TempDir() : rcm::test::TempDir("rcm_test_rosbag2_session_") {}
 };
+
+constexpr const char* kForceTopic = "/PSM1/body/measured_cf";
 
 // Runs the CLI; returns its exit status, with stdout and stderr in `out`.
 int run_cli(const std::string& args, std::string& out) {

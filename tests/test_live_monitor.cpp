@@ -303,12 +303,7 @@ TEST(MonitorNodeCore, PublishesEveryNthEstimateFlagsOnChangeAndCountsRejections)
 
   rcm::MonitorNodeParameters bad = p;
   bad.publish_every = 0;
-  auto where = [](const std::string& name) {
-    rcm::InputLocation l;
-    l.field = name;
-    l.kind = rcm::InputLocation::Kind::plain;
-    return l;
-  };
+  auto where = [](const std::string& name) { return rcm::InputLocation::plain("", name); };
   EXPECT_THROW(bad.check(where), rcm::InputError);
   bad = p;
   bad.joint_names = {"a", "a"};
@@ -316,6 +311,44 @@ TEST(MonitorNodeCore, PublishesEveryNthEstimateFlagsOnChangeAndCountsRejections)
   EXPECT_EQ(rcm::parse_joint_names("[outer_yaw, 'outer_pitch']", where("joint_names")),
             (std::vector<std::string>{"outer_yaw", "outer_pitch"}));
   EXPECT_THROW(rcm::parse_joint_names("a,,b", where("joint_names")), rcm::InputError);
+}
+
+// The node's path per message: checks, estimate and the sink's calls, without
+// allocating (only a log line may).
+TEST(MonitorNodeCore, NoAllocationPerMessageAfterTheFirst) {
+  struct CountingSink : rcm::MonitorSink {
+    long estimates = 0, flags = 0, rejected = 0, lines = 0;
+    void publish_estimate(std::int64_t, const rcm::OnlineOutput&) override { ++estimates; }
+    void publish_flag(rcm::MonitorFlag, bool) override { ++flags; }
+    void publish_rejected(std::uint64_t) override { ++rejected; }
+    void log(rcm::LogLevel, const std::string&, double) override { ++lines; }
+  } sink;
+  rcm::MonitorNodeParameters p;
+  p.session = "s.json";
+  p.model_file = "m.json";
+  p.status_period_s = 0;
+  rcm::MonitorNode node(p, std::make_unique<rcm::OnlinePipeline>(*make_pipeline()),
+                        rcm::LiveMonitor::ZeroStamp::invalid, sink);
+  node.start("rt/PSM1/measured_js");
+  const std::vector<int> order = {0, 1, 2, 3};
+  constexpr std::int64_t kBase = 1700000000000000000;
+  std::vector<Message> messages;
+  for (int k = 0; k < 500; ++k) messages.push_back(make_message(make_sample(k), order, kBase));
+  node.compute_message(rcm::view_joint_state(messages[0]), messages[0].stamp_ns, 0);
+  // Message by message: a message that logs (onset, alarm, regime) may
+  // allocate its line; every other must not allocate at all.
+  std::size_t quiet = 0;
+  for (std::size_t k = 1; k < messages.size(); ++k) {
+    const long lines_before = sink.lines;
+    const long before = g_allocations;
+    node.compute_message(rcm::view_joint_state(messages[k]), messages[k].stamp_ns, 0);
+    const long allocations = g_allocations - before;
+    if (sink.lines != lines_before) continue;
+    ++quiet;
+    EXPECT_EQ(allocations, 0) << "message " << k;
+  }
+  EXPECT_GT(quiet, 450u);
+  EXPECT_EQ(sink.estimates, 500);
 }
 
 }  // namespace

@@ -38,11 +38,7 @@ std::atomic<bool> g_stop{false};
 extern "C" void on_signal(int) { g_stop = true; }
 
 rcm::InputLocation param_location(const std::string& file, const std::string& name) {
-  rcm::InputLocation where;
-  where.file = file;
-  where.field = name;
-  where.kind = rcm::InputLocation::Kind::plain;
-  return where;
+  return rcm::InputLocation::plain(file, name);
 }
 
 // A ROS 2 parameters file: `<node>:` or `/**:`, then `ros__parameters:`.
@@ -407,7 +403,9 @@ int run(int argc, char** argv) {
                             DDS_DURABILITY_VOLATILE);
   const dds_entity_t reader = check(dds_create_reader(participant, topic, qos, nullptr), "reader");
   dds_delete_qos(qos);
-  check(dds_set_status_mask(reader, DDS_REQUESTED_INCOMPATIBLE_QOS_STATUS | DDS_DATA_AVAILABLE_STATUS), "status");
+  check(dds_set_status_mask(reader, DDS_REQUESTED_INCOMPATIBLE_QOS_STATUS | DDS_SUBSCRIPTION_MATCHED_STATUS |
+                                        DDS_DATA_AVAILABLE_STATUS),
+        "status");
   const dds_entity_t waitset = check(dds_create_waitset(participant), "waitset");
   check(dds_waitset_attach(waitset, reader, reader), "attach");
   node.start(input + " (domain " + std::to_string(domain) + (best_effort ? ", best effort)" : ", reliable)"));
@@ -424,6 +422,12 @@ int run(int argc, char** argv) {
     if (dds_take_status(reader, &status, DDS_REQUESTED_INCOMPATIBLE_QOS_STATUS) == DDS_RETCODE_OK && status)
       sink.log(rcm::LogLevel::warn, "rcm: a publisher on " + input + " does not match this subscription's QoS" +
                                         (best_effort ? "" : " (a best-effort publisher? restart with --best-effort)"));
+    // Samples sent before the subscription matches their writer are not
+    // delivered (VOLATILE): say when the robot's publisher comes and goes.
+    dds_subscription_matched_status_t matched;
+    if (dds_get_subscription_matched_status(reader, &matched) == DDS_RETCODE_OK && matched.current_count_change != 0)
+      sink.log(rcm::LogLevel::info,
+               "rcm: " + std::to_string(matched.current_count) + " publisher(s) matched on " + input);
     while (true) {
       for (void*& s : samples) s = nullptr;  // null buffers: Cyclone lends its samples
       const dds_return_t n = dds_take(reader, samples, infos, kBatch, kBatch);

@@ -6,11 +6,7 @@
 namespace rcm::python {
 
 InputLocation argument_location(const std::string& function, const std::string& argument) {
-  InputLocation where;
-  where.file = function;
-  where.field = argument;
-  where.kind = InputLocation::Kind::plain;
-  return where;
+  return InputLocation::plain(function, argument);
 }
 
 namespace {

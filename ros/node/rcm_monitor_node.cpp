@@ -33,13 +33,7 @@
 
 namespace {
 
-rcm::InputLocation param_location(const std::string& name) {
-  rcm::InputLocation where;
-  where.file = "ROS parameter";
-  where.field = "~" + name;
-  where.kind = rcm::InputLocation::Kind::plain;
-  return where;
-}
+rcm::InputLocation param_location(const std::string& name) { return rcm::InputLocation::plain("ROS parameter", "~" + name); }
 
 // ~joint_names: a list (launch file, rosparam) or, since roscpp's `_name:=value`
 // cannot give lists, a comma-separated string ("outer_yaw,outer_pitch,outer_insertion").

@@ -15,11 +15,7 @@ namespace rcm {
 namespace {
 
 InputLocation locate(const std::filesystem::path& path, const std::string& where) {
-  InputLocation loc;
-  loc.file = path.string();
-  loc.field = where;
-  loc.kind = InputLocation::Kind::plain;
-  return loc;
+  return InputLocation::plain(path.string(), where);
 }
 
 // The topics of a bag with their types and counts, for "no such topic" errors.

@@ -10,13 +10,7 @@
 namespace rcm {
 namespace {
 
-InputLocation locate(const std::string& file, const std::string& where) {
-  InputLocation loc;
-  loc.file = file;
-  loc.field = where;
-  loc.kind = InputLocation::Kind::plain;
-  return loc;
-}
+InputLocation locate(const std::string& file, const std::string& where) { return InputLocation::plain(file, where); }
 
 std::string format_seconds(double s) {
   std::ostringstream o;

@@ -73,10 +73,7 @@ std::unique_ptr<OnlinePipeline> make_monitor_pipeline(const MonitorNodeParameter
   options.read.dedupe = p.dedupe;
   const TorqueModelFitter no_fitter = [](dynamics::TorqueModelKind, const std::vector<Recording>&,
                                          const dynamics::FitOptions&) -> dynamics::FitResult {
-    InputLocation where;
-    where.field = "model_file";
-    where.kind = InputLocation::Kind::plain;
-    throw InputError(where, "the node does not fit free-space models");
+    throw InputError(InputLocation::plain("", "model_file"), "the node does not fit free-space models");
   };
   const MonitorSetup setup = prepare_monitor(session, options, no_fitter);
   OnlineEstimatorOptions online = make_online_options(setup.joint_options);

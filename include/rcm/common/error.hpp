@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace rcm {
 
@@ -22,6 +23,15 @@ struct InputLocation {
   enum class Kind { auto_detect, csv_column, json_field, plain } kind = Kind::auto_detect;
 
   std::string to_string() const;  // "file:line: column effort_2" / "file: field q0[1]"
+
+  // A place named in words: `field` printed as given ("/PSM1/measured_js message 4: effort[2]", "--topic").
+  static InputLocation plain(std::string file, std::string field) {
+    InputLocation where;
+    where.file = std::move(file);
+    where.field = std::move(field);
+    where.kind = Kind::plain;
+    return where;
+  }
 };
 
 // Thrown for every malformed, inconsistent or missing user input.

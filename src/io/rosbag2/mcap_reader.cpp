@@ -159,11 +159,7 @@ class Reader {
 
  private:
   [[noreturn]] void fail(const std::string& where, const std::string& what) const {
-    InputLocation loc;
-    loc.file = path_;
-    loc.field = where;
-    loc.kind = InputLocation::Kind::plain;
-    throw InputError(loc, what);
+    throw InputError(InputLocation::plain(path_, where), what);
   }
   [[noreturn]] void fail(const Where& where, const std::string& what) const { fail(where.str(), what); }
   static Where at_record(std::uint64_t offset, std::uint8_t op) { return Where{offset, op, false, 0}; }

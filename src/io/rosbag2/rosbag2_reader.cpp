@@ -17,13 +17,7 @@ namespace {
 constexpr const char* kJointStateType = "sensor_msgs/msg/JointState";
 constexpr const char* kWrenchType = "geometry_msgs/msg/WrenchStamped";
 
-InputLocation locate(const std::string& file, const std::string& where) {
-  InputLocation loc;
-  loc.file = file;
-  loc.field = where;
-  loc.kind = InputLocation::Kind::plain;
-  return loc;
-}
+InputLocation locate(const std::string& file, const std::string& where) { return InputLocation::plain(file, where); }
 
 std::string lower_extension(const std::filesystem::path& p) {
   std::string e = p.extension().string();

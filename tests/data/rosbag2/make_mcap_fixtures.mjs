@@ -172,3 +172,7 @@ await write_fixture("joint_states_no_summary.mcap", {
   chunkSize: CHUNK_BYTES, compressChunk: COMPRESSORS.zstd, useStatistics: false,
   useSummaryOffsets: false, repeatSchemas: false, repeatChannels: false,
   useAttachmentIndex: false, useMetadataIndex: false, useChunkIndex: false });
+// Indexed or not: chunks without MessageIndex records and a summary without
+// ChunkIndex records (schemas, channels and statistics only).
+await write_fixture("joint_states_unindexed.mcap", {
+  chunkSize: CHUNK_BYTES, compressChunk: COMPRESSORS.lz4, useMessageIndex: false, useChunkIndex: false });
