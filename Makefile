@@ -13,7 +13,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   pybind11-dev python3-dev python3-numpy python3-torch python3-scipy \
   gnuplot-nox \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
-  libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools
+  libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
 .PHONY: deps build test demo bench coverage clean
 

@@ -399,6 +399,26 @@ TEST(McapReader, SkipsRecordsOfUnknownOpcode) {
   EXPECT_FALSE(r.result.truncated);
 }
 
+// A record longer than the fields this reader knows (a later spec version may
+// append fields): the extra bytes are skipped, as the spec requires.
+TEST(McapReader, ReadsRecordsPaddedBeyondTheirKnownFields) {
+  const Bytes original = load(fixture("joint_states_no_summary.mcap"));
+  ASSERT_EQ(original[8], 0x01);  // the Header record
+  const std::uint64_t header_length = le(original, 9, 8);
+  const std::size_t after_header = 8 + 9 + header_length;
+  Bytes bytes(original.begin(), original.begin() + after_header);
+  bytes.insert(bytes.end(), {0xde, 0xad, 0xbe, 0xef});
+  put_le(bytes, 9, header_length + 4, 8);
+  bytes.insert(bytes.end(), original.begin() + after_header, original.end());
+  const std::size_t data_end = bytes.size() - 37 - 13;
+  ASSERT_EQ(bytes[data_end], 0x0f);
+  put_le(bytes, data_end + 9, 0, 4);  // the data CRC no longer matches: declared absent
+  const Read r = read_topic(temp().write("padded.mcap", bytes), kJointTopic);
+  EXPECT_EQ(r.messages.size(), 50u);
+  EXPECT_EQ(r.messages, read_topic(fixture("joint_states_no_summary.mcap"), kJointTopic).messages);
+  EXPECT_FALSE(r.result.truncated);
+}
+
 // Single-byte flips anywhere: a clean error or a correct (possibly shorter)
 // read; with the sanitizers on, also no memory error.
 TEST(McapReader, RandomByteFlipsNeverYieldGarbage) {

@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "child_process.hpp"
+#include "dds_test_fixture.hpp"
 #include "rcm/io/recording.hpp"
 #include "ros2_msgs.h"
 
@@ -28,32 +29,13 @@ namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 using rcm::test::ChildProcess;
+using rcm::test::read_text;
 using rcm::test::wait_for;
 
-const fs::path kFixture = RCM_DDS_TEST_DIR;
-const fs::path kSession = kFixture / "session" / "session.json";
-const fs::path kModel = kFixture / "model.json";
-const fs::path kTrial = kFixture / "session" / "D30_r10_15.csv";  // a hybrid offset, forces above 10 N
-
-struct CliResult {
-  int status;
-  std::string out;
-};
-CliResult run_cli(const std::string& args) {
-  FILE* p = popen((std::string(RCM_CLI_PATH) + " " + args + " 2>/dev/null").c_str(), "r");
-  std::string out;
-  char buf[4096];
-  while (std::fgets(buf, sizeof buf, p)) out += buf;
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
-
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using rcm::test::kModel;
+using rcm::test::kSession;
+using rcm::test::kTrial;
+using rcm::test::run_cli;
 
 dds_qos_t* make_qos(dds_reliability_kind_t r, dds_history_kind_t h, int depth, dds_durability_kind_t d) {
   dds_qos_t* q = dds_create_qos();
@@ -130,7 +112,7 @@ TEST(DdsMonitorNode, ParametersFileAndFlags) {
                         << "\n    model_file: " << kModel.string()
                         << "\n    arm: PSM2\n    joint_names: [outer_yaw, outer_pitch, outer_insertion]\n"
                            "    status_period_s: 0.0\n";
-  ::setenv("ROS_DOMAIN_ID", std::to_string(100 + (::getpid() + 50) % 100).c_str(), 1);
+  ::setenv("ROS_DOMAIN_ID", std::to_string(130 + ::getpid() % 30).c_str(), 1);
   {
     ChildProcess node({RCM_DDS_NODE_PATH, "--params-file", params.string(), "--arm", "PSM3"}, dir / "node.log");
     const bool listening =
@@ -171,7 +153,7 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
 
   const fs::path dir = fs::temp_directory_path() / ("rcm_test_dds_node_" + std::to_string(::getpid()));
   fs::create_directories(dir);
-  const int domain = 100 + ::getpid() % 100;  // a domain of its own
+  const int domain = 100 + ::getpid() % 30;  // a domain of its own (each DDS test has its range)
   ::setenv("ROS_DOMAIN_ID", std::to_string(domain).c_str(), 1);
 
   const dds_entity_t participant = dds_create_participant(static_cast<dds_domainid_t>(domain), nullptr, nullptr);
