@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "child_process.hpp"
+#include "monitor_reference.hpp"
 #include "dds_test_fixture.hpp"
 #include "rcm/io/recording.hpp"
 #include "ros2_msgs.h"
@@ -305,13 +306,7 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
   EXPECT_EQ(node_exit, 0) << node_log;
   std::cout << "[ node     ] " << T << " samples + " << injected << " bad messages published at 1.5 kHz in " << seconds
             << " s\n";
-  for (const char* key : {"samples accepted", "per sample:", "publishing (own thread)"}) {
-    const auto p = node_log.find(key);
-    if (p != std::string::npos) {
-      const auto b = node_log.rfind('\n', p) + 1, e = node_log.find('\n', p);
-      std::cout << "[ node log ] " << node_log.substr(b, e - b) << "\n";
-    }
-  }
+  rcm::test::print_node_log_lines(node_log, {"samples accepted", "per sample:", "publishing (own thread)"});
 
   EXPECT_EQ(estimates, static_cast<std::size_t>(T));
   EXPECT_EQ(sds, static_cast<std::size_t>(T));
@@ -335,14 +330,9 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
     EXPECT_NEAR(estimate[i], fin["misalignment_m"][i].get<double>(), 1e-9) << "offset " << i;
     EXPECT_NEAR(sd[i], fin["sd_m"][i].get<double>(), 1e-9) << "sd " << i;
   }
-  std::vector<bool> expected_alarm = {false};
-  for (const auto& a : expected["alarms"]) {
-    expected_alarm.push_back(true);
-    if (!a["cleared_s"].is_null()) expected_alarm.push_back(false);
-  }
+  const std::vector<bool> expected_alarm = rcm::test::get_expected_alarm(expected);
   EXPECT_EQ(alarm, expected_alarm);
-  const std::vector<bool> expected_onset =
-      expected["onset_s"].is_null() ? std::vector<bool>{false} : std::vector<bool>{false, true};
+  const std::vector<bool> expected_onset = rcm::test::get_expected_onset(expected);
   EXPECT_EQ(onset, expected_onset);
   ASSERT_FALSE(regime.empty());
   EXPECT_FALSE(regime.front());

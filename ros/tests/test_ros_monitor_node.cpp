@@ -33,6 +33,7 @@
 
 #include "rcm/io/recording.hpp"
 #include "child_process.hpp"
+#include "monitor_reference.hpp"
 #include "ros_test_util.hpp"
 
 namespace {
@@ -217,13 +218,7 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
   std::lock_guard<std::mutex> lock(got.mutex);
   std::cout << "[ node     ] " << T << " samples + " << injected << " bad messages published and answered in " << seconds
             << " s\n";
-  for (const char* key : {"samples accepted", "per sample:"}) {
-    const auto p = node_log.find(key);
-    if (p != std::string::npos) {
-      const auto b = node_log.rfind('\n', p) + 1, e = node_log.find('\n', p);
-      std::cout << "[ node log ] " << node_log.substr(b, e - b) << "\n";
-    }
-  }
+  rcm::test::print_node_log_lines(node_log, {"samples accepted", "per sample:"});
   // Every sample answered once, the bad ones rejected and counted.
   EXPECT_EQ(got.estimates, static_cast<std::size_t>(T));
   EXPECT_EQ(got.forces, static_cast<std::size_t>(T));
@@ -246,15 +241,10 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
   }
 
   // Alarm: false at start, then raised and cleared as rcm monitor reports.
-  std::vector<bool> expected_alarm = {false};
-  for (const auto& a : expected["alarms"]) {
-    expected_alarm.push_back(true);
-    if (!a["cleared_s"].is_null()) expected_alarm.push_back(false);
-  }
+  const std::vector<bool> expected_alarm = rcm::test::get_expected_alarm(expected);
   EXPECT_EQ(got.alarm, expected_alarm);
   // Onset: false at start, true once.
-  const std::vector<bool> expected_onset =
-      expected["onset_s"].is_null() ? std::vector<bool>{false} : std::vector<bool>{false, true};
+  const std::vector<bool> expected_onset = rcm::test::get_expected_onset(expected);
   EXPECT_EQ(got.onset, expected_onset);
   // Regime: false at start; the same count of flagged samples as rcm monitor.
   ASSERT_FALSE(got.out_of_regime.empty());
