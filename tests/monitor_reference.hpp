@@ -3,7 +3,11 @@
 // --json` on the same recording says the node's latched topics must go
 // through, and the node's own log lines worth showing in the test output.
 
+#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+
+#include <cstddef>
+#include <cstdint>
 
 #include <initializer_list>
 #include <iostream>
@@ -25,6 +29,20 @@ inline std::vector<bool> get_expected_alarm(const nlohmann::json& monitor) {
 // The onset topic: false at start, true once if the monitor saw an onset.
 inline std::vector<bool> get_expected_onset(const nlohmann::json& monitor) {
   return monitor["onset_s"].is_null() ? std::vector<bool>{false} : std::vector<bool>{false, true};
+}
+
+// Every one of `samples` answered once on the three estimate topics, and the
+// `injected` bad messages counted on rejected_samples and in the exit summary.
+inline void expect_every_sample_answered(const std::string& log, std::size_t samples, std::size_t injected,
+                                         std::size_t estimates, std::size_t sds, std::size_t forces,
+                                         std::uint64_t rejected) {
+  EXPECT_EQ(estimates, samples);
+  EXPECT_EQ(sds, samples);
+  EXPECT_EQ(forces, samples);
+  EXPECT_EQ(rejected, injected);
+  EXPECT_NE(log.find(std::to_string(samples) + " samples accepted, " + std::to_string(injected) + " rejected"),
+            std::string::npos)
+      << log;
 }
 
 // Prints the node's log lines that contain each key ("[ node log ] ...").

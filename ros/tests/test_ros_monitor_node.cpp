@@ -220,12 +220,8 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
             << " s\n";
   rcm::test::print_node_log_lines(node_log, {"samples accepted", "per sample:"});
   // Every sample answered once, the bad ones rejected and counted.
-  EXPECT_EQ(got.estimates, static_cast<std::size_t>(T));
-  EXPECT_EQ(got.forces, static_cast<std::size_t>(T));
-  EXPECT_EQ(got.rejected, injected);
-  EXPECT_NE(node_log.find(std::to_string(T) + " samples accepted, " + std::to_string(injected) + " rejected"),
-            std::string::npos)
-      << node_log;
+  rcm::test::expect_every_sample_answered(node_log, static_cast<std::size_t>(T), injected, got.estimates, got.sds,
+                                          got.forces, got.rejected);
   EXPECT_NE(node_log.find("3 joints by name: outer_yaw, outer_pitch, outer_insertion; time from header.stamp"),
             std::string::npos);
   EXPECT_EQ(got.last_estimate.header.frame_id, "PSM1_incision");
