@@ -1,5 +1,6 @@
-# CTest fixture of the live-node tests (ROS 1, DDS): a quick simulated session (30 s trials at
-# 200 Hz) and a linear free-space model fitted on it, in OUT (about 2 s).
+# CTest fixture of the tests that stream a session through the live path (ROS 1 and DDS nodes, the
+# stream soak): a quick simulated session (30 s trials at 200 Hz) and a linear free-space model
+# fitted on it, in OUT (about 2 s).
 #   cmake -DRCM=<rcm> -DOUT=<dir> -P make_test_session.cmake
 file(REMOVE_RECURSE ${OUT})
 execute_process(COMMAND ${RCM} simulate --quick --seed 1 --out ${OUT}/session

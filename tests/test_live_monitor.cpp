@@ -157,6 +157,59 @@ TEST(LiveMonitor, RejectsAndCountsBadMessages) {
   EXPECT_EQ(monitor.get_joint_map().names(), std::vector<std::string>({"outer_yaw", "outer_pitch", "outer_insertion"}));
 }
 
+// A publisher's clock: one stamp hours off is rejected (ahead: time jump;
+// behind: out of order) and the stream goes on; a timeline that moves for good
+// is followed after ten consistent messages; a silence is not a jump.
+TEST(LiveMonitor, ClockGlitchesAreRejectedAndMovedTimelinesFollowed) {
+  const auto pipeline = make_pipeline();
+  rcm::LiveMonitor monitor(*pipeline, {}, rcm::LiveMonitor::ZeroStamp::invalid);
+  const std::vector<int> order = {0, 1, 2, 3};
+  constexpr std::int64_t kHour = 3600LL * 1000000000LL;
+  std::int64_t shift = 0;  // what the publisher's clock adds to the true stamp
+  std::int64_t silence = 0;  // time without messages, on both clocks
+  auto send = [&](int k, std::int64_t extra = 0) {
+    Message m = make_message(make_sample(k), order, kBase + shift + silence + extra);
+    return compute(monitor, m, kBase + silence + std::llround(make_sample(k).t * 1e9));
+  };
+  for (int k = 0; k < 20; ++k) ASSERT_EQ(send(k), Verdict::accepted) << k;
+  EXPECT_EQ(send(20, 3 * kHour), Verdict::time_jump);
+  EXPECT_NE(describe(monitor, Verdict::time_jump, make_message(make_sample(20), order, kBase + 3 * kHour))
+                .find("more than the receive clock advanced"),
+            std::string::npos);
+  EXPECT_EQ(send(21, -3 * kHour), Verdict::out_of_order);
+  for (int k = 22; k < 30; ++k) ASSERT_EQ(send(k), Verdict::accepted) << k;
+  EXPECT_EQ(monitor.get_counters().time_jump, 1u);
+  EXPECT_EQ(monitor.get_counters().out_of_order, 1u);
+
+  silence = 600LL * 1000000000LL;  // ten minutes without a message: accepted
+  ASSERT_EQ(send(30), Verdict::accepted);
+  EXPECT_NEAR(monitor.get_output().time, 600.0 + make_sample(30).t, 1e-9);
+
+  shift = -2 * kHour;  // the publisher's clock steps back for good
+  for (int k = 31; k < 40; ++k) ASSERT_EQ(send(k), Verdict::out_of_order) << k;
+  const double before = monitor.get_output().time;
+  ASSERT_EQ(send(40), Verdict::accepted);
+  EXPECT_EQ(monitor.get_counters().retimed, 1u);
+  // The estimator's time went on by the receive clock; the published stamp is the new one.
+  EXPECT_NEAR(monitor.get_output().time - before, make_sample(40).t - make_sample(30).t, 1e-9);
+  EXPECT_EQ(monitor.get_last_time_ns(), kBase + shift + silence + std::llround(make_sample(40).t * 1e9));
+  for (int k = 41; k < 50; ++k) ASSERT_EQ(send(k), Verdict::accepted) << k;
+
+  shift = 5 * kHour;  // ... and forward for good
+  for (int k = 50; k < 59; ++k) ASSERT_EQ(send(k), Verdict::time_jump) << k;
+  ASSERT_EQ(send(59), Verdict::accepted);
+  EXPECT_EQ(monitor.get_counters().retimed, 2u);
+  EXPECT_EQ(monitor.get_counters().time_jump, 10u);
+  EXPECT_EQ(monitor.get_counters().out_of_order, 10u);
+  EXPECT_EQ(monitor.get_counters().accepted, 40u);
+
+  // With retiming off, a moved timeline stays rejected.
+  rcm::LiveMonitor strict(*pipeline, {}, rcm::LiveMonitor::ZeroStamp::invalid, {1.0, 0});
+  ASSERT_EQ(compute(strict, make_message(make_sample(0), order, kBase), 0), Verdict::accepted);
+  for (int k = 1; k < 40; ++k)
+    ASSERT_EQ(compute(strict, make_message(make_sample(k), order, kBase - kHour), 0), Verdict::out_of_order) << k;
+}
+
 TEST(LiveMonitor, PositionalStreamsReadTheFirstJoints) {
   const auto pipeline = make_pipeline();
   rcm::LiveMonitor monitor(*pipeline);

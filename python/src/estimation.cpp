@@ -245,6 +245,7 @@ void bind_estimation(py::module_& m) {
       .def_readwrite("initial_radial_sd_m", &OnlineEstimatorOptions::initial_radial_sd_m)
       .def_readwrite("initial_D_sd_m", &OnlineEstimatorOptions::initial_D_sd_m)
       .def_readwrite("drift_sd_m_per_sqrt_s", &OnlineEstimatorOptions::drift_sd_m_per_sqrt_s)
+      .def_readwrite("max_drift_gap_s", &OnlineEstimatorOptions::max_drift_gap_s)
       .def_readwrite("hypothesis_memory_s", &OnlineEstimatorOptions::hypothesis_memory_s)
       .def_readwrite("onset_threshold", &OnlineEstimatorOptions::onset_threshold)
       .def_readwrite("alarm_force_n", &OnlineEstimatorOptions::alarm_force_n)

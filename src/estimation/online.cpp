@@ -26,6 +26,7 @@ void OnlineEstimatorOptions::check() const {
   if (!(huber_scale > 0)) fail("huber_scale must be > 0");
   if (!(initial_radial_sd_m > 0) || !(initial_D_sd_m > 0)) fail("initial standard deviations must be > 0");
   if (!(drift_sd_m_per_sqrt_s >= 0)) fail("drift_sd_m_per_sqrt_s must be >= 0");
+  if (!(max_drift_gap_s > 0)) fail("max_drift_gap_s must be > 0");
   if (!(hypothesis_memory_s > 0)) fail("hypothesis_memory_s must be > 0");
   if (!(onset_threshold > 0)) fail("onset_threshold must be > 0");
   if (!(alarm_force_n > 0)) fail("alarm_force_n must be > 0");
@@ -90,6 +91,11 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
                                                     const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau) const {
   const OnlineEstimatorOptions& o = options_;
   const double dt = ws.started ? std::max(time - ws.last_time, o.min_dt_s) : o.min_dt_s;
+  // What one sample can tell: samples a correlation time apart are independent,
+  // so a sample after a gap in the stream weighs as one such sample, not as the
+  // whole gap's worth of data (its variance, its onset evidence and its share of
+  // the hypothesis costs).
+  const double dt_info = std::min(dt, o.correlation_time_s);
   ws.started = true;
   ws.last_time = time;
   OnlineOutput& out = ws.output;
@@ -97,7 +103,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
   out.alarm_raised = out.alarm_cleared = false;
 
   // Time update of every filter: the incision drifts as a random walk.
-  const double q_drift = o.drift_sd_m_per_sqrt_s * o.drift_sd_m_per_sqrt_s * dt;
+  const double q_drift = o.drift_sd_m_per_sqrt_s * o.drift_sd_m_per_sqrt_s * std::min(dt, o.max_drift_gap_s);
   for (int h = 0; h < ws.num_hypotheses; ++h) ws.hypotheses[static_cast<std::size_t>(h)].P.diagonal().array() += q_drift;
 
   out.at_rest = std::abs(qd[0]) < o.rest_angular_speed && std::abs(qd[1]) < o.rest_angular_speed &&
@@ -107,9 +113,9 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
   if (out.used) {
     using Jet = ceres::Jet<double, 3>;
     const double rest_factor = out.at_rest ? o.rest_sigma_factor * o.rest_sigma_factor : 1.0;
-    const Eigen::Vector3d R = measurement_variance_ * (rest_factor / dt);
+    const Eigen::Vector3d R = measurement_variance_ * (rest_factor / dt_info);
     const Eigen::Vector3d inv_sigma = o.torque_sigma.cwiseInverse();
-    const double forget = std::exp(-dt / o.hypothesis_memory_s);
+    const double forget = std::exp(-dt_info / o.hypothesis_memory_s);
     Jet tissue[4];
     for (int k = 0; k < 4; ++k) tissue[k] = Jet(tissue_.parameters[k]);
     // The filter reported before this sample: the onset test scores its
@@ -164,7 +170,8 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     detail::predict_joint_torque(sample, incision_.R_base_inc, tissue_.axial_velocity_scale, p_aligned,
                                  tissue_.parameters.data(), tau_aligned);
     const Eigen::Vector3d nu_aligned = dtau - Eigen::Vector3d(tau_aligned[0], tau_aligned[1], tau_aligned[2]);
-    const double llr = (rho(nu_aligned.cwiseProduct(inv_sigma).norm()) - prior_cost_sample) * (dt / o.correlation_time_s);
+    const double llr =
+        (rho(nu_aligned.cwiseProduct(inv_sigma).norm()) - prior_cost_sample) * (dt_info / o.correlation_time_s);
     if (!out.at_rest) out.cusum = std::max(0.0, out.cusum + llr);
     if (!out.onset && out.cusum > o.onset_threshold) {
       out.onset = true;

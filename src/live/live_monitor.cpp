@@ -1,14 +1,19 @@
 #include "rcm/live/live_monitor.hpp"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace rcm {
 
-LiveMonitor::LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string> joint_names, ZeroStamp zero_stamp)
+LiveMonitor::LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string> joint_names, ZeroStamp zero_stamp,
+                         StampRules stamp_rules)
     : pipeline_(pipeline),
       workspace_(pipeline.create_workspace()),
       wanted_names_(std::move(joint_names)),
-      zero_stamp_(zero_stamp) {
+      zero_stamp_(zero_stamp),
+      stamp_rules_(stamp_rules) {
+  if (!(stamp_rules_.max_lead_s >= 0.0) || stamp_rules_.retime_after < 0)
+    throw std::invalid_argument("LiveMonitor: max_lead_s must be >= 0 and retime_after >= 0");
   if (!wanted_names_.empty()) {
     map_ = JointStateMap(wanted_names_);  // throws std::invalid_argument on empty or repeated names
     if (map_.num_joints() < pipeline_.model().num_joints())
@@ -61,17 +66,51 @@ LiveMonitor::Verdict LiveMonitor::compute_message(const JointStateView& m, std::
       ++counters_.duplicate_stamp;
       return Verdict::duplicate_stamp;
     }
-    if (t_ns < last_ns_) {
+    if (!receive_time_) {
+      const double lead_s = static_cast<double>((t_ns - last_ns_) - (receive_time_ns - last_receive_ns_)) * 1e-9;
+      const Verdict verdict = t_ns < last_ns_                      ? Verdict::out_of_order
+                              : lead_s > stamp_rules_.max_lead_s ? Verdict::time_jump
+                                                                 : Verdict::accepted;
+      if (verdict != Verdict::accepted) {
+        if (reject_by_time(verdict, stamp_ns, receive_time_ns) == Verdict::accepted) {
+          // Follow the publisher's new timeline; the estimator's time goes on.
+          const std::int64_t elapsed_ns = std::max<std::int64_t>(receive_time_ns - last_receive_ns_, 1);
+          t_ns = last_ns_ + elapsed_ns;
+          origin_ns_ = stamp_ns - t_ns;
+        } else {
+          return verdict;
+        }
+      }
+    } else if (t_ns < last_ns_) {
       ++counters_.out_of_order;
       return Verdict::out_of_order;
     }
   }
+  candidates_ = 0;
   started_ = true;
   last_ns_ = t_ns;
+  last_receive_ns_ = receive_time_ns;
   pipeline_.compute_sample(workspace_, static_cast<double>(t_ns) * 1e-9, map_ws_.position.data(),
                            map_ws_.velocity.data(), map_ws_.effort.data());
   ++counters_.accepted;
   return Verdict::accepted;
+}
+
+LiveMonitor::Verdict LiveMonitor::reject_by_time(Verdict verdict, std::int64_t stamp_ns, std::int64_t receive_time_ns) {
+  const bool follows = candidates_ > 0 && stamp_ns > candidate_stamp_ns_ &&
+                       static_cast<double>((stamp_ns - candidate_stamp_ns_) - (receive_time_ns - candidate_receive_ns_)) *
+                               1e-9 <=
+                           stamp_rules_.max_lead_s;
+  candidates_ = follows ? candidates_ + 1 : 1;
+  candidate_stamp_ns_ = stamp_ns;
+  candidate_receive_ns_ = receive_time_ns;
+  if (stamp_rules_.retime_after > 0 && candidates_ >= stamp_rules_.retime_after) {
+    ++counters_.retimed;
+    return Verdict::accepted;
+  }
+  if (verdict == Verdict::out_of_order) ++counters_.out_of_order;
+  else ++counters_.time_jump;
+  return verdict;
 }
 
 std::string LiveMonitor::describe_rejection(Verdict v, const JointStateView& m, std::int64_t stamp_ns) const {
@@ -84,6 +123,10 @@ std::string LiveMonitor::describe_rejection(Verdict v, const JointStateView& m, 
     case Verdict::out_of_order:
       return "stamp " + std::to_string(stamp) + " s is earlier than the last accepted sample's (" +
              std::to_string(static_cast<double>(get_last_time_ns()) * 1e-9) + " s)";
+    case Verdict::time_jump:
+      return "stamp " + std::to_string(stamp) + " s is " +
+             std::to_string(static_cast<double>(stamp_ns - get_last_time_ns()) * 1e-9) +
+             " s after the last accepted sample's, more than the receive clock advanced";
     case Verdict::bad_stamp:
       return zero_stamp_ == ZeroStamp::invalid ? "header.stamp is zero: invalid data"
                                                : "header.stamp is zero in a stream whose first message had a stamp";
@@ -106,6 +149,7 @@ const char* to_string(LiveMonitor::Verdict v) {
     case LiveMonitor::Verdict::bad_stamp: return "zero stamp";
     case LiveMonitor::Verdict::malformed: return "malformed";
     case LiveMonitor::Verdict::too_few_joints: return "too few joints";
+    case LiveMonitor::Verdict::time_jump: return "time jump";
   }
   return "unknown";
 }

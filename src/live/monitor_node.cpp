@@ -130,6 +130,12 @@ void MonitorNode::compute_message(const JointStateView& message, std::int64_t st
   step_.add(std::chrono::duration<double>(stepped - start).count());
   const OnlineOutput& out = monitor_.get_output();
   if (monitor_.get_counters().accepted == 1) on_first_sample(stamp_ns);
+  if (monitor_.get_counters().retimed != retimed_) {
+    retimed_ = monitor_.get_counters().retimed;
+    sink_.log(LogLevel::warn,
+              format("rcm: the publisher's clock moved: following its stamps from %.6f s (estimator time %.3f s)",
+                     static_cast<double>(stamp_ns) * 1e-9, out.time));
+  }
 
   if (++since_publish_ >= params_.publish_every) {
     since_publish_ = 0;
@@ -196,9 +202,10 @@ std::string MonitorNode::get_summary() const {
   const auto& c = monitor_.get_counters();
   std::string s = format(
       "rcm: %llu samples accepted, %llu rejected (duplicate stamp %llu, out of order %llu, zero stamp %llu, "
-      "malformed %llu, too few joints %llu)\n",
+      "malformed %llu, too few joints %llu, time jump %llu)%s\n",
       ull(c.accepted), ull(c.get_rejected()), ull(c.duplicate_stamp), ull(c.out_of_order), ull(c.bad_stamp),
-      ull(c.malformed), ull(c.too_few_joints));
+      ull(c.malformed), ull(c.too_few_joints), ull(c.time_jump),
+      c.retimed ? format("; the publisher's clock moved %llu time(s) and was followed", ull(c.retimed)).c_str() : "");
   s += format(
       "rcm: per sample: model + estimator %.2f us mean, %.1f us max; whole callback with publishing %.2f us mean, "
       "%.1f us max\n",

@@ -13,7 +13,8 @@
 //   not an independent measurement: the measurement variance is sigma^2 tau_c/dt,
 //   which makes the information gathered per second independent of the sampling
 //   rate (200 Hz logs and the 1.5 kHz robot behave alike) and keeps the
-//   covariance honest.
+//   covariance honest. dt is capped at tau_c: after a gap in the stream a
+//   sample is one independent measurement, not the gap's worth of data.
 // - (D, r) and (-D, -r) and other poor linearization points are local traps: a
 //   small bank of filters starts at several D (as the batch multi-start) and the
 //   one with the lowest exponentially forgotten innovation cost is reported.
@@ -57,6 +58,12 @@ struct OnlineEstimatorOptions {
   double initial_radial_sd_m = 0.020;
   double initial_D_sd_m = 0.030;
   double drift_sd_m_per_sqrt_s = 2e-4;   // random walk of the incision (patient motion)
+  // A gap in the stream accrues the drift of at most this long. The random walk
+  // models the incision's slow motion while the arm is watched; a silence says
+  // nothing about how long the incision moved, and a prior widened by minutes of
+  // drift lets the first samples' correlated free-space error throw a settled
+  // estimate by centimetres (the stream soak, docs/reliability.md).
+  double max_drift_gap_s = 10.0;
   double hypothesis_memory_s = 10.0;     // forgetting time of each filter's innovation cost
   double onset_threshold = 10.0;         // CUSUM threshold, nats per correlation time
   double alarm_force_n = 10.0;           // paper V-E

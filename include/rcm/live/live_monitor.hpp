@@ -13,6 +13,17 @@
 // sample, computed in integer nanoseconds, as the bag readers do, so that a
 // bag and its live replay give the same numbers.
 //
+// A publisher's clock can misbehave: one stamp hours ahead or behind (a glitch),
+// or the whole timeline stepped (a clock reset, a restarted publisher, a bag
+// replayed from its start). A stamp ahead of the last accepted one by more than
+// the receive clock advanced plus LiveStampRules::max_lead_s is a `time_jump`; an
+// earlier one is `out_of_order`. Both are rejected, so that one bad stamp cannot
+// lock the stream out; when LiveStampRules::retime_after consecutive rejected
+// messages agree among themselves (increasing, and no lead between them), the
+// publisher's timeline has moved: the monitor follows it (`retimed`), and the
+// estimator's time goes on from the last accepted sample by what the receive
+// clock says elapsed, so that its own time never runs backwards.
+//
 // No allocation per message once the first message has been accepted (the
 // joint order and the buffers are set up then).
 
@@ -25,6 +36,17 @@
 
 namespace rcm {
 
+// How LiveMonitor tells a publisher's clock misbehaving from a silence.
+struct LiveStampRules {
+  // How far a stamp may run ahead of the receive clock between two messages.
+  // A 10-minute silence advances both clocks alike; a bag played faster than
+  // real time leads by its sample period at most, unless the bag has a gap.
+  double max_lead_s = 1.0;
+  // Consecutive rejected but mutually consistent messages that make the
+  // monitor follow the publisher's new timeline (0: never).
+  int retime_after = 10;
+};
+
 class LiveMonitor {
  public:
   enum class Verdict {
@@ -34,12 +56,17 @@ class LiveMonitor {
     bad_stamp,         // zero stamp: invalid data, or a stream that has stamps
     malformed,         // see get_last_defect()
     too_few_joints,    // the first message has fewer joints than the model reads
+    time_jump,         // later than the last accepted sample by more than the receive clock allows
   };
   struct Counters {
     std::uint64_t accepted = 0, duplicate_stamp = 0, out_of_order = 0, bad_stamp = 0, malformed = 0,
-                  too_few_joints = 0;
-    std::uint64_t get_rejected() const { return duplicate_stamp + out_of_order + bad_stamp + malformed + too_few_joints; }
+                  too_few_joints = 0, time_jump = 0;
+    std::uint64_t retimed = 0;  // times the monitor followed a publisher's timeline that moved (not a rejection)
+    std::uint64_t get_rejected() const {
+      return duplicate_stamp + out_of_order + bad_stamp + malformed + too_few_joints + time_jump;
+    }
   };
+  using StampRules = LiveStampRules;
 
   enum class ZeroStamp {
     receive_time_when_unstamped,  // ROS 1: a stream whose first message has no stamp uses the receive time
@@ -49,10 +76,11 @@ class LiveMonitor {
   // `pipeline` must outlive the monitor. `joint_names`: the joint order the
   // free-space model was trained on, by name; empty: the first message's order.
   LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string> joint_names = {},
-              ZeroStamp zero_stamp = ZeroStamp::receive_time_when_unstamped);
+              ZeroStamp zero_stamp = ZeroStamp::receive_time_when_unstamped, StampRules stamp_rules = {});
 
-  // One message with its header stamp (0: zero stamp); `receive_time_ns` is
-  // used only when the stream carries no stamps.
+  // One message with its header stamp (0: zero stamp) and the time it was
+  // received (any steady clock): the time when the stream carries no stamps,
+  // else the reference that tells a clock jump from a silence.
   Verdict compute_message(const JointStateView& message, std::int64_t stamp_ns, std::int64_t receive_time_ns);
 
   const OnlineOutput& get_output() const { return get_online_output(workspace_.estimator); }
@@ -73,12 +101,18 @@ class LiveMonitor {
   OnlinePipeline::Workspace workspace_;
   std::vector<std::string> wanted_names_;
   ZeroStamp zero_stamp_;
+  StampRules stamp_rules_;
   JointStateMap map_;
   JointStateMap::Workspace map_ws_;
   bool started_ = false, receive_time_ = false;
-  std::int64_t origin_ns_ = 0, last_ns_ = 0;
+  std::int64_t origin_ns_ = 0, last_ns_ = 0, last_receive_ns_ = 0;
+  // The run of rejected messages that may be a moved timeline.
+  int candidates_ = 0;
+  std::int64_t candidate_stamp_ns_ = 0, candidate_receive_ns_ = 0;
   Counters counters_;
   JointStateDefect defect_;
+
+  Verdict reject_by_time(Verdict verdict, std::int64_t stamp_ns, std::int64_t receive_time_ns);
 };
 
 const char* to_string(LiveMonitor::Verdict verdict);

@@ -103,6 +103,7 @@ class MonitorNode {
   LiveMonitor monitor_;
   MonitorSink& sink_;
   bool onset_ = false, alarm_ = false, out_of_regime_ = false;
+  std::uint64_t retimed_ = 0;
   dynamics::RegimeSummary regime_;
   int since_publish_ = 0;
   double next_status_s_ = 0.0;

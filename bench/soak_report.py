@@ -1,0 +1,82 @@
+#!/usr/bin/python3
+"""`make soak`: the live stream soak, and its figures in docs/reliability.md.
+
+Simulates a quick session and fits a linear free-space model on it (as the live
+tests do), then runs tests/soak_live.cpp (ten million messages by default) once
+with the ROS 2 convention for zero stamps (invalid data) and once with ROS 1's,
+and writes the table between the soak markers of docs/reliability.md. Exits
+non-zero when a run breaks a rule (the table is written all the same).
+
+    /usr/bin/python3 bench/soak_report.py --build build [--messages 10000000]
+"""
+import argparse
+import datetime
+import json
+import os
+import subprocess
+import sys
+
+from doc_tables import cpu_model, run, write_block
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DOC = os.path.join(ROOT, "docs", "reliability.md")
+BEGIN, END = "<!-- soak:begin -->", "<!-- soak:end -->"
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--build", default="build")
+    ap.add_argument("--messages", type=int, default=10_000_000)
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+    build = os.path.abspath(args.build)
+    rcm = os.path.join(build, "bin", "rcm")
+    soak = os.path.join(build, "bin", "soak_live")
+    work = os.path.join(build, "soak")
+    session = os.path.join(work, "session")
+    model = os.path.join(work, "model.json")
+    if not os.path.exists(os.path.join(session, "session.json")):
+        run([rcm, "simulate", "--quick", "--seed", "1", "--out", session], stdout=subprocess.DEVNULL)
+    if not os.path.exists(model):
+        run([rcm, "dynamics", "fit", "--model", "linear", "--out", model, os.path.join(session, "free_space.csv")],
+            stdout=subprocess.DEVNULL)
+    results, failed = [], False
+    for name, flag in (("ROS 2 (zero stamp: invalid)", []), ("ROS 1 (zero stamp: receive time)", ["--ros1"])):
+        out = os.path.join(work, f"soak{'_ros1' if flag else ''}.json")
+        proc = subprocess.run([soak, "--session", os.path.join(session, "session.json"), "--model", model,
+                               "--recording", os.path.join(session, "D30_r10_15.csv"), "--messages",
+                               str(args.messages), "--seed", str(args.seed), "--json", out] + flag)
+        failed |= proc.returncode != 0
+        results.append((name, json.load(open(out))))
+
+    lines = [f"Run {datetime.date.today().isoformat()} by `make soak` on {cpu_model()}, {os.cpu_count()} cores: "
+             f"{args.messages:,} clean samples of a simulated trial (D = 30 mm, radial (10, 15) mm, 200 Hz, "
+             "looped), linear free-space model; one fault every 12 s of sample time or more.", ""]
+    lines += ["| convention | messages | sample time | wall | messages/s per node | rejected | retimed | "
+              "counts as predicted | exceptions | faults not recovered in 5 s | RSS after 1 min -> peak | passed |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, r in results:
+        c, p = r["counters"], r["predicted"]
+        rejected = sum(c[k] for k in c if k not in ("accepted", "retimed"))
+        lines.append(
+            f"| {name} | {r['messages']:,} | {r['sample_time_s'] / 3600:.1f} h | {r['wall_s']:.0f} s | "
+            f"{r['messages'] / r['wall_s']:,.0f} | {rejected:,} | {c['retimed']} | "
+            f"{'yes' if c == p and r['verdict_mismatches'] == 0 else 'NO'} | {r['exceptions']} | "
+            f"{r['unrecovered']} | {r['rss_kb']['baseline']:,} -> {r['rss_kb']['peak_after']:,} kB | "
+            f"{'yes' if r['passed'] else 'NO'} |")
+    lines += ["", f"Per fault ({results[0][0]}):", "",
+              "| fault | injected | samples affected | longest recovery (s) | largest deviation (mm) |",
+              "|---|---|---|---|---|"]
+    for f in results[0][1]["faults"]:
+        lines.append(f"| {f['kind']} | {f['injected']:,} | {f['samples']:,} | {f['max_recovery_s']:.2f} | "
+                     f"{1e3 * f['max_deviation_m']:.2f} |")
+    c = results[0][1]["counters"]
+    lines += ["", "Rejections by reason (" + results[0][0] + "): " +
+              ", ".join(f"{k.replace('_', ' ')} {v:,}" for k, v in c.items() if k != "accepted") + "."]
+    write_block(DOC, BEGIN, END, "\n".join(lines))
+    print(f"soak: table written to {DOC}", file=sys.stderr)
+    sys.exit(1 if failed else 0)
+
+
+if __name__ == "__main__":
+    main()
