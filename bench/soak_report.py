@@ -1,13 +1,15 @@
 #!/usr/bin/python3
-"""`make soak`: the live stream soak, and its figures in docs/reliability.md.
+"""`make soak`: the long reliability runs, and their figures in docs/reliability.md.
 
-Simulates a quick session and fits a linear free-space model on it (as the live
-tests do), then runs tests/soak_live.cpp (ten million messages by default) once
-with the ROS 2 convention for zero stamps (invalid data) and once with ROS 1's,
-and writes the table between the soak markers of docs/reliability.md. Exits
-non-zero when a run breaks a rule (the table is written all the same).
+1. The live stream soak: simulates a quick session and fits a linear free-space
+   model on it (as the live tests do), then runs tests/soak_live.cpp (ten million
+   messages by default) once with the ROS 2 convention for zero stamps (invalid
+   data) and once with ROS 1's -> the table between the soak markers.
+2. The estimate's properties on random sessions (tests/test_estimate_properties,
+   50 sessions of 4 trials) -> the line between the property markers.
+Exits non-zero when a run breaks a rule (the tables are written all the same).
 
-    /usr/bin/python3 bench/soak_report.py --build build [--messages 10000000]
+    /usr/bin/python3 bench/soak_report.py --build build [--messages 10000000] [--sessions 50]
 """
 import argparse
 import datetime
@@ -21,6 +23,7 @@ from doc_tables import cpu_model, run, write_block
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "reliability.md")
 BEGIN, END = "<!-- soak:begin -->", "<!-- soak:end -->"
+PROPERTY_BEGIN, PROPERTY_END = "<!-- properties:begin -->", "<!-- properties:end -->"
 
 
 def main():
@@ -28,6 +31,8 @@ def main():
     ap.add_argument("--build", default="build")
     ap.add_argument("--messages", type=int, default=10_000_000)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--sessions", type=int, default=50)
+    ap.add_argument("--trials", type=int, default=4)
     args = ap.parse_args()
     build = os.path.abspath(args.build)
     rcm = os.path.join(build, "bin", "rcm")
@@ -75,6 +80,18 @@ def main():
               ", ".join(f"{k.replace('_', ' ')} {v:,}" for k, v in c.items() if k != "accepted") + "."]
     write_block(DOC, BEGIN, END, "\n".join(lines))
     print(f"soak: table written to {DOC}", file=sys.stderr)
+
+    env = dict(os.environ, RCM_PROPERTY_SESSIONS=str(args.sessions), RCM_PROPERTY_TRIALS=str(args.trials))
+    print("+ test_estimate_properties", file=sys.stderr, flush=True)
+    proc = subprocess.run([os.path.join(build, "bin", "test_estimate_properties")], env=env, capture_output=True,
+                          text=True)
+    sys.stderr.write(proc.stdout[-2000:])
+    failed |= proc.returncode != 0
+    coverage = [l for l in proc.stdout.splitlines() if l.startswith("coverage of the 95 %")]
+    summary = coverage[0] if coverage else "no coverage line: the test failed before its end (see its output)"
+    write_block(DOC, PROPERTY_BEGIN, PROPERTY_END,
+                f"Run {datetime.date.today().isoformat()} by `make soak` on {cpu_model()}, {os.cpu_count()} cores"
+                f" ({'passed' if proc.returncode == 0 else 'FAILED'}): {summary}.")
     sys.exit(1 if failed else 0)
 
 
