@@ -1,5 +1,5 @@
 // `rcm dynamics fit|eval` end to end on a small synthetic recording: the model
-// file is written, eval prints the cli.md JSON shape, bad input exits non-zero.
+// file is written, eval prints the JSON shape of docs/formats.md, bad input exits non-zero.
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-// Recordings and sessions (rcm-session/1, shared/spec/session-format.md).
+// Recordings and sessions (rcm-session/1, docs/formats.md).
 
 #include <optional>
 

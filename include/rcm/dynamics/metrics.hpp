@@ -31,7 +31,7 @@ std::vector<JointTorqueError> evaluate_torque_model(const TorqueModel& model,
                                                     double first_fraction = 0.0,
                                                     PredictionMode mode = PredictionMode::batch);
 
-// {"joints": [{"index": 1, "rmse": r, "nrmse_percent": p}, ...]} (cli.md).
+// {"joints": [{"index": 1, "rmse": r, "nrmse_percent": p}, ...]} (docs/formats.md).
 nlohmann::json to_json(const std::vector<JointTorqueError>& errors);
 
 }  // namespace rcm::dynamics

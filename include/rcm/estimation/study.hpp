@@ -108,7 +108,7 @@ struct StudyResult {
   std::vector<TrialOutcome> trials;
   double seconds = 0.0;
 
-  // The rcm-results/1 object of session-format.md, with extra fields.
+  // The rcm-results/1 object (docs/formats.md, "Results"), with extra fields.
   nlohmann::json to_json() const;
 };
 

@@ -1,5 +1,5 @@
 #pragma once
-// The rcm-session/1 manifest (shared/spec/session-format.md): which recordings
+// The rcm-session/1 manifest (docs/formats.md): which recordings
 // form a bench or clinical session, with paths relative to the manifest.
 
 #include <Eigen/Core>

@@ -76,7 +76,7 @@ inline const Eigen::Isometry3d& get_frame_pose(const KinematicsData& data, int f
   return data.X_base_frame[static_cast<std::size_t>(frame)];
 }
 
-// Closed forms of the contract (session-format.md), valid for every robot that
+// Closed forms of the frames (docs/formats.md), valid for every robot that
 // loaded: columns of the rotation of DH frame 3 in the base frame.
 Eigen::Vector3d compute_z3_base(const Eigen::Vector3d& q);  // insertion axis
 Eigen::Vector3d compute_x3_base(const Eigen::Vector3d& q);

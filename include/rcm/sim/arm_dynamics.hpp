@@ -16,7 +16,7 @@
 
 namespace rcm::sim {
 
-// Closed forms of the contract (session-format.md), kept local to the simulator
+// Closed forms of the frames (docs/formats.md), kept local to the simulator
 // so that its ground truth does not share code with the estimator under test.
 struct ShaftFrame {
   Eigen::Vector3d x3, y3, z3;   // DH frame 3 axes in the base frame

@@ -1,7 +1,7 @@
 #pragma once
 // The data of the tissue-law identification (paper III-C step 2): pairs
 // x = D* tan(theta) [m] and y = |f_inc| [N] from a calibration recording under a
-// known pure coaxial offset D*, and their CSV form (header "x,y", cli.md).
+// known pure coaxial offset D*, and their CSV form (header "x,y", docs/formats.md).
 
 #include <Eigen/Core>
 #include <cstddef>
