@@ -1,4 +1,4 @@
-// Per-sample cost of the online misalignment estimator (issue 7 target: a
+// Per-sample cost of the online misalignment estimator (target: a
 // streaming update <= 20 us per sample; the dVRK runs at 1.5 kHz, 667 us per
 // sample). The estimator alone (bank of 3 EKFs with Jet derivatives, onset test,
 // alarm), and the whole live path: free-space model step + residual + estimator,

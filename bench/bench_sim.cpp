@@ -1,4 +1,4 @@
-// Speed of the simulated bench. The target of issue 3: the default session
+// Speed of the simulated bench. Target: the default session
 // (15 min free space + 10 trials, with truth files) written in under 60 s.
 
 #include <benchmark/benchmark.h>

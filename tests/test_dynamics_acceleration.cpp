@@ -1,8 +1,8 @@
 // The linear model's qddot estimates: the causal one of compute_step() (windowed
 // quadratic fit and/or first-order low-pass) and the zero-phase one of
 // predict_torque(). Reference values: exact on polynomials the fit spans, the
-// closed-form lag of the first-order low-pass, causality, old model files, and
-// no allocation in the per-sample path.
+// closed-form lag of the first-order low-pass, causality, model files without
+// window fields, and no allocation in the per-sample path.
 
 #include <gtest/gtest.h>
 
@@ -170,7 +170,7 @@ TEST(LinearAcceleration, ZeroPhaseBatchEstimate) {
   EXPECT_LT(eq.cwiseAbs().maxCoeff(), 1e-8);  // including the cut windows at both ends
 }
 
-// Old files: one number for the low-pass, no window fields.
+// Model files without window fields: one number for the low-pass.
 TEST(LinearAcceleration, OldModelFilesLoadWithTheOldEstimate) {
   const LinearTorqueModel reference(make_info(), acceleration_only(0.0, 0.03, 0.0));
   nlohmann::json doc = torque_model_to_json(reference);

@@ -209,7 +209,7 @@ TEST(RobotModel, RejectsMalformedAndNonConformingTables) {
 }
 
 // The CLI prints the Jacobian that a user will trust; check it against finite
-// differences of forward kinematics as the issue asks.
+// differences of forward kinematics.
 TEST(KinematicsCli, JsonJacobianMatchesFiniteDifferences) {
   const std::string cmd = std::string(RCM_CLI_PATH) +
                           " kinematics --q 0.3,-0.2,0.12 --q0 0,0,0.12 --offset 0.03 --json";

@@ -63,7 +63,7 @@ TEST(SimDynamics, MassMatrixMatchesKineticEnergyAndDefaults) {
   const Eigen::Matrix3d M = compute_mass_matrix(arm, q);
   EXPECT_NEAR(0.5 * qd.dot(M * qd), compute_kinetic_energy(arm, q, qd), 1e-12);
   EXPECT_GT(M.llt().matrixL().toDenseMatrix().diagonal().minCoeff(), 0.0);
-  // Effective inertias of the brief at q0: 0.16 / 0.20 kg m^2, 0.85 kg.
+  // Effective inertias of the simulated arm at q0: 0.16 / 0.20 kg m^2, 0.85 kg.
   const Eigen::Matrix3d M0 = compute_mass_matrix(arm, config.protocol.q0);
   EXPECT_NEAR(M0(0, 0), 0.16, 0.005);
   EXPECT_NEAR(M0(1, 1), 0.20, 0.005);

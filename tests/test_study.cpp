@@ -163,7 +163,7 @@ TEST(Study, OnlineEstimatorTracksEveryTrialAndStaysQuietInFreeSpace) {
   EXPECT_LT(free.misalignment_m.head<2>().norm(), 0.003) << free.misalignment_m.transpose();
 }
 
-// Issue 7's claim beyond the paper: the joint estimator holds on stiffening and
+// Beyond the paper: the joint estimator holds on stiffening and
 // axial-friction tissue too, where the three-step subtraction of radial from
 // total force is not exact.
 TEST(Study, JointMethodHoldsOnStiffeningAndSlidingTissue) {
@@ -182,7 +182,7 @@ TEST(Study, JointMethodHoldsOnStiffeningAndSlidingTissue) {
     if (preset == "sliding") EXPECT_GT(r.joint_tissue->parameters[3], 0.1) << "axial friction, N";
     for (const auto& t : r.trials) {
       ASSERT_TRUE(t.joint && t.online && t.truth_m);
-      const double bound = (*t.truth_m)[2] > 0.020 ? 0.001 : 0.0015;  // the issue's targets
+      const double bound = (*t.truth_m)[2] > 0.020 ? 0.001 : 0.0015;  // 1 mm for D > 20 mm, 1.5 mm below
       EXPECT_LT((t.joint->misalignment_m - *t.truth_m).norm(), bound) << preset << " " << t.name;
       EXPECT_LT((t.online->final_output.misalignment_m - *t.truth_m).norm(), 0.0015) << preset << " " << t.name;
       const bool inside =

@@ -35,8 +35,8 @@ inline Eigen::Index window_capacity(double window_s, double sample_period_s) {
 // quadratic through the last `window` seconds has no lag while qddot changes
 // linearly over the window and averages the noise over the window instead. The
 // optional low-pass follows the fit. A sample at the same time as the previous
-// one is ignored; one earlier than it restarts the window (as the old backward
-// difference did). Sized once; update() does not allocate.
+// one is ignored; one earlier than it restarts the window (as the backward
+// difference of window 0 does). Sized once; update() does not allocate.
 class AccelerationEstimator {
  public:
   AccelerationEstimator(double window_s, double filter_s, double sample_period_s)

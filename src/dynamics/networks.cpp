@@ -144,7 +144,7 @@ nlohmann::json save_normalization(const Normalization& n) {
                       {"input_scale", detail::encode_vector(n.input_scale)},
                       {"output_mean", detail::encode_vector(n.output_mean)},
                       {"output_scale", detail::encode_vector(n.output_scale)}};
-  // Absent when empty, so files without direction features keep their old bytes.
+  // Absent when empty, so that a model without direction features writes no such field.
   if (n.velocity_tanh_scale.size() > 0) j["velocity_tanh_scale"] = detail::encode_vector(n.velocity_tanh_scale);
   if (n.has_acceleration()) {
     j["acceleration_filter_s"] = detail::encode_vector(n.acceleration_filter_s);
@@ -558,7 +558,7 @@ void LstmTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, co
 
 nlohmann::json LstmTorqueModel::save_parameters() const {
   nlohmann::json j = {{"lstm", save_lstm(kernel_.network())}, {"normalization", save_normalization(normalization_)}};
-  // Absent at 0, so causal models keep their old bytes.
+  // Absent at 0, so that a causal model writes no such field.
   if (output_delay_ > 0) j["output_delay_samples"] = output_delay_;
   return j;
 }

@@ -96,7 +96,7 @@ struct OnlineOutput {
   bool alarm_cleared = false;
   // The sample left the free-space model's training regime (dynamics/regime.hpp):
   // which joint and quantity, and whether any. The estimate is computed as
-  // always; its torque residual is no longer covered by what the model saw.
+  // always; its torque residual is not covered by what the model saw.
   std::uint32_t regime_flags = 0;
   bool out_of_regime = false;
 };
@@ -186,7 +186,7 @@ class OnlinePipeline {
 };
 
 // A whole recording streamed through a pipeline, as `rcm monitor` and the study
-// replay it, with what the targets are measured on.
+// replay it, with the measures of its accuracy and timing.
 struct OnlineAlarm {
   double raised_s = 0.0;
   std::optional<double> cleared_s;
