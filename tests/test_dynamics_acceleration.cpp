@@ -97,8 +97,9 @@ TEST(LinearAcceleration, CausalWindowedFitIsExactOnQuadraticVelocity) {
   for (Eigen::Index t = 20; t < s.time.size(); ++t) EXPECT_NEAR(est(t), s.true_qdd(t), 1e-8) << t;
 }
 
-// The default of older files (backward difference, 30 ms first-order low-pass)
-// lags a ramp of qddot by dt / 2 (difference) + tau (low-pass) in steady state.
+// The estimate of model files without window fields (backward difference, 30 ms
+// first-order low-pass) lags a ramp of qddot by dt / 2 (difference) + tau
+// (low-pass) in steady state.
 TEST(LinearAcceleration, DefaultLowPassLagsByItsTimeConstant) {
   const double dt = 0.005, tau = 0.03, jerk = 3.0;
   const LinearTorqueModel model(make_info(), acceleration_only(0.0, tau, 0.0));

@@ -218,7 +218,7 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
   const double sample_period = median_sample_period(recordings);
   const std::vector<double> grid = {1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1};
   // Causal qddot candidates (compute_step): the low-pass of the backward
-  // difference (the first is the default of older model files) and quadratic fits
+  // difference (the first is what model files without window fields use) and quadratic fits
   // over 40-120 ms, with or without a light low-pass after them.
   const std::vector<AccelerationChoice> accelerations = {
       {0.0, kDefaultAccelerationFilter}, {0.0, 0.01}, {0.0, 0.02}, {0.0, 0.05}, {0.04, 0.0}, {0.06, 0.0},
