@@ -55,7 +55,7 @@ SKIP_SUFFIXES = (".csv", ".mcap", ".db3", ".bag", ".png", ".svg", ".pdf", ".pt",
 # This file, relative to the repository root (see the docstring).
 SELF = "tests/" + os.path.basename(__file__)
 
-SKIP_DIRS = {".git", "node_modules", "__pycache__"}
+SKIP_DIRS = {".git", "node_modules", "__pycache__", "demo-out"}
 
 
 def list_files(root):
@@ -69,7 +69,8 @@ def list_files(root):
         pass
     files = []
     for d, dirs, names in os.walk(root):
-        dirs[:] = [x for x in dirs if x not in SKIP_DIRS and not x.startswith("build")]
+        # What .gitignore leaves out: build trees and the outputs of make demo.
+        dirs[:] = [x for x in dirs if x not in SKIP_DIRS and not x.startswith(("build", "out"))]
         for n in names:
             files.append(os.path.relpath(os.path.join(d, n), root))
     return files
