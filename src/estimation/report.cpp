@@ -222,16 +222,24 @@ std::filesystem::path write_study_report(const StudyResult& r, const Session& se
   save_json_file(out_dir / "results.json", r.to_json());
   std::string figure_note;
   std::vector<std::string> figures;
-  try {
-    figures = make_figures(r, session, out_dir / "figures", figure_note);
-  } catch (const std::runtime_error& e) {
-    figure_note = std::string("figures could not be drawn: ") + e.what();
+  if (r.interrupted) {
+    // Whoever interrupted wants the run to end; figures of part of a study can wait.
+    figure_note = "Figures were not drawn: the study was interrupted.";
+  } else {
+    try {
+      figures = make_figures(r, session, out_dir / "figures", figure_note);
+    } catch (const std::runtime_error& e) {
+      figure_note = std::string("figures could not be drawn: ") + e.what();
+    }
   }
 
   std::string md;
   md += "# rcm study report\n\n";
   md += fmt::format("Session `{}`, method **{}**, free-space model **{}**, {:.0f} s in all.\n\n",
                     r.session_manifest.string(), r.method, dynamics::to_string(r.model_kind), r.seconds);
+  if (r.interrupted)
+    md += fmt::format("**Interrupted** after {} of {} trials: the tables cover the trials estimated.\n\n",
+                      r.trials.size(), r.trials_planned);
   md += "## Free-space torque (Table II)\n\nHeld-out last 10 % of the free-space recordings, NRMSE = RMSE / (max - min) x 100.\n\n";
   md += "| joint | RMSE | NRMSE (%) | paper PM (%) |\n|---|---|---|---|\n";
   const char* paper_ii[3] = {"1.6", "1.5", "5.3"};

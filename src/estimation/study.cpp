@@ -6,6 +6,7 @@
 #include <iostream>
 
 #include "rcm/common/error.hpp"
+#include "rcm/common/interrupt.hpp"
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/force/incision_force.hpp"
 #include "rcm/io/json_file.hpp"
@@ -82,6 +83,7 @@ Eigen::Vector3d compute_settled_free_space_torque(const dynamics::TorqueModel& m
 
 FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOptions& options,
                                        const TorqueModelFitter& fitter) {
+  const auto start = std::chrono::steady_clock::now();
   FreeSpaceModelStep out;
   out.kind = options.model_kind;
   std::vector<Recording> free_space;
@@ -96,6 +98,8 @@ FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOption
     progress(options.verbose, "fitting the " + dynamics::to_string(options.model_kind) + " free-space model on " +
                                   std::to_string(free_space.size()) + " recording(s)");
     dynamics::FitResult fit = fitter(options.model_kind, free_space, options.fit);
+    // A network whose training was cut short is not the model the study asked for.
+    if (fit.summary.interrupted) throw Interrupted("interrupted while fitting the free-space model");
     out.fit = fit.summary;
     out.errors = fit.summary.test_errors;
     out.model = std::move(fit.model);
@@ -108,6 +112,7 @@ FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOption
     throw InputError(where, "the model predicts " + std::to_string(out.model->num_outputs()) +
                                 " joints; the estimator needs joints 1-3");
   }
+  out.seconds = seconds_since(start);
   return out;
 }
 
@@ -141,8 +146,7 @@ MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options
   return setup;
 }
 
-StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
-  const auto start = std::chrono::steady_clock::now();
+void check_study_inputs(const Session& session, const StudyOptions& options) {
   InputLocation manifest_where;
   manifest_where.file = session.manifest.string();
   manifest_where.kind = InputLocation::Kind::json_field;
@@ -160,7 +164,16 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
     where.file = "method";
     throw InputError(where, "expected three-step or joint, got '" + options.method + "'");
   }
+}
 
+StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
+  check_study_inputs(session, options);
+  return run_study(session, options, fit_free_space_step(session, options, fitter));
+}
+
+StudyResult run_study(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space_step) {
+  const auto start = std::chrono::steady_clock::now();
+  check_study_inputs(session, options);
   StudyResult result;
   result.method = options.method;
   result.session_manifest = session.manifest;
@@ -168,7 +181,6 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   const IncisionFrame incision = make_incision_frame(session.q0);
 
   // Step 0: the free-space model.
-  FreeSpaceModelStep free_space_step = fit_free_space_step(session, options, fitter);
   result.model = free_space_step.model;
   result.model_kind = free_space_step.kind;
   result.fit = free_space_step.fit;
@@ -179,6 +191,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   const Recording calibration = load_recording(session.calibration->recording, get_read_options(session, options.read));
   result.calibration_offset_m = session.calibration->coaxial_offset_m;
   progress(options.verbose, "identifying the tissue law on " + calibration.source);
+  throw_if_interrupted("identifying the tissue law");
   const Eigen::MatrixXd tau_fs_cal = dynamics::predict_torque(model, calibration);
   {
     TissuePairsResult pairs = compute_tissue_pairs(calibration, tau_fs_cal, session.q0, result.calibration_offset_m,
@@ -203,6 +216,7 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   }
 
   // Joint method, step 2 in torque space: the tissue parameters at D*.
+  throw_if_interrupted("identifying the tissue law");
   JointEstimatorOptions joint_options = options.joint;
   if (options.method == "joint") {
     joint_options = make_joint_options_for_model(options.joint, free_space_step);
@@ -232,7 +246,12 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   // Step 3: every trial.
   const Eigen::Vector3d tau_fs_paper = compute_settled_free_space_torque(model, session.q0, options.paper_settle_s);
   const dynamics::RegimeMonitor regime(model.info().regime);
+  result.trials_planned = session.trials.size();
+  // An interrupt ends the study between trials, or inside one (a Ceres solve
+  // aborted), whose partial outcome is dropped: the finished trials are kept.
+  try {
   for (std::size_t i = 0; i < session.trials.size(); ++i) {
+    throw_if_interrupted("estimating the trials");
     const TrialSpec& spec = session.trials[i];
     const auto trial_start = std::chrono::steady_clock::now();
     progress(options.verbose, "trial " + std::to_string(i + 1) + "/" + std::to_string(session.trials.size()) + ": " +
@@ -321,7 +340,13 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
     }
     result.trials.push_back(std::move(out));
   }
-  result.seconds = seconds_since(start);
+  } catch (const Interrupted&) {
+    if (result.trials.empty()) throw Interrupted("interrupted before the first trial was estimated");
+    result.interrupted = true;
+    progress(options.verbose, "interrupted after " + std::to_string(result.trials.size()) + " of " +
+                                  std::to_string(result.trials_planned) + " trials");
+  }
+  result.seconds = seconds_since(start) + free_space_step.seconds;
   return result;
 }
 
@@ -330,6 +355,8 @@ nlohmann::json StudyResult::to_json() const {
   j["format"] = "rcm-results/1";
   j["method"] = method;
   j["session"] = session_manifest.string();
+  if (interrupted)
+    j["interrupted"] = {{"trials_estimated", trials.size()}, {"trials_planned", trials_planned}};
   const TissueFrontEntry& best = tissue.best();
   j["tissue_model"] = {{"expression", format_expression(best.expression, ExpressionFormat::sympy)},
                        {"complexity", best.complexity},
