@@ -39,7 +39,13 @@ void run(const Options& o) {
   const rcm::sim::SessionWriteSummary written =
       rcm::sim::simulate_session(config, bench_dir, [](const std::string& m) { std::cerr << "[rcm]   " << m << std::endl; });
   // Fig. 3 sweep, referenced from the session so that the report draws it.
-  const rcm::sim::ForceAngleResult sweep = rcm::sim::run_force_angle_experiment(config);
+  rcm::sim::ForceAngleResult sweep;
+  try {
+    sweep = rcm::sim::run_force_angle_experiment(config);
+  } catch (const rcm::Interrupted& e) {
+    throw rcm::Interrupted(std::string(e.what()) + "; the simulated session in " + bench_dir.string() +
+                           " was kept, no report written");
+  }
   rcm::sim::save_force_angle_csv(bench_dir / "force_angle.csv", sweep);
   rcm::Session session = rcm::load_session(written.manifest);
   session.extra["force_angle"] = "force_angle.csv";
