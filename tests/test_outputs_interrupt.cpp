@@ -1,4 +1,4 @@
-// rcm's outputs under abrupt and polite stops, end to end on a quick simulated
+// rcm's outputs under abrupt and polite stops, end to end on a small simulated
 // session: SIGKILL of `rcm run` at random moments leaves only whole files (and
 // the next run removes the temporaries it left); SIGINT and SIGTERM stop
 // `rcm run` and `rcm simulate` with what they finished saved, a message saying
@@ -73,14 +73,16 @@ TEST_F(Outputs, KilledRunLeavesOnlyWholeFiles) {
   ASSERT_EQ(describe_defects(path("run_whole")), "");
   ASSERT_TRUE(rcm::test::list_temporaries(path("run_whole")).empty());
 
-  // Kills at moments spread over the run, into one folder, so that later runs
-  // meet what earlier ones left.
+  // One kill at a random moment in each fifth of the run, so that every phase
+  // (model, tissue, trials, report, figures) is hit; all into one folder, so
+  // that later runs meet what earlier ones left.
   const auto out = path("run_killed");
+  const int kills = 5;
   std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> moment(0.0, run_s);
+  std::uniform_real_distribution<double> within(0.0, 1.0);
   std::size_t temporaries_seen = 0;
-  for (int k = 0; k < 5; ++k) {
-    const double delay_s = moment(rng);
+  for (int k = 0; k < kills; ++k) {
+    const double delay_s = (k + within(rng)) * run_s / kills;
     ChildProcess child(run_args(out, "three-step"), path("run_killed.log"));
     ASSERT_TRUE(child.started());
     std::this_thread::sleep_for(std::chrono::duration<double>(delay_s));
