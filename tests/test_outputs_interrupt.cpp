@@ -132,6 +132,28 @@ TEST_F(Outputs, InterruptedRunSavesTheFinishedTrials) {
   EXPECT_FALSE(std::filesystem::exists(out / "figures"));
 }
 
+TEST_F(Outputs, InterruptedWhileDrawingKeepsResultsAndReport) {
+  const auto out = path("run_draw_int");
+  ChildProcess child(run_args(out, "three-step"), path("run_draw_int.log"));
+  ASSERT_TRUE(rcm::test::wait_for([&] { return std::filesystem::exists(out / "figures") || !child.alive(); },
+                                  std::chrono::seconds(60)));
+  child.send(SIGINT);
+  const int code = child.wait(std::chrono::seconds(30));
+  const std::string log = child.log();
+  EXPECT_EQ(code, 130) << log;
+  EXPECT_NE(log.find("rcm: SIGINT: interrupted after every trial was estimated; saved results.json"), std::string::npos)
+      << log;
+  EXPECT_EQ(describe_defects(out), "");
+  const nlohmann::json results = nlohmann::json::parse(read_text(out / "results.json"));
+  EXPECT_FALSE(results.contains("interrupted"));
+  // The report lists exactly the figures that exist.
+  const std::string report = read_text(out / "report.md");
+  for (const char* name : {"fig4a_force", "fig4b_force", "fig4c_decoupled", "table4_estimates"})
+    EXPECT_EQ(report.find(std::string("figures/") + name + ".png") != std::string::npos,
+              std::filesystem::exists(out / "figures" / (std::string(name) + ".png")))
+        << name;
+}
+
 TEST_F(Outputs, InterruptedSimulateKeepsTheFinishedRecordings) {
   for (const int signal_number : {SIGINT, SIGTERM}) {
     const std::string name = signal_number == SIGINT ? "simulate_int" : "simulate_term";

@@ -65,6 +65,10 @@ void run(const Options& o) {
     std::cout << "Table IV -- misalignment estimates\n" << rcm::format_table_iv(result);
     std::cout << "report: " << report.string() << "\n";
   }
+  if (!result.interrupted && rcm::is_interrupt_requested())
+    throw rcm::Interrupted("interrupted after every trial was estimated; saved results.json, report.md and "
+                           "free_space_model.json in " + out.string() +
+                           "; figures drawn before the signal are listed in report.md");
   if (result.interrupted) {
     std::string done, left;
     for (const auto& t : result.trials) done += (done.empty() ? "" : ", ") + t.name;

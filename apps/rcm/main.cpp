@@ -46,6 +46,6 @@ int main(int argc, char** argv) {
     std::cerr << "rcm: error: " << e.what() << std::endl;
     return 1;
   }
-  if (rcm::is_interrupt_requested()) return interrupted("received after the work was done; every output was saved");
+  if (rcm::is_interrupt_requested()) return interrupted("received after the work was done; the outputs were written whole");
   return 0;
 }

@@ -78,7 +78,17 @@ void check_figure_whole(const std::filesystem::path& temp, const std::filesystem
 }  // namespace
 
 bool is_gnuplot_available() {
-  return std::system("gnuplot --version >/dev/null 2>&1") == 0;
+  // popen, not std::system: system() ignores SIGINT while it waits, which
+  // would swallow a Ctrl-C meant for rcm (rcm/common/interrupt.hpp).
+  static const bool available = [] {
+    FILE* pipe = popen("gnuplot --version 2>&1", "r");
+    if (!pipe) return false;
+    char buf[256];
+    while (std::fgets(buf, sizeof buf, pipe)) {
+    }
+    return pclose(pipe) == 0;
+  }();
+  return available;
 }
 
 PlotFiles save_plot(const PlotSpec& spec, const std::filesystem::path& stem) {

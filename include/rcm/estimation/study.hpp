@@ -168,7 +168,8 @@ Eigen::Vector3d compute_settled_free_space_torque(const dynamics::TorqueModel& m
 
 // results.json, report.md (Tables II-IV, solver summaries) and figures/ (Fig. 3
 // when the session has a force-angle sweep, Fig. 4). Figures need gnuplot; without
-// it the report says so. Returns the report path.
+// it the report says so, as it does when the study was interrupted (figures are
+// then not drawn). Returns the report path.
 std::filesystem::path write_study_report(const StudyResult& result, const Session& session,
                                          const std::filesystem::path& out_dir);
 
