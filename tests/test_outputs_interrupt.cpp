@@ -73,11 +73,11 @@ TEST_F(Outputs, KilledRunLeavesOnlyWholeFiles) {
   ASSERT_EQ(describe_defects(path("run_whole")), "");
   ASSERT_TRUE(rcm::test::list_temporaries(path("run_whole")).empty());
 
-  // One kill at a random moment in each fifth of the run, so that every phase
+  // One kill at a random moment in each quarter of the run, so that every phase
   // (model, tissue, trials, report, figures) is hit; all into one folder, so
   // that later runs meet what earlier ones left.
   const auto out = path("run_killed");
-  const int kills = 5;
+  const int kills = 4;
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> within(0.0, 1.0);
   std::size_t temporaries_seen = 0;
