@@ -83,6 +83,18 @@ class ChildProcess {
     return WIFEXITED(status_) ? WEXITSTATUS(status_) : -WTERMSIG(status_);
   }
   std::string log() const { return read_text(log_); }
+  // Sends a signal to the child alone, or to its group (the programs it started too).
+  void send(int signal_number, bool group = false) {
+    if (alive()) ::kill(group ? -pid_ : pid_, signal_number);
+  }
+  // The exit code (or -signal) once the child has ended within `timeout`; -1000 while it runs.
+  int wait(std::chrono::milliseconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (alive() && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (alive()) return kStillRunning;
+    return WIFEXITED(status_) ? WEXITSTATUS(status_) : -WTERMSIG(status_);
+  }
+  static constexpr int kStillRunning = -1000;
 
  private:
   std::filesystem::path log_;

@@ -5,6 +5,7 @@
 #include "cli_util.hpp"
 #include "command_registry.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/common/interrupt.hpp"
 #include "rcm/io/session.hpp"
 #include "rcm/sim/bench.hpp"
 #include "rcm/sim/sim_config.hpp"
@@ -33,11 +34,18 @@ void run(const Options& o) {
     config.protocol.static_hold_s = 4.0;
     config.protocol.baseline_hold_s = 4.0;
   }
+  rcm::install_interrupt_handlers();
   std::cerr << "[rcm] simulating the phantom bench into " << bench_dir.string() << std::endl;
   const rcm::sim::SessionWriteSummary written =
       rcm::sim::simulate_session(config, bench_dir, [](const std::string& m) { std::cerr << "[rcm]   " << m << std::endl; });
   // Fig. 3 sweep, referenced from the session so that the report draws it.
-  const rcm::sim::ForceAngleResult sweep = rcm::sim::run_force_angle_experiment(config);
+  rcm::sim::ForceAngleResult sweep;
+  try {
+    sweep = rcm::sim::run_force_angle_experiment(config);
+  } catch (const rcm::Interrupted& e) {
+    throw rcm::Interrupted(std::string(e.what()) + "; the simulated session in " + bench_dir.string() +
+                           " was kept, no report written");
+  }
   rcm::sim::save_force_angle_csv(bench_dir / "force_angle.csv", sweep);
   rcm::Session session = rcm::load_session(written.manifest);
   session.extra["force_angle"] = "force_angle.csv";
@@ -54,8 +62,19 @@ void run(const Options& o) {
     options.joint.bootstrap_replicates = 20;
     options.joint.calibration_bootstrap_replicates = 10;
   }
-  const rcm::StudyResult result = rcm::run_study(session, options, rcm::cli::get_torque_model_fitter());
+  rcm::StudyResult result;
+  try {
+    result = rcm::run_study(session, options, rcm::cli::get_torque_model_fitter());
+  } catch (const rcm::Interrupted& e) {
+    throw rcm::Interrupted(std::string(e.what()) + "; the simulated session in " + bench_dir.string() +
+                           " was kept, no report written");
+  }
   const auto report = rcm::write_study_report(result, session, out / "report");
+  if (result.interrupted)
+    throw rcm::Interrupted("interrupted after " + std::to_string(result.trials.size()) + " of " +
+                           std::to_string(result.trials_planned) + " trials; " + report.string() +
+                           " and results.json cover them, figures not drawn; the simulated session in " +
+                           bench_dir.string() + " was kept");
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (o.json) {
     nlohmann::json j = result.to_json();

@@ -14,6 +14,7 @@
 #include "command_registry.hpp"
 #include "study_cli.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/common/interrupt.hpp"
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/metrics.hpp"
@@ -120,11 +121,16 @@ void run_fit(const DynamicsArgs& a) {
                                         *a.output_delay, samples, period, o.burn_in));
   }
   FitResult fit;
+  rcm::install_interrupt_handlers();
 #if defined(RCM_HAVE_TORCH)
   if (!a.torchscript_out.empty() && kind != TorqueModelKind::lstm) {
     throw rcm::InputError(rcm::cli::flag_location("--torchscript"), "TorchScript export is for --model lstm only");
   }
-  fit = fit_torque_model(kind, recs, o);
+  try {
+    fit = fit_torque_model(kind, recs, o);
+  } catch (const rcm::Interrupted& e) {
+    throw rcm::Interrupted(std::string(e.what()) + "; nothing saved, " + a.out + " not written");
+  }
   if (!a.torchscript_out.empty()) {
     export_torchscript(static_cast<const LstmTorqueModel&>(*fit.model), a.torchscript_out);
   }
@@ -144,6 +150,11 @@ void run_fit(const DynamicsArgs& a) {
     // The fit printed its report on stderr as it ended (FitOptions::verbose).
     std::cout << (o.verbose ? std::string() : fit.summary.brief_report()) << "model written to " << a.out << "\n";
   }
+  if (fit.summary.interrupted)
+    throw rcm::Interrupted(fmt::format("interrupted after {} epochs: saved the model of epoch {} (the best validation "
+                                       "loss so far) to {}; its training did not finish{}",
+                                       fit.summary.epochs, fit.summary.best_epoch, a.out,
+                                       a.torchscript_out.empty() ? "" : "; TorchScript written to " + a.torchscript_out));
 }
 
 void run_eval(const DynamicsArgs& a) {

@@ -9,6 +9,7 @@
 #include "cli_util.hpp"
 #include "command_registry.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/common/interrupt.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/sim/bench.hpp"
 #include "rcm/sim/sim_config.hpp"
@@ -95,6 +96,7 @@ void run_simulate(const SimulateOptions& o) {
     throw rcm::InputError(loc, "an output directory is required");
   }
   const std::filesystem::path out_dir = o.out;
+  rcm::install_interrupt_handlers();
 
   if (o.experiment == "session") {
     auto progress = [&](const std::string& msg) { std::cerr << "simulate: " << msg << "\n"; };
@@ -140,7 +142,12 @@ void run_simulate(const SimulateOptions& o) {
     const auto start = std::chrono::steady_clock::now();
     std::cerr << fmt::format("simulate: force-angle sweep, seed {}, tissue {}\n", config.seed,
                              config.tissue.preset);
-    const ForceAngleResult r = run_force_angle_experiment(config);
+    ForceAngleResult r;
+    try {
+      r = run_force_angle_experiment(config);
+    } catch (const rcm::Interrupted& e) {
+      throw rcm::Interrupted(std::string(e.what()) + "; nothing written");
+    }
     std::filesystem::create_directories(out_dir);
     const auto csv = out_dir / "force_angle.csv";
     save_force_angle_csv(csv, r);

@@ -1,14 +1,18 @@
 // rcm: sensorless RCM misalignment estimation for the dVRK PSM.
 // Subcommands register themselves (command_registry.hpp); main only orders
 // them, runs CLI11, and turns exceptions into messages and exit codes:
-// 0 success, 2 bad input (located message), 1 anything else.
+// 0 success, 2 bad input (located message), 1 anything else, 128 + the
+// signal (130 SIGINT, 143 SIGTERM) when a command that installs the interrupt
+// handlers (run, dynamics fit, simulate, demo) was stopped by one.
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <csignal>
 #include <iostream>
 
 #include "command_registry.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/common/interrupt.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"rcm " RCM_VERSION
@@ -23,10 +27,18 @@ int main(int argc, char** argv) {
                    [](const auto& a, const auto& b) { return a.order < b.order; });
   for (const auto& command : commands) command.add(app);
 
+  // The interrupted command's message says what it saved and what it did not.
+  auto interrupted = [](const std::string& what) {
+    const int signal_number = rcm::get_interrupt_signal() != 0 ? rcm::get_interrupt_signal() : SIGINT;
+    std::cerr << "rcm: " << rcm::get_signal_name(signal_number) << ": " << what << std::endl;
+    return 128 + signal_number;
+  };
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  } catch (const rcm::Interrupted& e) {
+    return interrupted(e.what());
   } catch (const rcm::InputError& e) {
     std::cerr << "rcm: error: " << e.what() << std::endl;
     return 2;
@@ -34,5 +46,6 @@ int main(int argc, char** argv) {
     std::cerr << "rcm: error: " << e.what() << std::endl;
     return 1;
   }
+  if (rcm::is_interrupt_requested()) return interrupted("received after the work was done; the outputs were written whole");
   return 0;
 }

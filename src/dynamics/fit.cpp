@@ -160,6 +160,7 @@ nlohmann::json FitSummary::to_json() const {
   j["epochs"] = epochs;
   j["best_epoch"] = best_epoch;
   j["best_validation_loss"] = best_validation_loss;
+  if (interrupted) j["interrupted"] = true;
   if (kind == TorqueModelKind::lstm || kind == TorqueModelKind::hybrid) j["loss_balance"] = loss_balance;
   if (kind == TorqueModelKind::lstm) j["output_delay_samples"] = output_delay_samples;
   j["seconds"] = seconds;

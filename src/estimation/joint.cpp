@@ -10,6 +10,7 @@
 
 #include "joint_model.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/common/interrupt.hpp"
 
 namespace rcm {
 namespace {
@@ -29,6 +30,14 @@ struct JointResidual {
   Eigen::Matrix3d R;
   double v0;
   Eigen::Vector3d inv_sigma, dtau;
+};
+
+// Lets an interrupt end a solve between iterations rather than after hundreds
+// of bootstrap solves.
+struct InterruptCallback : ceres::IterationCallback {
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary&) override {
+    return is_interrupt_requested() ? ceres::SOLVER_ABORT : ceres::SOLVER_CONTINUE;
+  }
 };
 
 struct Fit {
@@ -74,7 +83,10 @@ Fit solve(const IncisionFrame& incision, const std::vector<JointSample>& samples
   opt.parameter_tolerance = 1e-12;
   opt.logging_type = ceres::SILENT;
   opt.num_threads = 1;
+  InterruptCallback interrupt;
+  opt.callbacks.push_back(&interrupt);
   ceres::Solve(opt, &problem, &fit.summary);
+  throw_if_interrupted("estimating in torque space");
   fit.cost = fit.summary.final_cost;
   return fit;
 }

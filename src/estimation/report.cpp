@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "rcm/common/error.hpp"
+#include "rcm/common/interrupt.hpp"
 #include "rcm/estimation/study.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/plot.hpp"
@@ -63,14 +64,20 @@ PlotSpec force_plot(const std::string& title, const TrialOutcome& t, const Eigen
   return spec;
 }
 
-std::vector<std::string> make_figures(const StudyResult& r, const Session& session, const std::filesystem::path& dir,
-                                      std::string& note) {
-  std::vector<std::string> made;
+// Draws into `made` as it goes, so that the figures drawn before an error or an
+// interrupt (Interrupted, between figures) are still listed.
+void make_figures(const StudyResult& r, const Session& session, const std::filesystem::path& dir,
+                  std::vector<std::string>& made, std::string& note) {
   if (!is_gnuplot_available()) {
     note = "gnuplot was not found, so no figures were drawn (install gnuplot-nox).";
-    return made;
+    return;
   }
   std::filesystem::create_directories(dir);
+  auto draw = [&](const PlotSpec& spec, const std::string& name) {
+    throw_if_interrupted("drawing the figures");
+    save_plot(spec, dir / name);
+    made.push_back(name);
+  };
   // Fig. 3: the static force-angle sweep, when the session ships one.
   if (session.extra.contains("force_angle") && session.extra["force_angle"].is_string()) {
     const std::filesystem::path csv = session.manifest.parent_path() / session.extra["force_angle"].get<std::string>();
@@ -112,29 +119,25 @@ std::vector<std::string> make_figures(const StudyResult& r, const Session& sessi
     spec.x_label = "pivot angle theta (deg)";
     spec.y_label = "|f| at the incision (N)";
     for (auto& [offset, s] : by_offset) spec.series.push_back(s);
-    save_plot(spec, dir / "fig3_force_angle");
-    made.push_back("fig3_force_angle");
+    draw(spec, "fig3_force_angle");
   }
   // Fig. 4: the D = 30 mm trials, pure coaxial and hybrid, as in the paper.
   const TrialOutcome* pure = find_trial(r, Eigen::Vector3d(0, 0, 0.030));
   const TrialOutcome* hybrid = find_trial(r, Eigen::Vector3d(0.010, 0.015, 0.030));
   if (!pure && !r.trials.empty()) pure = &r.trials.front();
   if (pure) {
-    save_plot(force_plot("(a) " + pure->name + ": estimated vs sensor", *pure, pure->f_estimated, "estimate",
-                         pure->f_sensor.rows() ? &pure->f_sensor : nullptr, "sensor"),
-              dir / "fig4a_force");
-    made.push_back("fig4a_force");
+    draw(force_plot("(a) " + pure->name + ": estimated vs sensor", *pure, pure->f_estimated, "estimate",
+                    pure->f_sensor.rows() ? &pure->f_sensor : nullptr, "sensor"),
+         "fig4a_force");
   }
   if (hybrid && hybrid != pure) {
-    save_plot(force_plot("(b) " + hybrid->name + ": estimated vs sensor", *hybrid, hybrid->f_estimated, "estimate",
-                         hybrid->f_sensor.rows() ? &hybrid->f_sensor : nullptr, "sensor"),
-              dir / "fig4b_force");
-    made.push_back("fig4b_force");
+    draw(force_plot("(b) " + hybrid->name + ": estimated vs sensor", *hybrid, hybrid->f_estimated, "estimate",
+                    hybrid->f_sensor.rows() ? &hybrid->f_sensor : nullptr, "sensor"),
+         "fig4b_force");
     if (pure && pure->f_estimated.rows() == hybrid->f_coaxial_decoupled.rows()) {
-      save_plot(force_plot("(c) decoupled coaxial force of " + hybrid->name + " vs pure coaxial " + pure->name, *hybrid,
-                           hybrid->f_coaxial_decoupled, "decoupled", &pure->f_estimated, "pure coaxial"),
-                dir / "fig4c_decoupled");
-      made.push_back("fig4c_decoupled");
+      draw(force_plot("(c) decoupled coaxial force of " + hybrid->name + " vs pure coaxial " + pure->name, *hybrid,
+                      hybrid->f_coaxial_decoupled, "decoupled", &pure->f_estimated, "pure coaxial"),
+           "fig4c_decoupled");
     }
   }
   // Table IV as a picture: estimated vs true D and radial magnitude.
@@ -160,11 +163,9 @@ std::vector<std::string> make_figures(const StudyResult& r, const Session& sessi
       ideal.x = {0.0, 60.0};
       ideal.y = {0.0, 60.0};
       spec.series = {d, rad, ideal};
-      save_plot(spec, dir / "table4_estimates");
-      made.push_back("table4_estimates");
+      draw(spec, "table4_estimates");
     }
   }
-  return made;
 }
 
 }  // namespace
@@ -222,16 +223,26 @@ std::filesystem::path write_study_report(const StudyResult& r, const Session& se
   save_json_file(out_dir / "results.json", r.to_json());
   std::string figure_note;
   std::vector<std::string> figures;
-  try {
-    figures = make_figures(r, session, out_dir / "figures", figure_note);
-  } catch (const std::runtime_error& e) {
-    figure_note = std::string("figures could not be drawn: ") + e.what();
+  if (r.interrupted || is_interrupt_requested()) {
+    // Whoever interrupted wants the run to end; figures can wait.
+    figure_note = "Figures were not drawn: the run was interrupted.";
+  } else {
+    try {
+      make_figures(r, session, out_dir / "figures", figures, figure_note);
+    } catch (const Interrupted&) {
+      figure_note = "The other figures were not drawn: the run was interrupted.";
+    } catch (const std::runtime_error& e) {
+      figure_note = std::string("figures could not be drawn: ") + e.what();
+    }
   }
 
   std::string md;
   md += "# rcm study report\n\n";
   md += fmt::format("Session `{}`, method **{}**, free-space model **{}**, {:.0f} s in all.\n\n",
                     r.session_manifest.string(), r.method, dynamics::to_string(r.model_kind), r.seconds);
+  if (r.interrupted)
+    md += fmt::format("**Interrupted** after {} of {} trials: the tables cover the trials estimated.\n\n",
+                      r.trials.size(), r.trials_planned);
   md += "## Free-space torque (Table II)\n\nHeld-out last 10 % of the free-space recordings, NRMSE = RMSE / (max - min) x 100.\n\n";
   md += "| joint | RMSE | NRMSE (%) | paper PM (%) |\n|---|---|---|---|\n";
   const char* paper_ii[3] = {"1.6", "1.5", "5.3"};

@@ -2,7 +2,6 @@
 
 #include <cstdio>
 #include <fstream>
-#include <random>
 #include <sstream>
 #include <system_error>
 
@@ -58,32 +57,6 @@ nlohmann::json load_json_file(const std::filesystem::path& path) {
     if (pos != std::string::npos) msg = msg.substr(pos + 2);
     if (msg.size() > 160) msg = msg.substr(0, 160) + "...";
     throw InputError(where, "invalid JSON: " + msg);
-  }
-}
-
-void write_file_atomic(const std::filesystem::path& path, const std::string& text) {
-  const std::filesystem::path dir = path.has_parent_path() ? path.parent_path() : ".";
-  std::random_device rd;
-  const std::filesystem::path tmp =
-      dir / ("." + path.filename().string() + ".tmp" + std::to_string(rd() % 1000000));
-  InputLocation where;
-  where.file = path.string();
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw InputError(where, "cannot be written (directory missing or not writable)");
-    out.write(text.data(), static_cast<std::streamsize>(text.size()));
-    out.flush();
-    if (!out) {
-      std::error_code ec;
-      std::filesystem::remove(tmp, ec);
-      throw InputError(where, "write failed (disk full?)");
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw InputError(where, "cannot replace the file: " + ec.message());
   }
 }
 

@@ -16,6 +16,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "rcm/common/interrupt.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/session.hpp"
 #include "rcm/sim/arm_dynamics.hpp"
@@ -125,6 +126,8 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
   bool have_previous_row = false;
 
   for (long step = step_begin; step < step_end; ++step) {
+    if (step % 4096 == 0 && is_interrupt_requested())
+      throw Interrupted("interrupted while simulating " + segments.front().name);
     const double t = static_cast<double>(step) / C.physics_rate_hz;
     // Sensors as the controller sees them.
     const Eigen::Vector3d q_meas = measure_position(q);
@@ -370,6 +373,7 @@ void run_parallel(std::vector<std::function<void()>>& jobs, int threads) {
       const std::size_t i = next.fetch_add(1);
       if (i >= jobs.size()) return;
       try {
+        throw_if_interrupted("simulating");
         jobs[i]();
       } catch (...) {
         std::lock_guard<std::mutex> lock(error_mutex);
@@ -440,7 +444,22 @@ SessionWriteSummary simulate_session(const SimConfig& config, const std::filesys
     });
   jobs.emplace_back([&] { write(simulate_calibration(config)); });
   jobs.emplace_back([&] { write(simulate_baseline(config)); });
-  run_parallel(jobs, config.threads);
+  // Written first: it says how the recordings were made, whatever stops the rest.
+  save_config(out_dir / "sim_config.json", config);
+  try {
+    run_parallel(jobs, config.threads);
+  } catch (const Interrupted& e) {
+    // The recordings written are whole; without the manifest, nothing takes them for a session.
+    std::string written;
+    std::sort(infos.begin(), infos.end(),
+              [](const RecordingFileInfo& a, const RecordingFileInfo& b) { return a.name < b.name; });
+    for (const auto& info : infos) written += (written.empty() ? "" : ", ") + info.file.filename().string();
+    const std::size_t planned = free_space.size() + 2 * trials.size() + 2;
+    throw Interrupted(fmt::format("{}: {} of {} recordings written to {} ({}), and sim_config.json; session.json not "
+                                  "written",
+                                  e.what(), infos.size(), planned, out_dir.string(),
+                                  written.empty() ? std::string("none") : written));
+  }
 
   Session session;
   session.manifest = out_dir / "session.json";
@@ -460,7 +479,6 @@ SessionWriteSummary simulate_session(const SimConfig& config, const std::filesys
     spec.truth_misalignment_m = t.misalignment_m;
     session.trials.push_back(spec);
   }
-  save_config(out_dir / "sim_config.json", config);
   nlohmann::json sim = {{"generator", "rcm simulate"},
                         {"seed", config.seed},
                         {"config", "sim_config.json"},

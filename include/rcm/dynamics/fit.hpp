@@ -82,6 +82,9 @@ struct FitSummary {
   TorqueModelKind kind = TorqueModelKind::linear;
   std::size_t train_samples = 0, validation_samples = 0, test_samples = 0;
   int epochs = 0, best_epoch = 0;
+  // Networks: training was stopped by an interrupt (rcm/common/interrupt.hpp)
+  // before early stopping ended it; the model is that of best_epoch.
+  bool interrupted = false;
   // Networks: compute_balanced_loss of the per-joint normalized MSE; linear:
   // RMSE-weighted.
   double best_validation_loss = 0.0;

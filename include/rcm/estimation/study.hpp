@@ -106,6 +106,10 @@ struct StudyResult {
   std::string baseline_message;
   double calibration_offset_m = 0.0;
   std::vector<TrialOutcome> trials;
+  // An interrupt (rcm/common/interrupt.hpp) ended the study after trials.size()
+  // of the session's trials_planned trials.
+  bool interrupted = false;
+  std::size_t trials_planned = 0;
   double seconds = 0.0;
 
   // The rcm-results/1 object (docs/formats.md, "Results"), with extra fields.
@@ -119,6 +123,7 @@ struct FreeSpaceModelStep {
   dynamics::TorqueModelKind kind = dynamics::TorqueModelKind::linear;
   std::optional<dynamics::FitSummary> fit;  // when fitted here
   std::vector<dynamics::JointTorqueError> errors;
+  double seconds = 0.0;  // loading the recordings and fitting
 };
 FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOptions& options,
                                        const TorqueModelFitter& fitter);
@@ -137,9 +142,18 @@ struct MonitorSetup {
 };
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter);
 
+// What run_study checks of a session and options before any work: a
+// calibration, at least one trial, a known method; throws InputError.
+void check_study_inputs(const Session& session, const StudyOptions& options);
+
 // Throws InputError for any defect of the session's files; the study needs a
-// calibration and at least one trial.
+// calibration and at least one trial. Once an interrupt is requested
+// (rcm/common/interrupt.hpp) the study stops: with the trials finished by then
+// (StudyResult::interrupted), or by throwing Interrupted before the first.
 StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter);
+// The same with the free-space model in hand (fit_free_space_step), so that a
+// caller can save it before the rest of the study runs.
+StudyResult run_study(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space);
 
 // The free-space model over a recording that ends at rest at q0 (a static file
 // or the baseline), its positions' encoder chatter removed first as
@@ -154,7 +168,8 @@ Eigen::Vector3d compute_settled_free_space_torque(const dynamics::TorqueModel& m
 
 // results.json, report.md (Tables II-IV, solver summaries) and figures/ (Fig. 3
 // when the session has a force-angle sweep, Fig. 4). Figures need gnuplot; without
-// it the report says so. Returns the report path.
+// it the report says so, as it does when the study was interrupted (figures are
+// then not drawn). Returns the report path.
 std::filesystem::path write_study_report(const StudyResult& result, const Session& session,
                                          const std::filesystem::path& out_dir);
 

@@ -1,18 +1,17 @@
 #pragma once
-// JSON files crossing the disk: parse with located errors, write atomically.
+// JSON files crossing the disk: parse with located errors, write atomically
+// (rcm/io/atomic_file.hpp).
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "rcm/io/atomic_file.hpp"
+
 namespace rcm {
 
 // Parses a JSON file; a syntax error is reported as "file:line: column c: ...".
 nlohmann::json load_json_file(const std::filesystem::path& path);
-
-// Writes `text` to `path` through a temporary file in the same directory and a
-// rename, so that a reader never sees a half-written file.
-void write_file_atomic(const std::filesystem::path& path, const std::string& text);
 
 // Pretty-printed JSON (2-space indent, trailing newline), atomically.
 void save_json_file(const std::filesystem::path& path, const nlohmann::json& value);

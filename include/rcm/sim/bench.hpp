@@ -99,7 +99,9 @@ struct SessionWriteSummary {
 // Writes the whole session (rcm-session/1) under out_dir: recordings, *_truth.csv
 // (when protocol.write_truth), sim_config.json (the resolved configuration) and
 // session.json with the truth of every trial. Recordings are simulated on
-// config.threads threads; the files do not depend on the thread count.
+// config.threads threads; the files do not depend on the thread count. An
+// interrupt (rcm/common/interrupt.hpp) stops it with Interrupted, whose message
+// lists the recordings written; session.json is then not written.
 SessionWriteSummary simulate_session(const SimConfig& config, const std::filesystem::path& out_dir,
                                      const std::function<void(const std::string&)>& progress = {});
 

@@ -17,8 +17,10 @@
 #include <utility>
 
 #include "rcm/common/error.hpp"
+#include "rcm/common/interrupt.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/training.hpp"
+#include "rcm/io/atomic_file.hpp"
 
 namespace rcm::dynamics {
 
@@ -325,7 +327,17 @@ struct LstmTrainResult {
   LstmNetwork network;
   int epochs = 0, best_epoch = 0;
   double best_loss = 0.0;
+  bool interrupted = false;
 };
+
+// An interrupt drops the epoch in progress; the best finished one is kept, or
+// there is nothing to keep.
+void check_training_interrupt(int best_epoch, const char* label, bool verbose) {
+  if (best_epoch == 0)
+    throw Interrupted(fmt::format("interrupted while training the {} network, before its first epoch ended", label));
+  if (verbose)
+    std::cerr << fmt::format("[{}] interrupted: keeping epoch {}, the best validation loss so far\n", label, best_epoch);
+}
 
 LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int N, int M, const FitOptions& o,
                            const LstmShape& shape, double balance_power, torch::Device device,
@@ -382,6 +394,7 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
   EarlyStopping stop(o.learning_rate);
   std::vector<torch::Tensor> best_params = clone_parameters(*net);
   int epoch = 0;
+  bool interrupted = false;
   for (epoch = 1; epoch <= o.max_epochs; ++epoch) {
     // Streams: cut the training segments at a random phase each epoch.
     std::vector<torch::Tensor> sx, sy;
@@ -395,7 +408,7 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
     auto X = torch::stack(sx).to(device), Y = torch::stack(sy).to(device);
     c10::optional<std::tuple<torch::Tensor, torch::Tensor>> state;
     JointSquaredErrors train_err(M);
-    for (Eigen::Index c = 0; c + W <= piece_len; c += W) {
+    for (Eigen::Index c = 0; c + W <= piece_len && !is_interrupt_requested(); c += W) {
       auto x = X.slice(1, c, c + W), y = Y.slice(1, c, c + W);
       auto [pred, st] = net->forward(x, state);
       state = std::make_tuple(std::get<0>(st).detach(), std::get<1>(st).detach());
@@ -407,6 +420,10 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
       torch::nn::utils::clip_grad_norm_(net->parameters(), 1.0);
       opt.step();
       train_err.add(mse, 1);
+    }
+    if (is_interrupt_requested()) {
+      interrupted = true;
+      break;
     }
     const double val = validate();
     if (stop.update(val, epoch, o, opt)) best_params = clone_parameters(*net);
@@ -420,11 +437,13 @@ LstmTrainResult train_lstm(const SequenceData& data, const TimeSplit& split, int
       break;
     }
   }
+  if (interrupted) check_training_interrupt(stop.best_epoch, label, o.verbose);
   restore_parameters(*net, best_params);
   net->to(torch::kCPU);
   LstmTrainResult r;
   r.network = to_network(net);
-  r.epochs = std::min(epoch, o.max_epochs);
+  r.interrupted = interrupted;
+  r.epochs = interrupted ? epoch - 1 : std::min(epoch, o.max_epochs);
   r.best_epoch = stop.best_epoch;
   r.best_loss = stop.best;
   return r;
@@ -436,6 +455,10 @@ void add_network_warnings(FitSummary& s, std::size_t few) {
         "data too few to trust: {} training samples (< {}, i.e. 2 min at 200 Hz); a recurrent network this small "
         "data set cannot cover the joint space, expect poor generalization",
         s.train_samples, few));
+  if (s.interrupted)
+    s.warnings.push_back(fmt::format("training was interrupted after {} epochs, before early stopping ended it; the "
+                                     "model is that of epoch {}",
+                                     s.epochs, s.best_epoch));
   if (s.best_epoch <= 2 && s.epochs > 4)
     s.warnings.push_back("validation loss was best in the first epochs: the model did not learn beyond its start");
   // Debian's reference BLAS (blas/) and ATLAS are single-threaded and train 2.6-25x slower.
@@ -466,6 +489,7 @@ void record_training(FitSummary& summary, const LstmTrainResult& tr) {
   summary.epochs = tr.epochs;
   summary.best_epoch = tr.best_epoch;
   summary.best_validation_loss = tr.best_loss;
+  summary.interrupted = tr.interrupted;
   add_network_warnings(summary, kFewSamplesNetwork);
 }
 
@@ -607,10 +631,11 @@ FitResult fit_mlp_torque_model(const std::vector<Recording>& recs, const FitOpti
   auto best_params = clone_parameters(holder);
   const int64_t batch = 256;
   int epoch = 0;
+  bool interrupted = false;
   for (epoch = 1; epoch <= o.max_epochs; ++epoch) {
     auto perm = torch::randperm(Xt.size(0), torch::TensorOptions().dtype(torch::kLong).device(device));
     double sum = 0, count = 0;
-    for (int64_t b = 0; b < Xt.size(0); b += batch) {
+    for (int64_t b = 0; b < Xt.size(0) && !is_interrupt_requested(); b += batch) {
       auto idx = perm.slice(0, b, std::min(b + batch, Xt.size(0)));
       auto loss = torch::mse_loss(forward_all(Xt.index_select(0, idx)), Yt.index_select(0, idx));
       opt.zero_grad();
@@ -618,6 +643,10 @@ FitResult fit_mlp_torque_model(const std::vector<Recording>& recs, const FitOpti
       opt.step();
       sum += loss.item<double>();
       count += 1;
+    }
+    if (is_interrupt_requested()) {
+      interrupted = true;
+      break;
     }
     double val;
     {
@@ -630,6 +659,7 @@ FitResult fit_mlp_torque_model(const std::vector<Recording>& recs, const FitOpti
                                sum / count, val, stop.lr, seconds_since(t0));
     if (stop.should_stop(o) || seconds_since(t0) > 60.0 * o.max_minutes) break;
   }
+  if (interrupted) check_training_interrupt(stop.best_epoch, "mlp", o.verbose);
   restore_parameters(holder, best_params);
   holder.to(torch::kCPU);
   std::vector<DenseStack> stacks;
@@ -641,9 +671,10 @@ FitResult fit_mlp_torque_model(const std::vector<Recording>& recs, const FitOpti
     s.layers.push_back({to_eigen(l2->weight), to_eigen_vector(l2->bias), Activation::identity});
     stacks.push_back(std::move(s));
   }
-  summary.epochs = std::min(epoch, o.max_epochs);
+  summary.epochs = interrupted ? epoch - 1 : std::min(epoch, o.max_epochs);
   summary.best_epoch = stop.best_epoch;
   summary.best_validation_loss = stop.best;
+  summary.interrupted = interrupted;
   add_network_warnings(summary, kFewSamplesNetwork / 4);
   const TorqueModelInfo info = make_network_info(recs, N, M);
   auto model = std::make_unique<MlpTorqueModel>(info, stacks, data.norm);
@@ -804,7 +835,16 @@ void export_torchscript(const LstmTorqueModel& model, const std::filesystem::pat
 {2}        return y * self.output_scale + self.output_mean{5}
   )JIT",
                        params, L, head, features, signature, result));
-  m.save(path.string());
+  // LibTorch writes by name: to a temporary renamed once whole (rcm/io/atomic_file.hpp).
+  AtomicFile file(path);
+  try {
+    m.save(file.get_temp_path().string());
+  } catch (const c10::Error& e) {
+    InputLocation where;
+    where.file = path.string();
+    throw InputError(where, std::string("cannot be written: ") + e.what_without_backtrace());
+  }
+  file.commit();
 }
 
 std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path& path) {
