@@ -38,11 +38,6 @@ SOURCE_SUFFIXES = (".h", ".hh", ".hpp", ".hxx", ".c", ".cc", ".cpp", ".cxx", ".i
 # (file, included layer): why the include is allowed for now. Keep one line
 # per file and layer, and remove the entry when the include goes.
 ALLOWED = {
-    # PsmModel::load reads the rcm-robot/1 text with read_text_file(), which
-    # lives in io/json_file.hpp (file reading and atomic writes for every
-    # layer); its place is common/, a move that touches every user of it.
-    ("src/kinematics/psm_model.cpp", "io"):
-        "robot description read with read_text_file (io/json_file.hpp)",
     # The CLI reads ROS 1 bags through the rcm::ros library (ros/, needs
     # roscpp and rosbag), compiled in only with RCM_WITH_ROS; the reader has no
     # home in the library, which does not depend on ROS.

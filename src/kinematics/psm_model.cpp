@@ -4,7 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "rcm/common/error.hpp"
-#include "rcm/io/json_file.hpp"
+#include "rcm/common/text_file.hpp"
 
 namespace rcm {
 namespace detail {

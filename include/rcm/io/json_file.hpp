@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "rcm/common/text_file.hpp"  // read_text_file
 #include "rcm/io/atomic_file.hpp"
 
 namespace rcm {
@@ -15,8 +16,5 @@ nlohmann::json load_json_file(const std::filesystem::path& path);
 
 // Pretty-printed JSON (2-space indent, trailing newline), atomically.
 void save_json_file(const std::filesystem::path& path, const nlohmann::json& value);
-
-// Reads a whole text file; throws InputError when it cannot be opened.
-std::string read_text_file(const std::filesystem::path& path);
 
 }  // namespace rcm
