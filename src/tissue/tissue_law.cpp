@@ -215,7 +215,8 @@ TissueExpression tissue_expression_from_json(const nlohmann::json& value, const 
 }
 
 TissueLaw tissue_law_from_json(const nlohmann::json& value, const std::string& source) {
-  if (!value.is_object() || value.value("format", std::string()) != "rcm-tissue-law/1") {
+  const auto format = value.is_object() ? value.find("format") : value.end();
+  if (format == value.end() || !format->is_string() || format->get<std::string>() != "rcm-tissue-law/1") {
     throw InputError({source, 0, 0, "format"}, "expected \"format\": \"rcm-tissue-law/1\"");
   }
   if (!value.contains("x_range_m") || !value.at("x_range_m").is_array() ||
