@@ -16,6 +16,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   RCM_FUZZ_CHECK(model);
   const int N = model->num_joints(), M = model->num_outputs();
   RCM_FUZZ_CHECK(N >= 1 && M >= 1 && M <= N);
+  // The model has the sizes its file states, not a wrapped or rounded form of them.
+  auto doc = nlohmann::json::parse(data, data + size, nullptr, false);
+  RCM_FUZZ_CHECK(doc.is_object() && doc["num_joints"] == N && doc["num_outputs"] == M);
 
   // Four samples of a slow motion, enough for every model's filters and delay line.
   constexpr int T = 4;
