@@ -3,6 +3,6 @@
 #include "rosbag2_checks.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  rcm::fuzz::fuzz_rosbag2_path(rcm::fuzz::write_input("fuzz.db3", data, size));
+  rcm::fuzz::fuzz_rosbag2_path(rcm::fuzz::write_input("fuzz.db3", data, size), size % 2 == 1);
   return 0;
 }

@@ -31,6 +31,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::filesystem::path& dir = bag_dir();
   std::ofstream(dir / "metadata.yaml", std::ios::binary | std::ios::trunc)
       .write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));
-  rcm::fuzz::fuzz_rosbag2_path(dir);
+  rcm::fuzz::fuzz_rosbag2_path(dir, size % 2 == 1);
   return 0;
 }
