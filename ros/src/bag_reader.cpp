@@ -224,6 +224,9 @@ Recording load_bag_recording(const std::filesystem::path& path, const BagReadOpt
     throw InputError(locate(path, ""), std::string("not a readable rosbag: ") + e.what());
   } catch (const ros::Exception& e) {
     throw InputError(locate(path, ""), std::string("corrupt message data: ") + e.what());
+  } catch (const std::runtime_error& e) {
+    // ros::Time's "out of dual 32-bit range" for an index entry's time, and the like.
+    throw InputError(locate(path, ""), std::string("not a readable rosbag: ") + e.what());
   }
 }
 
