@@ -82,34 +82,41 @@ def run_target(build, name, seconds, scratch, extra):
     }
 
 
-def table(results, when, where):
-    rows = [f"Measured {when} on {where}; `-timeout=1 -rss_limit_mb=512 -detect_leaks=1`, one target at a time.",
-            "",
-            "| target | seconds | executions | exec/s | cov | ft | corpus (inputs, size) | peak RSS MB | result |",
-            "|---|---|---|---|---|---|---|---|---|"]
-    for r in results:
-        result = "clean" if r["rc"] == 0 else "FAILED: " + (", ".join(r["crashes"]) or f"exit {r['rc']}")
-        if r["rc"] == 0 and r["execs"] < 1_000_000:
-            result += f" (short of 10^6 executions)"
-        rows.append(f"| {r['name']} | {r['seconds']} | {r['execs']:,} | {r['exec_s']:,} | {r['cov']} | {r['ft']} | "
-                    f"{r['corpus']} | {r['rss']} | {result} |")
-    return "\n".join(rows) + "\n"
+HEADER = ("| target | run (UTC) | seconds | executions | exec/s | cov | ft | corpus (inputs, size) | peak RSS MB | result |\n"
+          "|---|---|---|---|---|---|---|---|---|---|")
 
 
-def write_doc(path, text, names):
+def row(r, when):
+    result = "clean" if r["rc"] == 0 else "FAILED: " + (", ".join(r["crashes"]) or f"exit {r['rc']}")
+    if r["rc"] == 0 and r["execs"] < 1_000_000:
+        result += " (short of 10^6 executions)"
+    return (f"| {r['name']} | {when} | {r['seconds']} | {r['execs']:,} | {r['exec_s']:,} | {r['cov']} | {r['ft']} | "
+            f"{r['corpus']} | {r['rss']} | {result} |")
+
+
+def table(rows, where):
+    order = list(MAX_LEN)
+    lines = sorted(rows.values(), key=lambda l: order.index(l.split("|")[1].strip())
+                   if l.split("|")[1].strip() in order else len(order))
+    return (f"Machine: {where}. Each target alone, with its dictionary, `-timeout=1 -rss_limit_mb=512 "
+            f"-malloc_limit_mb=512 -detect_leaks=1`; cov and ft are libFuzzer's final coverage and feature counts.\n\n"
+            + HEADER + "\n" + "\n".join(lines) + "\n")
+
+
+def write_doc(path, new_rows, where):
     doc = open(path).read()
     if BEGIN not in doc or END not in doc:
         sys.exit(f"{path}: no {BEGIN} ... {END} markers")
     head, rest = doc.split(BEGIN, 1)
     old, tail = rest.split(END, 1)
-    # Keep the rows of targets not run this time.
-    kept = [l for l in old.splitlines() if l.startswith("| ") and not l.startswith("| target")
-            and l.split("|")[1].strip() not in names]
-    if kept:
-        text += "\nEarlier runs of the other targets:\n\n| target | seconds | executions | exec/s | cov | ft | " \
-                "corpus (inputs, size) | peak RSS MB | result |\n|---|---|---|---|---|---|---|---|---|\n" + \
-                "\n".join(kept) + "\n"
-    open(path, "w").write(head + BEGIN + "\n" + text + END + tail)
+    # Rows of targets not run this time stay, with their own run time.
+    rows = {}
+    for l in old.splitlines():
+        cells = l.split("|")
+        if l.startswith("| ") and len(cells) == 12 and cells[1].strip() != "target":
+            rows[cells[1].strip()] = l
+    rows.update(new_rows)
+    open(path, "w").write(head + BEGIN + "\n" + table(rows, where) + END + tail)
 
 
 def main():
@@ -126,17 +133,17 @@ def main():
                                    if f.startswith("fuzz_") and f[len("fuzz_"):] in MAX_LEN)
     if not names:
         sys.exit("no fuzz targets in " + os.path.join(args.build, "bin"))
-    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M")
     results = []
     for name in names:
         r = run_target(args.build, name, args.seconds, args.scratch, args.libfuzzer)
         results.append(r)
         print(f"{name}: {r['execs']:,} executions, {r['exec_s']:,}/s, cov {r['cov']}, ft {r['ft']}, "
               f"exit {r['rc']}" + (f", crash inputs: {r['crashes']} (log {r['log']})" if r["rc"] else ""), flush=True)
-    text = table(results, when, machine())
-    print(text)
+    new_rows = {r["name"]: row(r, when) for r in results}
+    print(table(new_rows, machine()))
     if args.doc:
-        write_doc(args.doc, text, set(names))
+        write_doc(args.doc, new_rows, machine())
     return 1 if any(r["rc"] != 0 for r in results) else 0
 
 
