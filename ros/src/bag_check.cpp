@@ -57,6 +57,7 @@ class Checker {
       record_index_[r.pos] = records.size() - 1;
       if (records.size() == 1 && r.op != kBagHeader) fail(r.pos, "record", "the first record is not the bag header");
       if (r.op == kChunk) check_chunk(r);
+      if (r.op == kConnection) check_connection(r);
       if (r.op == kIndexData) check_index(r, records);
       if (r.op == kChunkInfo) check_chunk_info(r);
       pos = r.data_pos + r.data_len;
@@ -204,6 +205,15 @@ class Checker {
       p += 8 + header_len + data_len;
     }
     last_chunk_ = r.pos;
+  }
+
+  // rosbag parses a connection record's data as header fields too (the
+  // connection header: type, md5sum, message_definition).
+  void check_connection(const Record& r) {
+    header_.resize(r.data_len);
+    read(r.data_pos, header_.data(), r.data_len);
+    Fields f;
+    parse_fields(header_.data(), r.data_len, r.data_pos, f);
   }
 
   void check_index(const Record& r, const std::vector<Record>& records) {
