@@ -33,6 +33,8 @@ inline void check_accepted_recording(const Recording& rec) {
   RCM_FUZZ_CHECK(s.samples == rec.num_samples());
   RCM_FUZZ_CHECK(!(s.dt_min_s < 0.0));
 
+  // save_recording holds what it writes to validate_recording's 3 joints.
+  if (rec.num_joints() < 3) return;
   const auto path = scratch_dir() / "roundtrip.csv";
   save_recording(path, rec);
   RecordingReadOptions again;
