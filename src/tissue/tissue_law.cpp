@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -92,7 +93,8 @@ TissueInverseResult TissueLaw::compute_inverse(double y) const {
   double a = x_min_, b = x_max_;
   const double tol = 1e-14 * (std::fabs(x_min_) + std::fabs(x_max_) + (x_max_ - x_min_));
   // Start from the secant through the ends: exact for a linear law.
-  double x = y_hi > y_lo ? x_min_ + (x_max_ - x_min_) * (y - y_at_min_) / (y_at_max_ - y_at_min_)
+  // Clamped: x_min + (x_max - x_min) * 1 can round one ulp past x_max.
+  double x = y_hi > y_lo ? std::clamp(x_min_ + (x_max_ - x_min_) * (y - y_at_min_) / (y_at_max_ - y_at_min_), a, b)
                          : 0.5 * (a + b);
   for (int it = 1; it <= 200; ++it) {
     result.iterations = it;
