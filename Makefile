@@ -15,7 +15,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
-.PHONY: deps build test test-sanitize demo bench coverage soak clean
+.PHONY: deps build test test-sanitize demo bench coverage soak fuzz fuzz-deps clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -76,6 +76,31 @@ coverage: build
 SOAK_MESSAGES ?= 10000000
 soak: build
 	$(PYTHON) bench/soak_report.py --build $(BUILD) --messages $(SOAK_MESSAGES)
+
+# libFuzzer on every reader of outside data (docs/reliability.md, "Fuzzing"):
+# a clang build with ASan and UBSan in FUZZ_BUILD, then each target for
+# FUZZ_SECONDS on a scratch corpus seeded from fuzz/corpus (the repository's
+# corpus is never grown). FUZZ_TARGETS="mcap cdr" runs some; FUZZ_DOC=docs/reliability.md
+# writes the figures table there. Fails when any target finds a bug.
+FUZZ_BUILD ?= build-fuzz
+FUZZ_SECONDS ?= 60
+FUZZ_TARGETS ?=
+FUZZ_SCRATCH ?= /tmp/rcm-fuzz
+FUZZ_DOC ?=
+FUZZ_PACKAGES := clang-14 libclang-rt-14-dev
+
+fuzz-deps: deps
+	@$(MAKE) --no-print-directory deps DEB_PACKAGES="$(FUZZ_PACKAGES)"
+
+$(FUZZ_BUILD)/CMakeCache.txt:
+	cmake -S . -B $(FUZZ_BUILD) -DRCM_FUZZ=ON -DCMAKE_CXX_COMPILER=clang++-14 \
+	  -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g" -DRCM_BUILD_TESTS=OFF -DRCM_BUILD_BENCH=OFF \
+	  -DRCM_WITH_TORCH=OFF -DRCM_WITH_PYTHON=OFF -DRCM_WITH_DDS=OFF -DPython3_EXECUTABLE=$(PYTHON) $(CMAKE_FLAGS)
+
+fuzz: fuzz-deps $(FUZZ_BUILD)/CMakeCache.txt
+	cmake --build $(FUZZ_BUILD) -j $(JOBS) --target fuzz_all
+	$(PYTHON) fuzz/run_fuzz.py --build $(FUZZ_BUILD) --seconds $(FUZZ_SECONDS) --scratch $(FUZZ_SCRATCH) \
+	  $(if $(FUZZ_DOC),--doc $(FUZZ_DOC)) $(FUZZ_TARGETS)
 
 clean:
 	rm -rf $(BUILD)

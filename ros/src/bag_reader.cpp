@@ -5,9 +5,12 @@
 #include <rosbag/view.h>
 #include <sensor_msgs/JointState.h>
 
+#include <boost/make_shared.hpp>
+
 #include <map>
 #include <optional>
 
+#include "bag_check.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/message_recording.hpp"
 
@@ -77,11 +80,71 @@ std::int64_t get_time(TimeRule& rule, MessageTime time, const std::filesystem::p
 
 const char* time_label(bool bag_time) { return bag_time ? "bag time" : "header.stamp"; }
 
-}  // namespace
+// Walks a serialized message's variable-length fields; false when a length or
+// count runs past the message. ROS 1 deserialization resizes a vector to the
+// count it reads before it reads the elements (a corrupt count of 2^32 would
+// allocate tens of GB), so counts are checked here first.
+class SerializedWalk {
+ public:
+  SerializedWalk(const std::uint8_t* p, std::size_t n) : p_(p), n_(n) {}
+  bool skip(std::uint64_t k) {
+    if (!ok_ || k > n_ - pos_) return ok_ = false;
+    pos_ += k;
+    return true;
+  }
+  std::uint64_t count() {
+    if (!skip(4)) return 0;
+    return static_cast<std::uint64_t>(p_[pos_ - 4]) | static_cast<std::uint64_t>(p_[pos_ - 3]) << 8 |
+           static_cast<std::uint64_t>(p_[pos_ - 2]) << 16 | static_cast<std::uint64_t>(p_[pos_ - 1]) << 24;
+  }
+  bool header() { return skip(12) && skip(count()); }  // seq, stamp, frame_id
+  bool doubles() {
+    const std::uint64_t k = count();
+    return k <= (n_ - pos_) / 8 && skip(8 * k);
+  }
+  bool ok() const { return ok_; }
 
-Recording load_bag_recording(const std::filesystem::path& path, const BagReadOptions& options, BagReadInfo* info_out) {
+ private:
+  const std::uint8_t* p_;
+  std::size_t n_, pos_ = 0;
+  bool ok_ = true;
+};
+
+bool fits(const std::uint8_t* p, std::size_t n, const sensor_msgs::JointState*) {
+  SerializedWalk w(p, n);
+  if (!w.header()) return false;
+  const std::uint64_t names = w.count();
+  for (std::uint64_t i = 0; i < names && w.ok(); ++i) w.skip(w.count());
+  return w.ok() && w.doubles() && w.doubles() && w.doubles();
+}
+
+bool fits(const std::uint8_t* p, std::size_t n, const geometry_msgs::WrenchStamped*) {
+  SerializedWalk w(p, n);
+  return w.header() && w.skip(6 * 8);
+}
+
+// The message as type M when the bag says it is one (null otherwise), its
+// lengths checked against its bytes before it is deserialized.
+template <class M>
+boost::shared_ptr<M> read_message(const rosbag::MessageInstance& mi, std::vector<std::uint8_t>& buffer,
+                                  const std::filesystem::path& path, const std::string& topic, std::size_t k) {
+  if (!mi.isType<M>()) return nullptr;
+  buffer.resize(mi.size());
+  ros::serialization::OStream out(buffer.data(), static_cast<std::uint32_t>(buffer.size()));
+  mi.write(out);
+  if (!fits(buffer.data(), buffer.size(), static_cast<const M*>(nullptr)))
+    throw InputError(locate(path, describe_message_place(topic, k, std::nullopt, 0)),
+                     "a length or count in the " + std::to_string(buffer.size()) +
+                         "-byte serialized message runs past its end");
+  auto m = boost::make_shared<M>();
+  ros::serialization::IStream in(buffer.data(), static_cast<std::uint32_t>(buffer.size()));
+  ros::serialization::deserialize(in, *m);
+  return m;
+}
+
+Recording read_bag(const std::filesystem::path& path, const BagReadOptions& options, BagReadInfo* info_out) {
   BagReadInfo info;
-  if (!std::filesystem::exists(path)) throw InputError(locate(path, ""), "no such file");
+  std::vector<std::uint8_t> buffer;
   rosbag::Bag bag;
   try {
     bag.open(path.string(), rosbag::bagmode::Read);
@@ -98,13 +161,7 @@ Recording load_bag_recording(const std::filesystem::path& path, const BagReadOpt
   rosbag::View view(bag, rosbag::TopicQuery(topic));
   std::size_t k = 0;
   for (const rosbag::MessageInstance& mi : view) {
-    sensor_msgs::JointState::ConstPtr msg;
-    try {
-      msg = mi.instantiate<sensor_msgs::JointState>();
-    } catch (const std::exception& e) {
-      throw InputError(locate(path, describe_message_place(topic, k, std::nullopt, 0)),
-                       std::string("cannot be read as sensor_msgs/JointState: ") + e.what());
-    }
+    sensor_msgs::JointState::ConstPtr msg = read_message<sensor_msgs::JointState>(mi, buffer, path, topic, k);
     if (!msg)
       throw InputError(locate(path, describe_message_place(topic, k, std::nullopt, 0)),
                        "cannot be read as sensor_msgs/JointState");
@@ -127,7 +184,7 @@ Recording load_bag_recording(const std::filesystem::path& path, const BagReadOpt
     rosbag::View fview(bag, rosbag::TopicQuery(ftopic));
     std::size_t n = 0;
     for (const rosbag::MessageInstance& mi : fview) {
-      const auto msg = mi.instantiate<geometry_msgs::WrenchStamped>();
+      const auto msg = read_message<geometry_msgs::WrenchStamped>(mi, buffer, path, ftopic, n);
       if (!msg)
         throw InputError(locate(path, describe_message_place(ftopic, n, std::nullopt, 0)),
                          "cannot be read as geometry_msgs/WrenchStamped");
@@ -150,6 +207,27 @@ Recording load_bag_recording(const std::filesystem::path& path, const BagReadOpt
   }
   if (info_out) *info_out = std::move(info);
   return rec;
+}
+
+}  // namespace
+
+Recording load_bag_recording(const std::filesystem::path& path, const BagReadOptions& options, BagReadInfo* info_out) {
+  if (!std::filesystem::exists(path)) throw InputError(locate(path, ""), "no such file");
+  ros1::check_bag_structure(path);
+  // What rosbag_storage and roscpp throw for what the structure check cannot
+  // see (an unknown connection, a time beyond ros::Time) is bad input too.
+  try {
+    return read_bag(path, options, info_out);
+  } catch (const InputError&) {
+    throw;
+  } catch (const rosbag::BagException& e) {
+    throw InputError(locate(path, ""), std::string("not a readable rosbag: ") + e.what());
+  } catch (const ros::Exception& e) {
+    throw InputError(locate(path, ""), std::string("corrupt message data: ") + e.what());
+  } catch (const std::runtime_error& e) {
+    // ros::Time's "out of dual 32-bit range" for an index entry's time, and the like.
+    throw InputError(locate(path, ""), std::string("not a readable rosbag: ") + e.what());
+  }
 }
 
 void register_bag_recording_reader(const BagReadOptions& options) {

@@ -314,10 +314,14 @@ std::unique_ptr<TorqueModel> torque_model_from_json(const nlohmann::json& docume
   TorqueModelInfo info;
   const auto& nj = detail::require(document, "num_joints", source, "");
   const auto& no = detail::require(document, "num_outputs", source, "");
-  if (!nj.is_number_integer() || nj.get<int>() < 1 || nj.get<int>() > 64)
-    fail(source, "num_joints", "expected an integer in 1..64");
-  if (!no.is_number_integer() || no.get<int>() < 1 || no.get<int>() > nj.get<int>())
-    fail(source, "num_outputs", "expected an integer in 1..num_joints");
+  // Compared as 64-bit: get<int>() of 4294967297 would wrap to a valid-looking 1.
+  auto in_range = [](const nlohmann::json& v, std::int64_t lo, std::int64_t hi) {
+    if (v.is_number_unsigned()) return v.get<std::uint64_t>() >= static_cast<std::uint64_t>(lo) &&
+                                      v.get<std::uint64_t>() <= static_cast<std::uint64_t>(hi);
+    return v.is_number_integer() && v.get<std::int64_t>() >= lo && v.get<std::int64_t>() <= hi;
+  };
+  if (!in_range(nj, 1, 64)) fail(source, "num_joints", "expected an integer in 1..64");
+  if (!in_range(no, 1, nj.get<std::int64_t>())) fail(source, "num_outputs", "expected an integer in 1..num_joints");
   info.num_joints = nj.get<int>();
   info.num_outputs = no.get<int>();
   const auto& sp = detail::require(document, "sample_period_s", source, "");

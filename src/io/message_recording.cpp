@@ -21,6 +21,19 @@ std::string format_seconds(double s) {
 
 double seconds_between(std::int64_t t_ns, std::int64_t origin_ns) { return static_cast<double>(t_ns - origin_ns) * 1e-9; }
 
+// Message times are held to [0, 2^62) ns (1970 to 2116): every difference,
+// median period and end tolerance computed from them then fits in int64. A
+// stamp outside is a corrupt field (a negative ROS 2 sec, a garbage receive
+// time), not a recording of 292 years.
+constexpr std::int64_t kMaxTimeNs = std::int64_t{1} << 62;
+
+void check_time_range(const std::string& file, const std::string& topic, std::size_t index, std::int64_t t_ns,
+                      const std::string& time_label) {
+  if (t_ns >= 0 && t_ns < kMaxTimeNs) return;
+  throw InputError(locate(file, describe_message_place(topic, index, std::nullopt, 0) + ": " + time_label),
+                   std::to_string(t_ns) + " ns is not a time of a recording (expected 0 to 2^62 ns, 1970 to 2116)");
+}
+
 }  // namespace
 
 TopicReadOptions with_session_topics(TopicReadOptions options, const RecordingReadOptions& read, bool keep_topic,
@@ -42,6 +55,7 @@ ForceSamples::ForceSamples(std::string file, std::string topic, std::string time
     : file_(std::move(file)), topic_(std::move(topic)), time_label_(std::move(time_label)) {}
 
 void ForceSamples::add(std::size_t index, std::int64_t t_ns, const Eigen::Vector3d& f) {
+  check_time_range(file_, topic_, index, t_ns, time_label_);
   const std::int64_t origin = t_ns_.empty() ? t_ns : t_ns_.front();
   for (int a = 0; a < 3; ++a)
     if (!std::isfinite(f[a]))
@@ -69,6 +83,7 @@ JointStateRecordingBuilder::JointStateRecordingBuilder(std::string file, std::st
 }
 
 void JointStateRecordingBuilder::add(std::size_t index, std::int64_t t_ns, const JointStateView& m) {
+  check_time_range(file_, topic_, index, t_ns, time_label_);
   const std::int64_t origin = t_ns_.empty() ? t_ns : t_ns_.front();
   auto place = [&] { return describe_message_place(topic_, index, t_ns, origin); };
   if (map_.num_joints() == 0) {

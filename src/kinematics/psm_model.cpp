@@ -49,7 +49,8 @@ PsmModel PsmModel::from_json_text(const std::string& text, const std::string& so
   json doc;
   try {
     doc = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {
+    // parse_error, and out_of_range for a number beyond double (1e999).
     throw InputError(at(source, ""), std::string("not valid JSON: ") + e.what());
   }
   if (!doc.is_object()) throw InputError(at(source, ""), "expected a JSON object");

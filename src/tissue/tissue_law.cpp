@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -92,7 +93,8 @@ TissueInverseResult TissueLaw::compute_inverse(double y) const {
   double a = x_min_, b = x_max_;
   const double tol = 1e-14 * (std::fabs(x_min_) + std::fabs(x_max_) + (x_max_ - x_min_));
   // Start from the secant through the ends: exact for a linear law.
-  double x = y_hi > y_lo ? x_min_ + (x_max_ - x_min_) * (y - y_at_min_) / (y_at_max_ - y_at_min_)
+  // Clamped: x_min + (x_max - x_min) * 1 can round one ulp past x_max.
+  double x = y_hi > y_lo ? std::clamp(x_min_ + (x_max_ - x_min_) * (y - y_at_min_) / (y_at_max_ - y_at_min_), a, b)
                          : 0.5 * (a + b);
   for (int it = 1; it <= 200; ++it) {
     result.iterations = it;
@@ -215,7 +217,8 @@ TissueExpression tissue_expression_from_json(const nlohmann::json& value, const 
 }
 
 TissueLaw tissue_law_from_json(const nlohmann::json& value, const std::string& source) {
-  if (!value.is_object() || value.value("format", std::string()) != "rcm-tissue-law/1") {
+  const auto format = value.is_object() ? value.find("format") : value.end();
+  if (format == value.end() || !format->is_string() || format->get<std::string>() != "rcm-tissue-law/1") {
     throw InputError({source, 0, 0, "format"}, "expected \"format\": \"rcm-tissue-law/1\"");
   }
   if (!value.contains("x_range_m") || !value.at("x_range_m").is_array() ||

@@ -68,7 +68,8 @@ std::string describe_message_place(const std::string& topic, std::size_t index, 
 class ForceSamples {
  public:
   ForceSamples(std::string file, std::string topic, std::string time_label);
-  // Throws InputError for a non-finite component or a time that does not increase.
+  // Throws InputError for a non-finite component, a time outside [0, 2^62) ns
+  // or one that does not increase.
   void add(std::size_t index, std::int64_t t_ns, const Eigen::Vector3d& force);
   std::size_t size() const { return t_ns_.size(); }
   const std::string& topic() const { return topic_; }
@@ -86,8 +87,9 @@ class JointStateRecordingBuilder {
   JointStateRecordingBuilder(std::string file, std::string topic, const TopicReadOptions& options,
                              std::string time_label);
 
-  // Message `index` of the topic at `t_ns`. Throws InputError for a message the
-  // joint map rejects, or a first message with too few joints.
+  // Message `index` of the topic at `t_ns`. Throws InputError for a time outside
+  // [0, 2^62) ns (1970 to 2116), a message the joint map rejects, or a first
+  // message with too few joints.
   void add(std::size_t index, std::int64_t t_ns, const JointStateView& message);
 
   std::size_t size() const { return t_ns_.size(); }
