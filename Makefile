@@ -44,7 +44,8 @@ test: build
 # the benchmarks (timing programs, not tests); LibTorch and the other Debian
 # libraries are called from instrumented code but are not instrumented themselves.
 # -O2 -DNDEBUG, as the release build: out-of-bounds accesses that Eigen's
-# asserts would stop are ASan's reports here.
+# asserts would stop are ASan's reports here. The random-session property test
+# runs one session of two trials instrumented (twelve cases took over 15 minutes).
 SANITIZE_BUILD ?= build-sanitize
 SANITIZE_FLAGS := -O2 -g1 -DNDEBUG -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
 test-sanitize: deps
@@ -55,7 +56,7 @@ test-sanitize: deps
 	  -DRCM_BUILD_BENCH=OFF -DRCM_WITH_PYTHON=OFF -DPython3_EXECUTABLE=$(PYTHON) $(CMAKE_FLAGS)
 	cmake --build $(SANITIZE_BUILD) -j $(JOBS)
 	cd $(SANITIZE_BUILD) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
-	  ctest --output-on-failure -j $(JOBS)
+	  RCM_PROPERTY_SESSIONS=1 RCM_PROPERTY_TRIALS=2 ctest --output-on-failure -j $(JOBS)
 
 demo: build
 	$(BUILD)/bin/rcm demo --out demo-out
