@@ -110,7 +110,8 @@ TEST(AtomicFile, FullDiskKeepsTheEarlierFileAndNamesTheReason) {
 }
 
 TEST(AtomicFile, FullDiskWhileGnuplotDrawsLeavesNoFigure) {
-  if (!rcm::is_gnuplot_available()) GTEST_SKIP() << "gnuplot is not installed";
+  // gnuplot is a dependency (make deps installs gnuplot-nox): without it this is a broken install.
+  ASSERT_TRUE(rcm::is_gnuplot_available()) << "gnuplot is not installed";
   TempDir dir;
   rcm::PlotSpec spec;
   spec.title = "limit";
