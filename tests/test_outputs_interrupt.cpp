@@ -115,9 +115,9 @@ TEST_F(Outputs, InterruptedRunSavesTheFinishedTrials) {
   args.insert(args.end(), {"--export-problems", problems.string()});
   ChildProcess child(args, path("run_int.log"));
   ASSERT_TRUE(rcm::test::wait_for([&] { return !rcm::test::list_outputs(problems).empty() || !child.alive(); },
-                                  std::chrono::seconds(600)));
+                                  std::chrono::seconds(120)));
   child.send(SIGINT);
-  const int code = child.wait(std::chrono::seconds(300));
+  const int code = child.wait(std::chrono::seconds(60));
   const std::string log = child.log();
   EXPECT_EQ(code, 130) << log;
   EXPECT_NE(log.find("rcm: SIGINT: interrupted after"), std::string::npos) << log;
@@ -140,9 +140,9 @@ TEST_F(Outputs, InterruptedWhileDrawingKeepsResultsAndReport) {
   const auto out = path("run_draw_int");
   ChildProcess child(run_args(out, "three-step"), path("run_draw_int.log"));
   ASSERT_TRUE(rcm::test::wait_for([&] { return std::filesystem::exists(out / "figures") || !child.alive(); },
-                                  std::chrono::seconds(600)));
+                                  std::chrono::seconds(120)));
   child.send(SIGINT);
-  const int code = child.wait(std::chrono::seconds(300));
+  const int code = child.wait(std::chrono::seconds(60));
   const std::string log = child.log();
   EXPECT_EQ(code, 130) << log;
   EXPECT_NE(log.find("rcm: SIGINT: interrupted after every trial was estimated; saved results.json"), std::string::npos)
@@ -169,9 +169,9 @@ TEST_F(Outputs, InterruptedSimulateKeepsTheFinishedRecordings) {
         if (f.extension() == ".csv") csv.push_back(f);
       return csv;
     };
-    ASSERT_TRUE(rcm::test::wait_for([&] { return !recordings().empty() || !child.alive(); }, std::chrono::seconds(600)));
+    ASSERT_TRUE(rcm::test::wait_for([&] { return !recordings().empty() || !child.alive(); }, std::chrono::seconds(120)));
     child.send(signal_number);
-    const int code = child.wait(std::chrono::seconds(300));
+    const int code = child.wait(std::chrono::seconds(60));
     const std::string log = child.log();
     EXPECT_EQ(code, 128 + signal_number) << log;
     EXPECT_NE(log.find("rcm: " + std::string(signal_number == SIGINT ? "SIGINT" : "SIGTERM") +

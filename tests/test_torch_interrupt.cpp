@@ -30,10 +30,10 @@ TEST(TorchInterrupt, InterruptedFitSavesTheBestEpoch) {
                               dir.path() / "fit.log");
   // The second finished epoch is the moment: some training done, the rest not.
   ASSERT_TRUE(rcm::test::wait_for(
-      [&] { return fit.log().find("epoch   2") != std::string::npos || !fit.alive(); }, std::chrono::seconds(600)))
+      [&] { return fit.log().find("epoch   2") != std::string::npos || !fit.alive(); }, std::chrono::seconds(120)))
       << fit.log();
   fit.send(SIGINT);
-  const int code = fit.wait(std::chrono::seconds(300));
+  const int code = fit.wait(std::chrono::seconds(60));
   const std::string log = fit.log();
   EXPECT_EQ(code, 130) << log;
   EXPECT_NE(log.find("rcm: SIGINT: interrupted after "), std::string::npos) << log;

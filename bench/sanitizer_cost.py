@@ -1,0 +1,67 @@
+#!/usr/bin/python3
+"""What each sanitizer flag costs on the estimator's kind of arithmetic
+(bench/sanitizer/jet_kernel.cpp: ceres::Jet through small Eigen expressions),
+the reason for `make test-sanitize`'s flags; writes the table into
+docs/reliability.md between its markers.
+
+    /usr/bin/python3 bench/sanitizer_cost.py [--repeats 3]
+"""
+import argparse
+import datetime
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+
+from doc_tables import cpu_model, run, write_block
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DOC = os.path.join(ROOT, "docs", "reliability.md")
+BEGIN, END = "<!-- sanitizer-cost:begin -->", "<!-- sanitizer-cost:end -->"
+BASE = ["-O2", "-DNDEBUG", "-std=c++17", "-I/usr/include/eigen3"]
+VARIANTS = [
+    ("uninstrumented", []),
+    ("ASan + UBSan", ["-fsanitize=address,undefined", "-fno-sanitize-recover=all"]),
+    ("ASan + UBSan, no use-after-scope (make test-sanitize)",
+     ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-sanitize-address-use-after-scope"]),
+    ("ASan alone", ["-fsanitize=address"]),
+    ("ASan alone, no use-after-scope", ["-fsanitize=address", "-fno-sanitize-address-use-after-scope"]),
+    ("UBSan alone", ["-fsanitize=undefined", "-fno-sanitize-recover=all"]),
+]
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=3, help="runs per build; the median is reported")
+    ap.add_argument("--cxx", default="g++")
+    a = ap.parse_args()
+    src = os.path.join(ROOT, "bench", "sanitizer", "jet_kernel.cpp")
+    rows, results = [], set()
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, flags in VARIANTS:
+            exe = os.path.join(tmp, "kernel")
+            run([a.cxx] + BASE + flags + [src, "-o", exe])
+            times = []
+            for _ in range(a.repeats):
+                out = subprocess.run([exe], check=True, capture_output=True, text=True,
+                                     env=dict(os.environ, ASAN_OPTIONS="detect_leaks=0")).stdout.split()
+                times.append(float(out[0]))
+                results.add(out[1])
+            rows.append((name, sorted(times)[len(times) // 2]))
+    if len(results) != 1:
+        sys.exit(f"the builds disagree on the result: {sorted(results)}")
+    plain = rows[0][1]
+    compiler = subprocess.run([a.cxx, "--version"], capture_output=True, text=True).stdout.splitlines()[0]
+    lines = [f"Measured {datetime.date.today().isoformat()} on {cpu_model()} ({os.cpu_count()} cores, "
+             f"{platform.system()}), {compiler}, `-O2`; median of {a.repeats} runs of "
+             "`bench/sanitizer/jet_kernel.cpp` (`/usr/bin/python3 bench/sanitizer_cost.py`):", "",
+             "| build | seconds | x uninstrumented |", "|---|---|---|"]
+    for name, t in rows:
+        lines.append(f"| {name} | {t:.2f} | {t / plain:.1f} |")
+    write_block(DOC, BEGIN, END, "\n".join(lines))
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
