@@ -31,6 +31,19 @@ inline std::vector<bool> get_expected_onset(const nlohmann::json& monitor) {
   return monitor["onset_s"].is_null() ? std::vector<bool>{false} : std::vector<bool>{false, true};
 }
 
+// The advice topic: the hold before any sample, then each change rcm monitor saw.
+inline std::vector<std::string> get_expected_advice(const nlohmann::json& monitor) {
+  std::vector<std::string> advice = {"hold: no misalignment detected"};
+  for (const auto& c : monitor["correction"]["changes"]) advice.push_back(c["advice"].get<std::string>());
+  return advice;
+}
+
+// The correction topic's last vector: rcm monitor's final move, base frame.
+inline void expect_final_correction(const nlohmann::json& monitor, const double (&move_base)[3]) {
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(move_base[i], monitor["correction"]["move_base_m"][i].get<double>(), 1e-9) << "correction " << i;
+}
+
 // Every one of `samples` answered once on the three estimate topics, and the
 // `injected` bad messages counted on rejected_samples and in the exit summary.
 inline void expect_every_sample_answered(const std::string& log, std::size_t samples, std::size_t injected,

@@ -313,10 +313,15 @@ struct RecordingSink : rcm::MonitorSink {
   std::vector<std::int64_t> estimate_stamps;
   std::vector<std::pair<rcm::MonitorFlag, bool>> flags;
   std::vector<std::uint64_t> rejected;
-  std::vector<std::string> lines;
+  std::vector<std::string> lines, advice;
+  std::vector<std::int64_t> correction_stamps;
   void publish_estimate(std::int64_t stamp_ns, const rcm::OnlineOutput&) override { estimate_stamps.push_back(stamp_ns); }
   void publish_flag(rcm::MonitorFlag flag, bool value) override { flags.emplace_back(flag, value); }
   void publish_rejected(std::uint64_t total) override { rejected.push_back(total); }
+  void publish_correction(std::int64_t stamp_ns, const rcm::CorrectionOutput&) override {
+    correction_stamps.push_back(stamp_ns);
+  }
+  void publish_advice(const std::string& text) override { advice.push_back(text); }
   void log(rcm::LogLevel, const std::string& text, double) override { lines.push_back(text); }
 };
 
@@ -334,6 +339,7 @@ TEST(MonitorNodeCore, PublishesEveryNthEstimateFlagsOnChangeAndCountsRejections)
   ASSERT_EQ(sink.flags.size(), 3u);
   for (const auto& f : sink.flags) EXPECT_FALSE(f.second);
   EXPECT_EQ(sink.rejected, std::vector<std::uint64_t>{0});
+  EXPECT_EQ(sink.advice, std::vector<std::string>{"hold: no misalignment detected"});
   const std::vector<int> order = {0, 1, 2, 3};
   constexpr std::int64_t kBase = 1700000000000000000;
   for (int k = 0; k < 10; ++k) {
@@ -345,6 +351,7 @@ TEST(MonitorNodeCore, PublishesEveryNthEstimateFlagsOnChangeAndCountsRejections)
   ASSERT_EQ(sink.estimate_stamps.size(), 3u);
   EXPECT_EQ(sink.estimate_stamps[0], kBase + std::llround(make_sample(2).t * 1e9));
   EXPECT_EQ(sink.estimate_stamps[2], kBase + std::llround(make_sample(8).t * 1e9));
+  EXPECT_EQ(sink.correction_stamps, sink.estimate_stamps);  // the correction travels with the estimate
   EXPECT_EQ(sink.rejected.back(), 1u);
   const std::string summary = node.get_summary();
   EXPECT_NE(summary.find("10 samples accepted, 1 rejected (duplicate stamp 0, out of order 0, zero stamp 1,"),
@@ -357,6 +364,9 @@ TEST(MonitorNodeCore, PublishesEveryNthEstimateFlagsOnChangeAndCountsRejections)
   rcm::MonitorNodeParameters bad = p;
   bad.publish_every = 0;
   auto where = [](const std::string& name) { return rcm::InputLocation::plain("", name); };
+  EXPECT_THROW(bad.check(where), rcm::InputError);
+  bad = p;
+  bad.correction.compensate_limit_m = 0.001;  // below the tolerance
   EXPECT_THROW(bad.check(where), rcm::InputError);
   bad = p;
   bad.joint_names = {"a", "a"};
@@ -374,6 +384,8 @@ TEST(MonitorNodeCore, NoAllocationPerMessageAfterTheFirst) {
     void publish_estimate(std::int64_t, const rcm::OnlineOutput&) override { ++estimates; }
     void publish_flag(rcm::MonitorFlag, bool) override { ++flags; }
     void publish_rejected(std::uint64_t) override { ++rejected; }
+    void publish_correction(std::int64_t, const rcm::CorrectionOutput&) override {}
+    void publish_advice(const std::string&) override {}
     void log(rcm::LogLevel, const std::string&, double) override { ++lines; }
   } sink;
   rcm::MonitorNodeParameters p;

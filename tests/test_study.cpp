@@ -372,6 +372,23 @@ TEST(StudyCli, MonitorReplaysATrial) {
   EXPECT_TRUE(j["alarms"].is_array());
   EXPECT_GT(j["update_us"]["mean"].get<double>(), 0.0);
   EXPECT_TRUE(fs::exists(trace));
+  // The correction: the move to the incision is the estimate; a misalignment
+  // beyond the 10 mm software limit ends in re-docking advice, in words.
+  const auto& c = j["correction"];
+  const Eigen::Vector3d truth = trial.truth_misalignment_m.value();
+  ASSERT_GT(truth.norm(), 0.015) << "the last trial is the largest misalignment";
+  for (int i = 0; i < 3; ++i)
+    EXPECT_DOUBLE_EQ(c["move_inc_m"][i].get<double>(), j["final"]["misalignment_m"][i].get<double>());
+  EXPECT_NEAR(Eigen::Vector3d(c["move_base_m"][0], c["move_base_m"][1], c["move_base_m"][2]).norm(), truth.norm(), 0.002);
+  EXPECT_EQ(c["action"], "reposition") << c.dump();
+  EXPECT_NE(c["advice"].get<std::string>().find("re-dock, move the RCM"), std::string::npos) << c.dump();
+  ASSERT_FALSE(c["changes"].empty());
+  EXPECT_EQ(c["changes"].back()["action"], "reposition");
+  EXPECT_FALSE(j["alignment"]["aligned"].get<bool>());
+  EXPECT_NE(j["alignment"]["message"].get<std::string>().find("remain"), std::string::npos) << j["alignment"].dump();
+  const std::string trace_text = rcm::read_text_file(trace);
+  EXPECT_EQ(trace_text.substr(0, trace_text.find('\n')).substr(trace_text.find("action")),
+            "action,move_x,move_y,move_z,step_x,step_y,step_z");
   std::string err;
   EXPECT_EQ(run_cli("monitor --session " + bench().session.manifest.string() + " /nonexistent.csv --model linear", &err), 2);
   EXPECT_NE(err.find("/nonexistent.csv"), std::string::npos) << err;

@@ -13,6 +13,7 @@
 #include "command_registry.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/dynamics/torque_model.hpp"
+#include "rcm/estimation/correction.hpp"
 #include "rcm/estimation/online.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/session.hpp"
@@ -27,6 +28,7 @@ struct Options {
   double alarm_force_n = 10.0;
   double onset_threshold = rcm::OnlineEstimatorOptions{}.onset_threshold;
   double settle_band_m = 0.005;
+  rcm::CorrectionOptions correction;
   bool json = false, quiet = false;
 };
 
@@ -43,6 +45,11 @@ void run(const Options& o) {
   if (!(o.alarm_force_n > 0)) throw rcm::InputError(rcm::cli::flag_location("--alarm-force"), "must be > 0");
   if (!(o.settle_band_m > 0)) throw rcm::InputError(rcm::cli::flag_location("--settle-band"), "must be > 0");
   if (!(o.onset_threshold > 0)) throw rcm::InputError(rcm::cli::flag_location("--onset-threshold"), "must be > 0");
+  if (!(o.correction.tolerance_m > 0)) throw rcm::InputError(rcm::cli::flag_location("--tolerance"), "must be > 0");
+  if (!(o.correction.compensate_limit_m >= o.correction.tolerance_m))
+    throw rcm::InputError(rcm::cli::flag_location("--compensate-limit"), "must be >= --tolerance");
+  if (!(o.correction.max_rate_m_per_s > 0))
+    throw rcm::InputError(rcm::cli::flag_location("--max-shift-rate"), "must be > 0");
   const rcm::Session session = rcm::load_session(o.session);
   const rcm::StudyOptions options = rcm::cli::make_study_options(o.free_space);
   const rcm::Recording rec = rcm::load_recording(o.recording, options.read);
@@ -54,13 +61,20 @@ void run(const Options& o) {
   online.alarm_force_n = o.alarm_force_n;
   online.onset_threshold = o.onset_threshold;
   const rcm::OnlinePipeline pipeline(setup.free_space.model, rcm::OnlineEstimator(setup.incision, setup.tissue, online));
+  // A replay: the recorded RCM never moved, so no software shift is in effect;
+  // the correction says what the arm would be told at each sample.
+  const rcm::RcmCorrector corrector(setup.incision, o.correction);
+  rcm::RcmCorrector::Workspace correction_ws = corrector.create_workspace();
+  nlohmann::json correction_events = nlohmann::json::array();
   std::cerr << fmt::format("[rcm] tissue model ({}): k1 {:.1f} N/m, k3 {:.3g} N/m^3, c {:.2f} N s/m, F {:.2f} N\n",
                            setup.tissue.family, setup.tissue.parameters[0], setup.tissue.parameters[1],
                            setup.tissue.parameters[2], setup.tissue.parameters[3]);
 
   // Printing happens in the callback: events at once, the estimate at a cadence.
   double next_print = rec.time(0);
-  std::string csv = "time,dr_x,dr_y,D,sd_dr_x,sd_dr_y,sd_D,force_x,force_y,force_z,force_norm,cusum,onset,alarm,at_rest,hypothesis,out_of_regime,regime_flags\n";
+  std::string csv =
+      "time,dr_x,dr_y,D,sd_dr_x,sd_dr_y,sd_D,force_x,force_y,force_z,force_norm,cusum,onset,alarm,at_rest,hypothesis,"
+      "out_of_regime,regime_flags,action,move_x,move_y,move_z,step_x,step_y,step_z\n";
   bool onset_printed = false;
   double next_regime_print = rec.time(0);
   std::uint32_t regime_since_print = 0;
@@ -68,12 +82,19 @@ void run(const Options& o) {
     std::cout << fmt::format("{:>9} {:>8} {:>8} {:>8}   {:>6} {:>6} {:>6}  {:>7}  {}\n", "time (s)", "dr_x", "dr_y", "D",
                              "sd_x", "sd_y", "sd_D", "|f| (N)", "(mm)");
   auto on_sample = [&](const rcm::OnlineOutput& out) {
+    const rcm::CorrectionOutput& c = corrector.compute_correction(correction_ws, out);
     if (!o.out.empty())
-      csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", out.time, out.misalignment_m[0],
-                         out.misalignment_m[1], out.misalignment_m[2], out.sd_m[0], out.sd_m[1], out.sd_m[2],
-                         out.f_inc_base[0], out.f_inc_base[1], out.f_inc_base[2], out.force_norm_n, out.cusum,
-                         out.onset ? 1 : 0, out.alarm ? 1 : 0, out.at_rest ? 1 : 0, out.hypothesis,
-                         out.out_of_regime ? 1 : 0, out.regime_flags);
+      csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", out.time,
+                         out.misalignment_m[0], out.misalignment_m[1], out.misalignment_m[2], out.sd_m[0], out.sd_m[1],
+                         out.sd_m[2], out.f_inc_base[0], out.f_inc_base[1], out.f_inc_base[2], out.force_norm_n,
+                         out.cusum, out.onset ? 1 : 0, out.alarm ? 1 : 0, out.at_rest ? 1 : 0, out.hypothesis,
+                         out.out_of_regime ? 1 : 0, out.regime_flags, rcm::to_string(c.action), c.move_base[0],
+                         c.move_base[1], c.move_base[2], c.step_base[0], c.step_base[1], c.step_base[2]);
+    if (c.changed) {
+      const std::string advice = rcm::describe_correction(c, corrector);
+      correction_events.push_back({{"time_s", out.time}, {"action", rcm::to_string(c.action)}, {"advice", advice}});
+      if (!o.json) std::cout << fmt::format("{:9.3f}  ADVICE {}\n", out.time, advice);
+    }
     if (o.json) return;
     // Leaving the regime is an event, printed at most once per second of recording.
     regime_since_print |= out.regime_flags;
@@ -105,6 +126,9 @@ void run(const Options& o) {
   if (!o.out.empty()) rcm::write_file_atomic(o.out, csv);
 
   const rcm::OnlineOutput& final_out = replay.final_output;
+  const rcm::CorrectionOutput& final_correction = correction_ws.output;
+  const std::string final_advice = rcm::describe_correction(final_correction, corrector);
+  const rcm::AlignmentCheck alignment = rcm::check_alignment(final_out, setup.incision, o.correction);
   const auto truth = find_truth(session, o.recording);
   const double mean_us = 1e6 * replay.mean_update_s;
   const Eigen::Index T = rec.time.size();
@@ -140,6 +164,22 @@ void run(const Options& o) {
     j["alarms"] = events;
     j["update_us"] = {{"mean", mean_us}, {"max", 1e6 * replay.max_update_s}};
     j["regime"] = replay.regime.to_json();
+    j["correction"] = {{"action", rcm::to_string(final_correction.action)},
+                       {"reason", rcm::to_string(final_correction.reason)},
+                       {"move_base_m", rcm::cli::to_json(final_correction.move_base)},
+                       {"move_inc_m", rcm::cli::to_json(final_correction.move_inc)},
+                       {"distance_m", final_correction.distance_m},
+                       {"distance_low_m", final_correction.distance_low_m},
+                       {"distance_high_m", final_correction.distance_high_m},
+                       {"advice", final_advice},
+                       {"changes", correction_events},
+                       {"tolerance_m", o.correction.tolerance_m},
+                       {"compensate_limit_m", o.correction.compensate_limit_m},
+                       {"max_rate_m_per_s", o.correction.max_rate_m_per_s}};
+    j["alignment"] = {{"aligned", alignment.aligned},
+                      {"confident", alignment.confident},
+                      {"within_m", alignment.within_m},
+                      {"message", alignment.message}};
     j["trace"] = o.out.empty() ? nlohmann::json(nullptr) : nlohmann::json(o.out);
     rcm::cli::print_json(j);
     return;
@@ -157,6 +197,8 @@ void run(const Options& o) {
                              o.settle_band_m * 1e3, *replay.settled_after_s);
   std::cout << fmt::format("alarms     {} (threshold {:.1f} N), peak model force {:.1f} N\n", replay.alarms.size(),
                            o.alarm_force_n, replay.peak_force_n);
+  std::cout << fmt::format("advice     {}\n", final_advice);
+  std::cout << fmt::format("alignment  {}\n", alignment.message);
   std::cout << fmt::format("regime     {}\n", replay.regime.to_text());
   std::cout << fmt::format("update     {:.2f} us per sample on average (free-space model + estimator), max {:.1f} us\n",
                            mean_us, 1e6 * replay.max_update_s);
@@ -178,7 +220,13 @@ const bool registered = rcm::cli::register_command({"monitor", 65, [](CLI::App& 
   cmd->add_option("--alarm-force", o->alarm_force_n, "incision force that raises the alarm, N (default 10, paper V-E)");
   cmd->add_option("--onset-threshold", o->onset_threshold, "CUSUM threshold of the onset test (default 10)");
   cmd->add_option("--settle-band", o->settle_band_m, "band around the final estimate for the settling time, m (default 0.005)");
-  cmd->add_option("--out", o->out, "write the running estimate of every sample as CSV");
+  cmd->add_option("--tolerance", o->correction.tolerance_m,
+                  "correction: the RCM is aligned within this distance of the incision, m (default 0.002)");
+  cmd->add_option("--compensate-limit", o->correction.compensate_limit_m,
+                  "correction: software RCM shifts up to this, beyond it re-docking advice, m (default 0.010)");
+  cmd->add_option("--max-shift-rate", o->correction.max_rate_m_per_s,
+                  "correction: speed of the software RCM shift, m/s (default 0.005)");
+  cmd->add_option("--out", o->out, "write the running estimate and correction of every sample as CSV");
   cmd->add_flag("--dedupe", o->free_space.dedupe, "drop repeated rows");
   cmd->add_flag("--quiet", o->quiet, "print only events and the summary");
   cmd->add_flag("--json", o->json, "print one JSON object at the end");

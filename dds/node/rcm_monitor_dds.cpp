@@ -78,6 +78,9 @@ void read_params_file(const std::string& file, const std::string& node_name, rcm
       else if (name == "dedupe") p.dedupe = v.as<bool>();
       else if (name == "seed") p.seed = v.as<int>();
       else if (name == "status_period_s") p.status_period_s = v.as<double>();
+      else if (name == "tolerance_m") p.correction.tolerance_m = v.as<double>();
+      else if (name == "compensate_limit_m") p.correction.compensate_limit_m = v.as<double>();
+      else if (name == "max_shift_rate_m_per_s") p.correction.max_rate_m_per_s = v.as<double>();
       else throw rcm::InputError(where, "unknown parameter");
     } catch (const YAML::Exception& e) {
       throw rcm::InputError(where, "wrong type: " + e.msg);
@@ -116,9 +119,11 @@ dds_entity_t check(dds_entity_t e, const char* what) {
 // One output of the node: queued by the estimator's thread, written by the
 // publisher thread. Plain data, so that queueing it costs no allocation.
 struct Output {
-  enum class Kind { estimate, flag, rejected } kind = Kind::estimate;
+  enum class Kind { estimate, flag, rejected, advice } kind = Kind::estimate;
   std::int64_t stamp_ns = 0;
-  double misalignment[3] = {0, 0, 0}, sd[3] = {0, 0, 0}, force[3] = {0, 0, 0};
+  double misalignment[3] = {0, 0, 0}, sd[3] = {0, 0, 0}, force[3] = {0, 0, 0}, correction[3] = {0, 0, 0};
+  // The advice travels by value: the queue holds no pointer into the estimator's thread.
+  char advice[320] = {};
   rcm::MonitorFlag flag = rcm::MonitorFlag::onset;
   bool value = false;
   std::uint64_t total = 0;
@@ -204,6 +209,8 @@ class DdsSink : public rcm::MonitorSink {
     alarm_ = writer(&std_msgs_msg_dds__Bool__desc, prefix + "alarm", latched);
     out_of_regime_ = writer(&std_msgs_msg_dds__Bool__desc, prefix + "out_of_regime", latched);
     rejected_ = writer(&std_msgs_msg_dds__UInt64__desc, prefix + "rejected_samples", latched);
+    correction_ = writer(&geometry_msgs_msg_dds__Vector3Stamped__desc, prefix + "correction", stream);
+    advice_ = writer(&std_msgs_msg_dds__String__desc, prefix + "advice", latched);
     dds_delete_qos(stream);
     dds_delete_qos(latched);
     std::memset(&vector_msg_, 0, sizeof vector_msg_);
@@ -222,7 +229,7 @@ class DdsSink : public rcm::MonitorSink {
   std::string get_summary() const {
     char buf[256];
     std::snprintf(buf, sizeof buf,
-                  "rcm: publishing (own thread): %.2f us mean, %.1f us max per estimate (3 writes); queue depth max "
+                  "rcm: publishing (own thread): %.2f us mean, %.1f us max per estimate (4 writes); queue depth max "
                   "%zu of %zu, %llu outputs dropped\n",
                   writes_.count ? 1e6 * writes_.sum_s / static_cast<double>(writes_.count) : 0.0, 1e6 * writes_.max_s,
                   queue_.get_max_depth(), queue_.capacity(), static_cast<unsigned long long>(queue_.get_dropped()));
@@ -237,7 +244,19 @@ class DdsSink : public rcm::MonitorSink {
       o.misalignment[i] = out.misalignment_m[i];
       o.sd[i] = out.sd_m[i];
       o.force[i] = out.f_inc_base[i];
+      o.correction[i] = pending_correction_[i];
     }
+    queue_.push(o);
+  }
+  // The node core calls publish_correction just before publish_estimate, with
+  // the same stamp, on the estimator's thread: one queued output carries both.
+  void publish_correction(std::int64_t, const rcm::CorrectionOutput& c) override {
+    for (int i = 0; i < 3; ++i) pending_correction_[i] = c.move_base[i];
+  }
+  void publish_advice(const std::string& text) override {
+    Output o;
+    o.kind = Output::Kind::advice;
+    std::snprintf(o.advice, sizeof o.advice, "%s", text.c_str());
     queue_.push(o);
   }
   void publish_flag(rcm::MonitorFlag flag, bool value) override {
@@ -301,6 +320,9 @@ class DdsSink : public rcm::MonitorSink {
           set_stamp(wrench_msg_.header, o.stamp_ns);
           wrench_msg_.wrench.force = {o.force[0], o.force[1], o.force[2]};
           write(force_, &wrench_msg_);
+          vector_msg_.header.frame_id = const_cast<char*>(base_.c_str());
+          vector_msg_.vector = {o.correction[0], o.correction[1], o.correction[2]};
+          write(correction_, &vector_msg_);
           const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
           ++writes_.count;
           writes_.sum_s += s;
@@ -309,6 +331,9 @@ class DdsSink : public rcm::MonitorSink {
           std_msgs_msg_dds__Bool_ m{o.value};
           write(o.flag == rcm::MonitorFlag::onset ? onset_ : o.flag == rcm::MonitorFlag::alarm ? alarm_ : out_of_regime_,
                 &m);
+        } else if (o.kind == Output::Kind::advice) {
+          std_msgs_msg_dds__String_ m{const_cast<char*>(o.advice)};
+          write(advice_, &m);
         } else {
           std_msgs_msg_dds__UInt64_ m{o.total};
           write(rejected_, &m);
@@ -318,7 +343,9 @@ class DdsSink : public rcm::MonitorSink {
   }
 
   std::string incision_, base_;
-  dds_entity_t misalignment_ = 0, sd_ = 0, force_ = 0, onset_ = 0, alarm_ = 0, out_of_regime_ = 0, rejected_ = 0;
+  dds_entity_t misalignment_ = 0, sd_ = 0, force_ = 0, onset_ = 0, alarm_ = 0, out_of_regime_ = 0, rejected_ = 0,
+               correction_ = 0, advice_ = 0;
+  double pending_correction_[3] = {0, 0, 0};  // the estimator's thread only
   geometry_msgs_msg_dds__Vector3Stamped_ vector_msg_;
   geometry_msgs_msg_dds__WrenchStamped_ wrench_msg_;
   std::map<double, std::chrono::steady_clock::time_point> last_logged_;
@@ -369,6 +396,14 @@ int run(int argc, char** argv) {
   app.add_flag("--dedupe", p.dedupe, "drop repeated samples in the session's recordings");
   app.add_option("--seed", p.seed, "seed of the joint method's setup")->capture_default_str();
   app.add_option("--status-period-s", p.status_period_s, "seconds between status lines (0: none)")->capture_default_str();
+  app.add_option("--tolerance-m", p.correction.tolerance_m, "correction: aligned within this distance (m)")
+      ->capture_default_str();
+  app.add_option("--compensate-limit-m", p.correction.compensate_limit_m,
+                 "correction: software RCM shifts up to this, beyond it re-docking advice (m)")
+      ->capture_default_str();
+  app.add_option("--max-shift-rate-m-per-s", p.correction.max_rate_m_per_s,
+                 "correction: speed of the software RCM shift (m/s)")
+      ->capture_default_str();
   app.add_option("--domain", domain, "DDS domain (default: ROS_DOMAIN_ID, else 0)");
   app.add_flag("--best-effort", best_effort,
                "subscribe best-effort (matches best-effort publishers; the dVRK's are reliable)");

@@ -181,8 +181,11 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
   const dds_entity_t alarm_reader = reader(&std_msgs_msg_dds__Bool__desc, "rt/PSM1/rcm/alarm", true);
   const dds_entity_t regime_reader = reader(&std_msgs_msg_dds__Bool__desc, "rt/PSM1/rcm/out_of_regime", true);
   const dds_entity_t rejected_reader = reader(&std_msgs_msg_dds__UInt64__desc, "rt/PSM1/rcm/rejected_samples", true);
+  const dds_entity_t correction_reader =
+      reader(&geometry_msgs_msg_dds__Vector3Stamped__desc, "rt/PSM1/rcm/correction", false);
+  const dds_entity_t advice_reader = reader(&std_msgs_msg_dds__String__desc, "rt/PSM1/rcm/advice", true);
   for (dds_entity_t r : {estimate_reader, sd_reader, force_reader, onset_reader, alarm_reader, regime_reader,
-                         rejected_reader})
+                         rejected_reader, correction_reader, advice_reader})
     ASSERT_GT(r, 0) << dds_strretcode(r);
 
   // The dVRK's publisher QoS.
@@ -200,8 +203,10 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
   ASSERT_TRUE(node.started());
 
   // What the node publishes, taken as it comes.
-  std::size_t estimates = 0, sds = 0, forces = 0;
-  geometry_msgs_msg_dds__Vector3Stamped_ last_estimate{}, last_sd{};
+  std::size_t estimates = 0, sds = 0, forces = 0, corrections = 0;
+  geometry_msgs_msg_dds__Vector3Stamped_ last_estimate{}, last_sd{}, last_correction{};
+  std::string correction_frame;
+  std::vector<std::string> advice;
   geometry_msgs_msg_dds__WrenchStamped_ last_force{};
   std::string estimate_frame, force_frame;
   std::vector<bool> onset, alarm, regime;
@@ -234,6 +239,12 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
       force_frame = last_force.header.frame_id;
       ++forces;
     });
+    take(correction_reader, [&](const void* s) {
+      last_correction = *static_cast<const geometry_msgs_msg_dds__Vector3Stamped_*>(s);
+      correction_frame = last_correction.header.frame_id;
+      ++corrections;
+    });
+    take(advice_reader, [&](const void* s) { advice.emplace_back(static_cast<const std_msgs_msg_dds__String_*>(s)->data); });
     take(onset_reader, [&](const void* s) { onset.push_back(static_cast<const std_msgs_msg_dds__Bool_*>(s)->data); });
     take(alarm_reader, [&](const void* s) { alarm.push_back(static_cast<const std_msgs_msg_dds__Bool_*>(s)->data); });
     take(regime_reader, [&](const void* s) { regime.push_back(static_cast<const std_msgs_msg_dds__Bool_*>(s)->data); });
@@ -256,7 +267,8 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
                                  pm.current_count > 0 &&
                                  node.log().find("1 publisher(s) matched on rt/PSM1/measured_js") != std::string::npos &&
                                  matched(estimate_reader) && matched(sd_reader) &&
-                                 matched(force_reader) && !onset.empty() && !alarm.empty() && !regime.empty() &&
+                                 matched(force_reader) && matched(correction_reader) && !advice.empty() &&
+                                 !onset.empty() && !alarm.empty() && !regime.empty() &&
                                  rejected_messages > 0);
       },
       60s);
@@ -317,6 +329,11 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
       << node_log;
   EXPECT_EQ(estimate_frame, "PSM1_incision");
   EXPECT_EQ(force_frame, "PSM1_base");
+  EXPECT_EQ(correction_frame, "PSM1_base");
+  EXPECT_EQ(corrections, estimates);
+  rcm::test::expect_final_correction(expected,
+                                     {last_correction.vector.x, last_correction.vector.y, last_correction.vector.z});
+  EXPECT_EQ(advice, rcm::test::get_expected_advice(expected));
 
   const auto& fin = expected["final"];
   const double estimate[3] = {last_estimate.vector.x, last_estimate.vector.y, last_estimate.vector.z};

@@ -7,6 +7,7 @@
 
 #include "common.hpp"
 #include "rcm/dynamics/linear_model.hpp"
+#include "rcm/estimation/correction.hpp"
 #include "rcm/estimation/joint.hpp"
 #include "rcm/estimation/online.hpp"
 #include "rcm/estimation/study.hpp"
@@ -300,7 +301,11 @@ void bind_estimation(py::module_& m) {
       // Copies: the estimator is immutable (its constructor derived state from these).
       .def_property_readonly("incision", [](const OnlineEstimator& e) { return e.incision(); })
       .def_property_readonly("tissue", [](const OnlineEstimator& e) { return e.tissue(); })
-      .def_property_readonly("options", [](const OnlineEstimator& e) { return e.options(); });
+      .def_property_readonly("options", [](const OnlineEstimator& e) { return e.options(); })
+      .def("apply_rcm_shift", [](const OnlineEstimator& e, OnlineEstimator::Workspace& ws, py::handle shift) {
+        e.apply_rcm_shift(ws, to_vector3(shift, argument_location("OnlineEstimator.apply_rcm_shift", "shift_base")));
+      }, py::arg("workspace"), py::arg("shift_base"),
+           "The RCM moved by shift_base (base frame, m): the offsets, relative to the RCM, move with it");
 
   py::class_<PipelineWorkspace>(m, "OnlinePipelineWorkspace", "Free-space model state + estimator state of one stream");
   py::class_<OnlinePipeline, std::shared_ptr<OnlinePipeline>>(
@@ -335,7 +340,109 @@ void bind_estimation(py::module_& m) {
         // Aliasing pointer: it keeps the pipeline, and with it the model, alive.
         return std::shared_ptr<TorqueModel>(self, const_cast<TorqueModel*>(&self->model()));
       }, "the free-space model")
-      .def_property_readonly("estimator", &OnlinePipeline::estimator);
+      .def_property_readonly("estimator", &OnlinePipeline::estimator)
+      .def("apply_rcm_shift", [](const OnlinePipeline& self, PipelineWorkspace& ws, py::handle shift) {
+        const std::string fn = "OnlinePipeline.apply_rcm_shift";
+        if (ws.owner.get() != &self) throw InputError(argument_location(fn, "workspace"), "was created by another pipeline");
+        self.apply_rcm_shift(ws.workspace, to_vector3(shift, argument_location(fn, "shift_base")));
+      }, py::arg("workspace"), py::arg("shift_base"), "See OnlineEstimator.apply_rcm_shift");
+
+  // ---- from estimate to action ----
+  py::enum_<CorrectionAction>(m, "CorrectionAction")
+      .value("hold", CorrectionAction::hold)
+      .value("compensate", CorrectionAction::compensate)
+      .value("reposition", CorrectionAction::reposition);
+  py::enum_<HoldReason>(m, "HoldReason")
+      .value("none", HoldReason::none)
+      .value("no_onset", HoldReason::no_onset)
+      .value("not_confident", HoldReason::not_confident)
+      .value("within_tolerance", HoldReason::within_tolerance);
+  py::class_<CorrectionOptions>(m, "CorrectionOptions", "Gates and limits of the RCM correction (m, m/s)")
+      .def(py::init<>())
+      .def_readwrite("tolerance_m", &CorrectionOptions::tolerance_m, "within this, hold (default 0.002)")
+      .def_readwrite("compensate_limit_m", &CorrectionOptions::compensate_limit_m,
+                     "software shifts up to this in all, beyond: re-docking (default 0.010)")
+      .def_readwrite("max_rate_m_per_s", &CorrectionOptions::max_rate_m_per_s, "speed of the software shift (default 0.005)")
+      .def_readwrite("confidence_z", &CorrectionOptions::confidence_z, "1.96: the 95 % interval")
+      .def_readwrite("release_fraction", &CorrectionOptions::release_fraction, "back to hold below this x tolerance")
+      .def_readwrite("max_step_dt_s", &CorrectionOptions::max_step_dt_s, "a step after a gap covers at most this long");
+  py::class_<CorrectionOutput>(m, "CorrectionOutput", "The action after a sample (estimation/correction.hpp)")
+      .def_readonly("time", &CorrectionOutput::time)
+      .def_readonly("action", &CorrectionOutput::action)
+      .def_readonly("reason", &CorrectionOutput::reason, "why it holds (none when it acts)")
+      .def_readonly("changed", &CorrectionOutput::changed)
+      .def_readonly("move_inc", &CorrectionOutput::move_inc, "RCM move onto the incision, incision frame, m")
+      .def_readonly("move_base", &CorrectionOutput::move_base, "the same, base frame, m")
+      .def_readonly("move_low_inc", &CorrectionOutput::move_low_inc)
+      .def_readonly("move_high_inc", &CorrectionOutput::move_high_inc)
+      .def_readonly("distance_m", &CorrectionOutput::distance_m)
+      .def_readonly("distance_low_m", &CorrectionOutput::distance_low_m)
+      .def_readonly("distance_high_m", &CorrectionOutput::distance_high_m)
+      .def_readonly("step_base", &CorrectionOutput::step_base, "software RCM shift commanded now, base frame, m")
+      .def_readonly("applied_base", &CorrectionOutput::applied_base, "the shift in effect once the step is made")
+      .def("__repr__", [](const CorrectionOutput& c) {
+        return std::string("<rcm.CorrectionOutput t=") + std::to_string(c.time) + " " + to_string(c.action) +
+               (c.action == CorrectionAction::hold ? std::string(" (") + to_string(c.reason) + ")" : std::string()) +
+               " " + std::to_string(c.distance_m * 1e3) + " mm>";
+      });
+  py::class_<RcmCorrector::Workspace>(m, "RcmCorrectorWorkspace")
+      .def_property_readonly("output", [](const RcmCorrector::Workspace& w) { return w.output; });
+  py::class_<RcmCorrector>(m, "RcmCorrector", "hold / compensate / reposition from the running estimate (immutable)")
+      .def(py::init<const IncisionFrame&, const CorrectionOptions&>(), py::arg("incision"),
+           py::arg("options") = CorrectionOptions{})
+      .def("create_workspace", &RcmCorrector::create_workspace)
+      .def("reset", &RcmCorrector::reset, py::arg("workspace"))
+      .def("compute_correction", [](const RcmCorrector& c, RcmCorrector::Workspace& ws, const OnlineOutput& estimate,
+                                    py::handle applied) {
+        const Eigen::Vector3d a = applied.is_none() ? Eigen::Vector3d::Zero()
+                                                    : to_vector3(applied, argument_location("RcmCorrector.compute_correction", "applied_base"));
+        return c.compute_correction(ws, estimate, a);  // copied
+      }, py::arg("workspace"), py::arg("estimate"), py::arg("applied_base") = py::none(),
+           "The action after one OnlineOutput, given the software shift in effect (base frame, m; None: none)")
+      .def("describe", [](const RcmCorrector& c, const CorrectionOutput& out) { return describe_correction(out, c); },
+           py::arg("correction"), "the advice in words")
+      .def_property_readonly("incision", [](const RcmCorrector& c) { return c.incision(); })
+      .def_property_readonly("options", [](const RcmCorrector& c) { return c.options(); });
+  m.def("describe_rcm_move", [](py::handle move, const IncisionFrame& incision) {
+    return describe_rcm_move(to_vector3(move, argument_location("rcm.describe_rcm_move", "move_inc")), incision);
+  }, py::arg("move_inc"), py::arg("incision"), "'23 mm deeper along the instrument, 8.0 mm toward +x_base'");
+  py::class_<AlignmentCheck>(m, "AlignmentCheck")
+      .def_readonly("aligned", &AlignmentCheck::aligned)
+      .def_readonly("confident", &AlignmentCheck::confident)
+      .def_readonly("within_m", &AlignmentCheck::within_m, "95 % upper bound of the distance, m")
+      .def_readonly("message", &AlignmentCheck::message);
+  m.def("check_alignment", &check_alignment, py::arg("estimate"), py::arg("incision"),
+        py::arg("options") = CorrectionOptions{}, "After re-docking: is the RCM on the incision?");
+
+  // One call per sample for anyone's simulator or robot script: the estimate and the correction.
+  struct PyCorrectionLoop {
+    std::shared_ptr<const CorrectionLoop> loop;
+    CorrectionLoop::Workspace ws;
+  };
+  py::class_<PyCorrectionLoop>(
+      m, "CorrectionLoop",
+      "Pipeline + corrector, one call per sample: step(time, q, qd, effort, applied_base) -> (OnlineOutput,\n"
+      "CorrectionOutput). applied_base is the software shift of the RCM in effect (base frame, m); a change\n"
+      "is passed to the estimator before the sample. Carry out correction.step_base and pass the new shift next time.")
+      .def(py::init([](const OnlinePipeline& pipeline, const RcmCorrector& corrector) {
+             auto loop = std::make_shared<const CorrectionLoop>(pipeline, corrector);
+             return PyCorrectionLoop{loop, loop->create_workspace()};
+           }),
+           py::arg("pipeline"), py::arg("corrector"))
+      .def("reset", [](PyCorrectionLoop& self) { self.loop->reset(self.ws); })
+      .def("step", [](PyCorrectionLoop& self, double time, py::handle q, py::handle qd, py::handle effort,
+                      py::handle applied) {
+        const std::string fn = "CorrectionLoop.step";
+        to_finite(time, argument_location(fn, "time"));
+        const int n = std::max(3, self.loop->pipeline().model().num_joints());
+        const Eigen::VectorXd qv = joint_values(q, fn, "q", n), qdv = joint_values(qd, fn, "qd", n),
+                              ev = joint_values(effort, fn, "effort", n);
+        const Eigen::Vector3d a = applied.is_none() ? Eigen::Vector3d::Zero()
+                                                    : to_vector3(applied, argument_location(fn, "applied_base"));
+        const CorrectionOutput c = self.loop->compute_sample(self.ws, time, qv.data(), qdv.data(), ev.data(), a);
+        return py::make_tuple(get_online_output(self.ws.pipeline.estimator), c);
+      }, py::arg("time"), py::arg("q"), py::arg("qd"), py::arg("effort"), py::arg("applied_base") = py::none())
+      .def_property_readonly("corrector", [](const PyCorrectionLoop& self) { return self.loop->corrector(); });
 
   py::class_<OnlineAlarm>(m, "OnlineAlarm")
       .def_readonly("raised_s", &OnlineAlarm::raised_s)

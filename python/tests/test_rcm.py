@@ -628,6 +628,32 @@ class TestOnline(unittest.TestCase):
         with self.assertRaises(rcm.InputError):
             pipeline.compute_sample(ws, 0.0, rec.position[0, :2], rec.velocity[0], rec.effort[0])
 
+    def test_correction_loop_matches_cli_monitor(self):
+        cli = run_cli("monitor", "--session", _state["manifest"], "--model-file", _state["model_path"],
+                      session_file("D30_r10_15.csv"), "--json")
+        corrector = rcm.RcmCorrector(self.setup.incision, rcm.CorrectionOptions())
+        loop = rcm.CorrectionLoop(self.make_pipeline(), corrector)
+        rec = self.trial
+        changes = []
+        for t in range(rec.num_samples):
+            # A replay: the recorded RCM never moved, so no shift is in effect.
+            estimate, correction = loop.step(rec.time[t], rec.position[t], rec.velocity[t], rec.effort[t])
+            if correction.changed:
+                changes.append((correction.time, str(correction.action).split(".")[-1], corrector.describe(correction)))
+        np.testing.assert_allclose(estimate.misalignment_m, cli["final"]["misalignment_m"], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(correction.move_base, cli["correction"]["move_base_m"], rtol=1e-9, atol=1e-12)
+        self.assertEqual(str(correction.action).split(".")[-1], cli["correction"]["action"])
+        self.assertEqual([c[1] for c in changes], [c["action"] for c in cli["correction"]["changes"]])
+        self.assertEqual([c[2] for c in changes], [c["advice"] for c in cli["correction"]["changes"]])
+        # 30 mm deep and 18 mm across: beyond the software limit, a re-docking in words.
+        self.assertEqual(correction.action, rcm.CorrectionAction.reposition)
+        self.assertIn("deeper along the instrument", corrector.describe(correction))
+        check = rcm.check_alignment(estimate, self.setup.incision)
+        self.assertFalse(check.aligned)
+        self.assertEqual(check.message, cli["alignment"]["message"])
+        with self.assertRaises(rcm.InputError):
+            loop.step(0.0, rec.position[0], rec.velocity[0], rec.effort[0], [float("nan"), 0.0, 0.0])
+
     def test_joint_estimate_of_a_trial(self):
         setup = self.setup
         spec = self.session.trials[1]

@@ -18,6 +18,7 @@
 #include <ros/ros.h>
 #include <sensor_msgs/JointState.h>
 #include <std_msgs/Bool.h>
+#include <std_msgs/String.h>
 #include <std_msgs/UInt64.h>
 
 #include <cstdio>
@@ -68,6 +69,9 @@ rcm::MonitorNodeParameters read_parameters(const ros::NodeHandle& pnh) {
   pnh.param("dedupe", p.dedupe, p.dedupe);
   pnh.param("seed", p.seed, p.seed);
   pnh.param("status_period_s", p.status_period_s, p.status_period_s);
+  pnh.param("tolerance_m", p.correction.tolerance_m, p.correction.tolerance_m);
+  pnh.param("compensate_limit_m", p.correction.compensate_limit_m, p.correction.compensate_limit_m);
+  pnh.param("max_shift_rate_m_per_s", p.correction.max_rate_m_per_s, p.correction.max_rate_m_per_s);
   p.check(param_location);
   return p;
 }
@@ -85,6 +89,9 @@ class RosSink : public rcm::MonitorSink {
     alarm_pub_ = nh.advertise<std_msgs::Bool>(prefix + "alarm", 10, true);
     rejected_pub_ = nh.advertise<std_msgs::UInt64>(prefix + "rejected_samples", 10, true);
     out_of_regime_pub_ = nh.advertise<std_msgs::Bool>(prefix + "out_of_regime", 10, true);
+    correction_pub_ = nh.advertise<geometry_msgs::Vector3Stamped>(prefix + "correction", queue);
+    advice_pub_ = nh.advertise<std_msgs::String>(prefix + "advice", 10, true);
+    correction_msg_.header.frame_id = p.get_base_frame();
     misalignment_msg_.header.frame_id = p.get_incision_frame();
     sd_msg_.header.frame_id = p.get_incision_frame();
     force_msg_.header.frame_id = p.get_base_frame();
@@ -119,6 +126,17 @@ class RosSink : public rcm::MonitorSink {
     rejected_msg_.data = total;
     rejected_pub_.publish(rejected_msg_);
   }
+  void publish_correction(std::int64_t stamp_ns, const rcm::CorrectionOutput& c) override {
+    correction_msg_.header.stamp = ros::Time().fromNSec(static_cast<std::uint64_t>(stamp_ns));
+    correction_msg_.vector.x = c.move_base[0];
+    correction_msg_.vector.y = c.move_base[1];
+    correction_msg_.vector.z = c.move_base[2];
+    correction_pub_.publish(correction_msg_);
+  }
+  void publish_advice(const std::string& text) override {
+    advice_msg_.data = text;
+    advice_pub_.publish(advice_msg_);
+  }
   void log(rcm::LogLevel level, const std::string& text, double throttle_s = 0.0) override {
     if (throttle_s > 0) {  // the core throttles one kind of line per period
       const ros::WallTime now = ros::WallTime::now();
@@ -135,8 +153,10 @@ class RosSink : public rcm::MonitorSink {
   }
 
  private:
-  ros::Publisher misalignment_pub_, sd_pub_, force_pub_, onset_pub_, alarm_pub_, rejected_pub_, out_of_regime_pub_;
-  geometry_msgs::Vector3Stamped misalignment_msg_, sd_msg_;
+  ros::Publisher misalignment_pub_, sd_pub_, force_pub_, onset_pub_, alarm_pub_, rejected_pub_, out_of_regime_pub_,
+      correction_pub_, advice_pub_;
+  geometry_msgs::Vector3Stamped misalignment_msg_, sd_msg_, correction_msg_;
+  std_msgs::String advice_msg_;
   geometry_msgs::WrenchStamped force_msg_;
   std_msgs::Bool bool_msg_;
   std_msgs::UInt64 rejected_msg_;

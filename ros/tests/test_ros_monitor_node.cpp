@@ -14,6 +14,7 @@
 #include <geometry_msgs/WrenchStamped.h>
 #include <ros/ros.h>
 #include <std_msgs/Bool.h>
+#include <std_msgs/String.h>
 #include <std_msgs/UInt64.h>
 
 #include <arpa/inet.h>
@@ -62,8 +63,9 @@ int find_free_port() {
 // What the node published, as received.
 struct Received {
   std::mutex mutex;
-  std::size_t estimates = 0, sds = 0, forces = 0;
-  geometry_msgs::Vector3Stamped last_estimate, last_sd;
+  std::size_t estimates = 0, sds = 0, forces = 0, corrections = 0;
+  geometry_msgs::Vector3Stamped last_estimate, last_sd, last_correction;
+  std::vector<std::string> advice;
   geometry_msgs::WrenchStamped last_force;
   std::vector<bool> onset, alarm, out_of_regime;
   std::uint64_t rejected = 0;
@@ -138,6 +140,16 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
         ++got.forces;
         got.last_force = *m;
       });
+  auto sub_correction = nh.subscribe<geometry_msgs::Vector3Stamped>(
+      "/PSM1/rcm/correction", 100000, [&](const geometry_msgs::Vector3Stamped::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(got.mutex);
+        ++got.corrections;
+        got.last_correction = *m;
+      });
+  auto sub_advice = nh.subscribe<std_msgs::String>("/PSM1/rcm/advice", 1000, [&](const std_msgs::String::ConstPtr& m) {
+    std::lock_guard<std::mutex> lock(got.mutex);
+    got.advice.push_back(m->data);
+  });
   auto sub_onset = nh.subscribe<std_msgs::Bool>("/PSM1/rcm/onset", 1000, [&](const std_msgs::Bool::ConstPtr& m) {
     std::lock_guard<std::mutex> lock(got.mutex);
     got.onset.push_back(m->data);
@@ -172,6 +184,7 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
         std::lock_guard<std::mutex> lock(got.mutex);
         return !node.alive() || (pub.getNumSubscribers() > 0 && sub_estimate.getNumPublishers() > 0 &&
                                  sub_sd.getNumPublishers() > 0 && sub_force.getNumPublishers() > 0 &&
+                                 sub_correction.getNumPublishers() > 0 && !got.advice.empty() &&
                                  !got.onset.empty() && !got.alarm.empty() && got.rejected_messages > 0 &&
                                  !got.out_of_regime.empty());
       },
@@ -226,6 +239,9 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
             std::string::npos);
   EXPECT_EQ(got.last_estimate.header.frame_id, "PSM1_incision");
   EXPECT_EQ(got.last_force.header.frame_id, "PSM1_base");
+  EXPECT_EQ(got.last_correction.header.frame_id, "PSM1_base");
+  EXPECT_EQ(got.corrections, got.estimates);
+  EXPECT_EQ(got.last_correction.header.stamp, last_stamp);
 
   // The same pipeline: the same final estimate as rcm monitor.
   const auto& fin = expected["final"];
@@ -236,6 +252,10 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
     EXPECT_NEAR(sd[i], fin["sd_m"][i].get<double>(), 1e-9) << "sd " << i;
   }
 
+  // The correction and its advice, as rcm monitor says them.
+  rcm::test::expect_final_correction(
+      expected, {got.last_correction.vector.x, got.last_correction.vector.y, got.last_correction.vector.z});
+  EXPECT_EQ(got.advice, rcm::test::get_expected_advice(expected));
   // Alarm: false at start, then raised and cleared as rcm monitor reports.
   const std::vector<bool> expected_alarm = rcm::test::get_expected_alarm(expected);
   EXPECT_EQ(got.alarm, expected_alarm);

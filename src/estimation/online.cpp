@@ -77,6 +77,12 @@ void OnlineEstimator::reset(Workspace& ws) const {
   ws.output.sd_m = sd;
 }
 
+void OnlineEstimator::apply_rcm_shift(Workspace& ws, const Eigen::Vector3d& shift_base) const {
+  const Eigen::Vector3d shift_inc = incision_.R_base_inc.transpose() * shift_base;
+  for (int h = 0; h < ws.num_hypotheses; ++h) ws.hypotheses[static_cast<std::size_t>(h)].p -= shift_inc;
+  ws.output.misalignment_m -= shift_inc;
+}
+
 namespace {
 // The filter with the lowest forgotten innovation cost.
 int get_best_hypothesis(const OnlineEstimator::Workspace& ws) {

@@ -35,6 +35,10 @@ void MonitorNodeParameters::check(const std::function<InputLocation(const std::s
   if (queue_size < 1) throw InputError(where("queue_size"), "must be >= 1");
   if (!(status_period_s >= 0)) throw InputError(where("status_period_s"), "must be >= 0");
   if (seed < 0) throw InputError(where("seed"), "must be >= 0");
+  if (!(correction.tolerance_m > 0)) throw InputError(where("tolerance_m"), "must be > 0");
+  if (!(correction.compensate_limit_m >= correction.tolerance_m))
+    throw InputError(where("compensate_limit_m"), "must be >= tolerance_m");
+  if (!(correction.max_rate_m_per_s > 0)) throw InputError(where("max_shift_rate_m_per_s"), "must be > 0");
   for (std::size_t i = 0; i < joint_names.size(); ++i) {
     if (joint_names[i].empty()) throw InputError(where("joint_names[" + std::to_string(i) + "]"), "empty joint name");
     for (std::size_t k = 0; k < i; ++k)
@@ -100,6 +104,8 @@ MonitorNode::MonitorNode(const MonitorNodeParameters& parameters, std::unique_pt
     : params_(parameters),
       pipeline_(std::move(pipeline)),
       monitor_(*pipeline_, parameters.joint_names, zero_stamp),
+      corrector_(pipeline_->estimator().incision(), parameters.correction),
+      correction_ws_(corrector_.create_workspace()),
       sink_(sink) {
   regime_.known = pipeline_->regime_monitor().known();
 }
@@ -109,13 +115,16 @@ void MonitorNode::start(const std::string& input_topic_name) {
   sink_.publish_flag(MonitorFlag::alarm, false);
   sink_.publish_rejected(0);
   sink_.publish_flag(MonitorFlag::out_of_regime, false);
+  sink_.publish_advice(describe_correction(correction_ws_.output, corrector_));
   if (!regime_.known)
     sink_.log(LogLevel::warn, "rcm: the free-space model carries no training regime: out_of_regime is never raised "
                               "(refit it)");
   sink_.log(LogLevel::info, format("rcm: listening on %s; publishing %s{misalignment,misalignment_sd,incision_force,"
-                                   "onset,alarm,rejected_samples,out_of_regime}; alarm above %.1f N",
+                                   "onset,alarm,rejected_samples,out_of_regime,correction,advice}; alarm above %.1f N; "
+                                   "aligned within %.1f mm, software shifts up to %.1f mm",
                                    input_topic_name.c_str(), params_.get_output_prefix().c_str(),
-                                   params_.alarm_force_n));
+                                   params_.alarm_force_n, 1e3 * params_.correction.tolerance_m,
+                                   1e3 * params_.correction.compensate_limit_m));
 }
 
 void MonitorNode::compute_message(const JointStateView& message, std::int64_t stamp_ns, std::int64_t receive_time_ns) {
@@ -137,9 +146,17 @@ void MonitorNode::compute_message(const JointStateView& message, std::int64_t st
                      static_cast<double>(stamp_ns) * 1e-9, out.time));
   }
 
+  const CorrectionOutput& correction = corrector_.compute_correction(correction_ws_, out);
   if (++since_publish_ >= params_.publish_every) {
     since_publish_ = 0;
+    sink_.publish_correction(monitor_.get_last_time_ns(), correction);
     sink_.publish_estimate(monitor_.get_last_time_ns(), out);
+  }
+  if (correction.changed) {
+    const std::string advice = describe_correction(correction, corrector_);
+    sink_.publish_advice(advice);
+    sink_.log(correction.action == CorrectionAction::hold ? LogLevel::info : LogLevel::warn,
+              format("rcm: t = %.3f s: ADVICE %s", out.time, advice.c_str()));
   }
   if (out.onset != onset_) {
     onset_ = out.onset;
@@ -216,6 +233,7 @@ std::string MonitorNode::get_summary() const {
     s += format("rcm: final estimate dr_x %.2f +- %.2f, dr_y %.2f +- %.2f, D %.2f +- %.2f mm (1 sd); onset %s\n",
                 1e3 * o.misalignment_m[0], 1e3 * o.sd_m[0], 1e3 * o.misalignment_m[1], 1e3 * o.sd_m[1],
                 1e3 * o.misalignment_m[2], 1e3 * o.sd_m[2], o.onset ? "detected" : "not detected");
+    s += "rcm: advice: " + describe_correction(correction_ws_.output, corrector_) + "\n";
   }
   return s;
 }

@@ -62,6 +62,8 @@ class CountingSink : public MonitorSink {
   void publish_estimate(std::int64_t, const OnlineOutput&) override { ++estimates; }
   void publish_flag(MonitorFlag, bool) override {}
   void publish_rejected(std::uint64_t) override {}
+  void publish_correction(std::int64_t, const CorrectionOutput&) override {}
+  void publish_advice(const std::string&) override {}
   void log(LogLevel, const std::string& text, double) override {
     ++lines;
     if (text.find("clock moved") != std::string::npos) ++retime_lines;

@@ -128,6 +128,10 @@ class OnlineEstimator {
   const OnlineOutput& compute_update(Workspace& workspace, double time, const Eigen::Vector3d& q,
                                      const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau) const;
 
+  // The RCM itself moved by shift_base (base frame; a software RCM shift, e.g.
+  // estimation/correction.hpp's): every filter's offsets, relative to the RCM,
+  // move by -R_base_inc^T shift_base. The shift is known, so the covariances stay.
+  void apply_rcm_shift(Workspace& workspace, const Eigen::Vector3d& shift_base) const;
   const IncisionFrame& incision() const { return incision_; }
   const JointTissueModel& tissue() const { return tissue_; }
   const OnlineEstimatorOptions& options() const { return options_; }
@@ -174,6 +178,10 @@ class OnlinePipeline {
   const OnlineOutput& compute_sample(Workspace& workspace, double time, const double* q, const double* qd,
                                      const double* effort) const;
 
+  // See OnlineEstimator::apply_rcm_shift.
+  void apply_rcm_shift(Workspace& workspace, const Eigen::Vector3d& shift_base) const {
+    estimator_.apply_rcm_shift(workspace.estimator, shift_base);
+  }
   const dynamics::TorqueModel& model() const { return *model_; }
   const OnlineEstimator& estimator() const { return estimator_; }
   // Built from the model's training regime; known() is false when it has none.

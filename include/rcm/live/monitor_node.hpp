@@ -8,8 +8,11 @@
 //
 // Outputs, in the arm's namespace (`<arm>/rcm/...`): misalignment and
 // misalignment_sd (Vector3Stamped, incision frame, m), incision_force
-// (WrenchStamped, base frame, N), onset, alarm, out_of_regime (Bool, latched)
-// and rejected_samples (UInt64, latched).
+// (WrenchStamped, base frame, N), onset, alarm, out_of_regime (Bool, latched),
+// rejected_samples (UInt64, latched), correction (Vector3Stamped, base frame,
+// m: the RCM move onto the incision) and advice (String, latched: hold,
+// compensate or reposition in words, estimation/correction.hpp). The node
+// advises: it never moves the arm, so no software shift is in effect.
 
 #include <chrono>
 #include <cstdint>
@@ -20,6 +23,7 @@
 
 #include "rcm/common/error.hpp"
 #include "rcm/dynamics/regime.hpp"
+#include "rcm/estimation/correction.hpp"
 #include "rcm/estimation/online.hpp"
 #include "rcm/live/live_monitor.hpp"
 
@@ -38,6 +42,8 @@ struct MonitorNodeParameters {
   bool dedupe = false;
   int seed = 1;
   double status_period_s = 5.0;
+  // The correction's gates (parameters tolerance_m, compensate_limit_m, max_shift_rate_m_per_s).
+  CorrectionOptions correction;
 
   // Throws InputError at `where(name)` for a missing or out-of-range value.
   void check(const std::function<InputLocation(const std::string&)>& where) const;
@@ -68,6 +74,11 @@ class MonitorSink {
   virtual void publish_estimate(std::int64_t stamp_ns, const OnlineOutput& output) = 0;
   virtual void publish_flag(MonitorFlag flag, bool value) = 0;
   virtual void publish_rejected(std::uint64_t total) = 0;
+  // correction, with `stamp_ns`: the RCM move onto the incision, base frame.
+  // Called just before publish_estimate with the same stamp.
+  virtual void publish_correction(std::int64_t stamp_ns, const CorrectionOutput& correction) = 0;
+  // advice (latched): the action in words, each time it changes.
+  virtual void publish_advice(const std::string& text) = 0;
   // `throttle_s` > 0: the sink may drop lines of the same call site closer than that.
   virtual void log(LogLevel level, const std::string& text, double throttle_s = 0.0) = 0;
 };
@@ -101,6 +112,8 @@ class MonitorNode {
   MonitorNodeParameters params_;
   std::unique_ptr<OnlinePipeline> pipeline_;
   LiveMonitor monitor_;
+  RcmCorrector corrector_;
+  RcmCorrector::Workspace correction_ws_;
   MonitorSink& sink_;
   bool onset_ = false, alarm_ = false, out_of_regime_ = false;
   std::uint64_t retimed_ = 0;

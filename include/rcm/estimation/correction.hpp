@@ -1,0 +1,153 @@
+#pragma once
+// From estimate to action: what the running misalignment estimate tells the
+// arm and the surgical team to do.
+//
+// The estimate p = [dr_x, dr_y, D] is the incision's position relative to the
+// RCM in the incision frame I (docs/formats.md, "Frames and signs"), so the RCM
+// move that puts the RCM on the incision is p itself in I, and R_base_inc p in
+// the base frame. Three actions:
+//
+// - hold: the RCM is within tolerance of the incision (the 95 % upper bound of
+//   the distance is), or the estimate is not sure either way: no advice while
+//   the interval along the move is wider than the move (|p| <= z sd_u, sd_u the
+//   standard deviation along p).
+// - compensate: a software RCM shift toward the incision, for misalignments up
+//   to a limit; rate-limited, and never beyond the estimate's lower confidence
+//   bound |p| - z sd_u (a shift the estimate is 97.5 % sure does not overshoot).
+// - reposition: beyond the limit (or once the software shifts add up to it):
+//   manual re-docking advice, the move in the arm's own words.
+//
+// Hysteresis: hold turns into an action once the lower bound exceeds the
+// tolerance, and an action returns to hold once the estimate falls below
+// release_fraction of it; reposition turns back into compensate only once the
+// upper bound is within the limit; a hold "within tolerance" lasts until the
+// upper bound exceeds tolerance / release_fraction. The decisions are made on the lower and
+// upper bounds, not on the estimate, so a noisy estimate near a threshold does
+// not flip the advice at every sample.
+//
+// The corrector (RcmCorrector) is immutable; its state lives in a fixed-size
+// Workspace, and compute_correction() does not allocate. The software shift in
+// effect is the caller's to say (the arm knows where its RCM setpoint is; a
+// replay of a recording has none): the limit counts it. In closed loop, the
+// commanded shift moves the RCM: tell the estimator
+// (OnlineEstimator::apply_rcm_shift) so that its offsets stay relative to the
+// RCM as it is now.
+#include <Eigen/Core>
+#include <string>
+
+#include "rcm/estimation/online.hpp"
+#include "rcm/kinematics/incision.hpp"
+
+namespace rcm {
+
+struct CorrectionOptions {
+  double tolerance_m = 0.002;          // within this, hold
+  double compensate_limit_m = 0.010;   // software shifts up to this (in all, since reset), beyond: re-dock
+  double max_rate_m_per_s = 0.005;     // speed of the software shift
+  double confidence_z = 1.96;          // the 95 % interval
+  double release_fraction = 0.5;       // back to hold below this fraction of the tolerance
+  // A sample after a gap in the stream moves the RCM by at most this much time
+  // at max_rate: a silence is not a licence to jump.
+  double max_step_dt_s = 0.1;
+  void check() const;  // throws std::invalid_argument
+};
+
+enum class CorrectionAction { hold, compensate, reposition };
+const char* to_string(CorrectionAction action);
+
+// Why the corrector holds (none when it acts).
+// no_onset: the estimator has not detected a misalignment (or has no finite estimate).
+enum class HoldReason { none, no_onset, not_confident, within_tolerance };
+const char* to_string(HoldReason reason);
+
+struct CorrectionOutput {
+  double time = 0.0;
+  CorrectionAction action = CorrectionAction::hold;
+  HoldReason reason = HoldReason::no_onset;
+  bool changed = false;  // the action or the reason differs from the previous sample's
+  // The RCM move that puts the RCM on the incision (the remaining misalignment).
+  Eigen::Vector3d move_inc = Eigen::Vector3d::Zero();
+  Eigen::Vector3d move_base = Eigen::Vector3d::Zero();
+  // Per-axis 95 % interval of move_inc.
+  Eigen::Vector3d move_low_inc = Eigen::Vector3d::Zero();
+  Eigen::Vector3d move_high_inc = Eigen::Vector3d::Zero();
+  double distance_m = 0.0;       // |move|
+  double distance_low_m = 0.0;   // |move| - z sd_u, at least 0
+  double distance_high_m = 0.0;  // |move| + z sd_u
+  // The software shift of the RCM commanded at this sample (zero unless
+  // compensating), and the shift in effect once it is made, base frame.
+  Eigen::Vector3d step_base = Eigen::Vector3d::Zero();
+  Eigen::Vector3d applied_base = Eigen::Vector3d::Zero();
+};
+
+class RcmCorrector {
+ public:
+  struct Workspace {
+    bool started = false;
+    double last_time = 0.0;
+    CorrectionOutput output;
+  };
+  RcmCorrector(const IncisionFrame& incision, const CorrectionOptions& options);
+  Workspace create_workspace() const;
+  void reset(Workspace& workspace) const;
+  // The action after one estimate, given the software shift of the RCM in
+  // effect (base frame; zero when nothing shifts it). No allocation.
+  const CorrectionOutput& compute_correction(Workspace& workspace, const OnlineOutput& estimate,
+                                             const Eigen::Vector3d& applied_base = Eigen::Vector3d::Zero()) const;
+  const IncisionFrame& incision() const { return incision_; }
+  const CorrectionOptions& options() const { return options_; }
+
+ private:
+  IncisionFrame incision_;
+  CorrectionOptions options_;
+};
+
+// One call per sample for a closed loop: the pipeline's estimate, then the
+// correction. The caller says which software shift of the RCM is in effect
+// (base frame, the arm's setpoint minus the docked RCM); whatever changed since
+// the last call is passed to the estimator (apply_rcm_shift) before the sample,
+// so the estimate stays relative to the RCM as it is, whether or not the arm
+// carried out the last step. No allocation per sample.
+class CorrectionLoop {
+ public:
+  struct Workspace {
+    OnlinePipeline::Workspace pipeline;
+    RcmCorrector::Workspace corrector;
+    Eigen::Vector3d known_shift_base = Eigen::Vector3d::Zero();
+  };
+  CorrectionLoop(OnlinePipeline pipeline, RcmCorrector corrector);
+  Workspace create_workspace() const;
+  void reset(Workspace& workspace) const;
+  // As OnlinePipeline::compute_sample; returns the correction, whose estimate
+  // is get_online_output(workspace.pipeline.estimator).
+  const CorrectionOutput& compute_sample(Workspace& workspace, double time, const double* q, const double* qd,
+                                         const double* effort, const Eigen::Vector3d& applied_base) const;
+  const OnlinePipeline& pipeline() const { return pipeline_; }
+  const RcmCorrector& corrector() const { return corrector_; }
+
+ private:
+  OnlinePipeline pipeline_;
+  RcmCorrector corrector_;
+};
+
+// The advice in words a surgical team uses, along the arm's axes: "re-dock:
+// move the RCM 23 mm deeper along the instrument, 8 mm toward +x_base".
+// Allocates: call it when the action changes, or at a display cadence.
+std::string describe_correction(const CorrectionOutput& correction, const RcmCorrector& corrector);
+
+// The move alone, in those words ("23 mm deeper along the instrument, 8 mm
+// toward +x_base"); components under 1 mm are left out.
+std::string describe_rcm_move(const Eigen::Vector3d& move_inc, const IncisionFrame& incision);
+
+// After re-docking: the new baseline's incision frame and a short motion give a
+// fresh estimate; is the RCM now on the incision?
+struct AlignmentCheck {
+  bool aligned = false;       // the 95 % upper bound of the distance is within tolerance
+  bool confident = false;     // the estimate is sure of a move (lower bound > 0 and interval narrower than it)
+  double within_m = 0.0;      // 95 % upper bound of the distance
+  std::string message;        // "aligned within 1.6 mm" or what remains
+};
+AlignmentCheck check_alignment(const OnlineOutput& estimate, const IncisionFrame& incision,
+                               const CorrectionOptions& options);
+
+}  // namespace rcm

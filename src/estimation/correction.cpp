@@ -1,0 +1,248 @@
+#include "rcm/estimation/correction.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+#include <utility>
+
+namespace rcm {
+
+void CorrectionOptions::check() const {
+  auto fail = [](const char* what) { throw std::invalid_argument(std::string("CorrectionOptions: ") + what); };
+  if (!(tolerance_m > 0)) fail("tolerance_m must be > 0");
+  if (!(compensate_limit_m >= tolerance_m)) fail("compensate_limit_m must be >= tolerance_m");
+  if (!(max_rate_m_per_s > 0)) fail("max_rate_m_per_s must be > 0");
+  if (!(confidence_z > 0)) fail("confidence_z must be > 0");
+  if (!(release_fraction > 0 && release_fraction <= 1)) fail("release_fraction must be in (0, 1]");
+  if (!(max_step_dt_s > 0)) fail("max_step_dt_s must be > 0");
+}
+
+const char* to_string(CorrectionAction action) {
+  switch (action) {
+    case CorrectionAction::hold: return "hold";
+    case CorrectionAction::compensate: return "compensate";
+    case CorrectionAction::reposition: return "reposition";
+  }
+  return "?";
+}
+
+const char* to_string(HoldReason reason) {
+  switch (reason) {
+    case HoldReason::none: return "none";
+    case HoldReason::no_onset: return "no_onset";
+    case HoldReason::not_confident: return "not_confident";
+    case HoldReason::within_tolerance: return "within_tolerance";
+  }
+  return "?";
+}
+
+RcmCorrector::RcmCorrector(const IncisionFrame& incision, const CorrectionOptions& options)
+    : incision_(incision), options_(options) {
+  options_.check();
+}
+
+RcmCorrector::Workspace RcmCorrector::create_workspace() const {
+  Workspace ws;
+  reset(ws);
+  return ws;
+}
+
+void RcmCorrector::reset(Workspace& ws) const {
+  ws.started = false;
+  ws.last_time = 0.0;
+  ws.output = CorrectionOutput{};
+}
+
+namespace {
+
+struct MoveBounds {
+  double distance = 0.0, low = 0.0, high = 0.0;
+  Eigen::Vector3d direction = Eigen::Vector3d::Zero();  // unit, or zero for no move
+};
+
+// The distance to move and its 95 % bounds: the standard deviation along the
+// move, from the per-axis ones (the estimator reports the diagonal).
+MoveBounds compute_move_bounds(const Eigen::Vector3d& move, const Eigen::Vector3d& sd, double z) {
+  MoveBounds b;
+  b.distance = move.norm();
+  double sd_along = sd.maxCoeff();
+  if (b.distance > 0) {
+    b.direction = move / b.distance;
+    sd_along = std::sqrt((b.direction.array().square() * sd.array().square()).sum());
+  }
+  b.low = std::max(0.0, b.distance - z * sd_along);
+  b.high = b.distance + z * sd_along;
+  return b;
+}
+
+}  // namespace
+
+const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const OnlineOutput& estimate,
+                                                         const Eigen::Vector3d& applied_base) const {
+  const CorrectionOptions& o = options_;
+  CorrectionOutput& out = ws.output;
+  const CorrectionAction previous = out.action;
+  const HoldReason previous_reason = out.reason;
+  const double dt = ws.started ? std::clamp(estimate.time - ws.last_time, 0.0, o.max_step_dt_s) : 0.0;
+  ws.started = true;
+  ws.last_time = estimate.time;
+
+  out.time = estimate.time;
+  out.step_base.setZero();
+  out.applied_base = applied_base;
+  const Eigen::Vector3d& p = estimate.misalignment_m;
+  const Eigen::Vector3d& sd = estimate.sd_m;
+  const bool finite = p.allFinite() && sd.allFinite() && applied_base.allFinite();
+  const MoveBounds b = finite ? compute_move_bounds(p, sd, o.confidence_z) : MoveBounds{};
+  out.move_inc = finite ? p : Eigen::Vector3d::Zero();
+  out.move_base = incision_.R_base_inc * out.move_inc;
+  out.move_low_inc = out.move_inc - o.confidence_z * sd;
+  out.move_high_inc = out.move_inc + o.confidence_z * sd;
+  if (!finite) out.move_low_inc = out.move_high_inc = Eigen::Vector3d::Zero();
+  out.distance_m = b.distance;
+  out.distance_low_m = b.low;
+  out.distance_high_m = b.high;
+
+  auto hold = [&](HoldReason reason) {
+    out.action = CorrectionAction::hold;
+    out.reason = reason;
+  };
+  // What the software shift may still add before the arm must be re-docked.
+  const double budget = std::max(0.0, o.compensate_limit_m - applied_base.norm());
+  // Holding: sure to be within tolerance (upper bound), with the same
+  // hysteresis on the way out, or not sure either way.
+  const double within_bound =
+      previous_reason == HoldReason::within_tolerance ? o.tolerance_m / o.release_fraction : o.tolerance_m;
+  const HoldReason settled = b.high <= within_bound ? HoldReason::within_tolerance : HoldReason::not_confident;
+  if (!finite || !estimate.onset) {
+    hold(HoldReason::no_onset);
+  } else if (previous == CorrectionAction::hold && b.low <= o.tolerance_m) {
+    hold(settled);
+  } else if (previous != CorrectionAction::hold && b.low <= 0.0) {
+    hold(HoldReason::not_confident);  // the interval outgrew the move
+  } else if (previous != CorrectionAction::hold && b.distance < o.release_fraction * o.tolerance_m) {
+    hold(settled);
+  } else {
+    out.reason = HoldReason::none;
+    if (previous == CorrectionAction::reposition)
+      out.action = b.high <= budget ? CorrectionAction::compensate : CorrectionAction::reposition;
+    else
+      out.action = b.low > budget ? CorrectionAction::reposition : CorrectionAction::compensate;
+  }
+  if (out.action == CorrectionAction::compensate) {
+    const double step = std::min({o.max_rate_m_per_s * dt, b.low, budget});
+    out.step_base = incision_.R_base_inc * (b.direction * step);
+    out.applied_base = applied_base + out.step_base;
+  }
+  out.changed = out.action != previous || out.reason != previous_reason;
+  return out;
+}
+
+CorrectionLoop::CorrectionLoop(OnlinePipeline pipeline, RcmCorrector corrector)
+    : pipeline_(std::move(pipeline)), corrector_(std::move(corrector)) {}
+
+CorrectionLoop::Workspace CorrectionLoop::create_workspace() const {
+  Workspace ws{pipeline_.create_workspace(), corrector_.create_workspace(), Eigen::Vector3d::Zero()};
+  return ws;
+}
+
+void CorrectionLoop::reset(Workspace& ws) const {
+  pipeline_.reset(ws.pipeline);
+  corrector_.reset(ws.corrector);
+  ws.known_shift_base.setZero();
+}
+
+const CorrectionOutput& CorrectionLoop::compute_sample(Workspace& ws, double time, const double* q, const double* qd,
+                                                       const double* effort, const Eigen::Vector3d& applied_base) const {
+  if (!applied_base.allFinite()) throw std::invalid_argument("CorrectionLoop: the applied shift must be finite");
+  if (applied_base != ws.known_shift_base) {
+    pipeline_.apply_rcm_shift(ws.pipeline, applied_base - ws.known_shift_base);
+    ws.known_shift_base = applied_base;
+  }
+  const OnlineOutput& estimate = pipeline_.compute_sample(ws.pipeline, time, q, qd, effort);
+  return corrector_.compute_correction(ws.corrector, estimate, ws.known_shift_base);
+}
+
+namespace {
+
+std::string format_mm(double m) {
+  const double mm = std::abs(m) * 1e3;
+  return mm < 9.95 ? fmt::format("{:.1f} mm", mm) : fmt::format("{:.0f} mm", mm);
+}
+
+}  // namespace
+
+std::string describe_rcm_move(const Eigen::Vector3d& move_inc, const IncisionFrame& incision) {
+  constexpr double kSmallest = 0.001;  // m: components below this are not worth saying
+  std::string s;
+  auto add = [&](const std::string& part) { s += (s.empty() ? "" : ", ") + part; };
+  // Along the instrument: the team thinks of the insertion axis, into the patient.
+  if (std::abs(move_inc[2]) >= kSmallest)
+    add(format_mm(move_inc[2]) + (move_inc[2] > 0 ? " deeper along the instrument" : " shallower along the instrument"));
+  // Across it: the base frame's axes, largest first.
+  const Eigen::Vector3d lateral_base =
+      incision.R_base_inc.col(0) * move_inc[0] + incision.R_base_inc.col(1) * move_inc[1];
+  std::array<int, 3> axes = {0, 1, 2};
+  std::sort(axes.begin(), axes.end(),
+            [&](int a, int b) { return std::abs(lateral_base[a]) > std::abs(lateral_base[b]); });
+  static constexpr const char* kAxis[3] = {"x_base", "y_base", "z_base"};
+  for (int a : axes)
+    if (std::abs(lateral_base[a]) >= kSmallest)
+      add(format_mm(lateral_base[a]) + " toward " + (lateral_base[a] > 0 ? "+" : "-") + kAxis[a]);
+  return s.empty() ? "less than 1 mm" : s;
+}
+
+std::string describe_correction(const CorrectionOutput& c, const RcmCorrector& corrector) {
+  const CorrectionOptions& o = corrector.options();
+  const std::string total = format_mm(c.distance_m);
+  const std::string interval = fmt::format("95 % interval {:.1f} to {:.1f} mm", c.distance_low_m * 1e3, c.distance_high_m * 1e3);
+  switch (c.action) {
+    case CorrectionAction::hold:
+      switch (c.reason) {
+        case HoldReason::no_onset: return "hold: no misalignment detected";
+        case HoldReason::not_confident: return fmt::format("hold: not yet confident (estimate {}, {})", total, interval);
+        case HoldReason::within_tolerance:
+          return fmt::format("hold: the RCM is within {} of the incision (estimate {}, {})", format_mm(o.tolerance_m),
+                             total, interval);
+        case HoldReason::none: break;
+      }
+      return "hold";
+    case CorrectionAction::compensate:
+      return fmt::format("compensate: shifting the RCM {} at up to {}/s ({})",
+                         describe_rcm_move(c.move_inc, corrector.incision()), format_mm(o.max_rate_m_per_s), interval);
+    case CorrectionAction::reposition:
+      return fmt::format("reposition: re-dock, move the RCM {} ({}; beyond the software limit of {})",
+                         describe_rcm_move(c.move_inc, corrector.incision()), interval,
+                         format_mm(o.compensate_limit_m));
+  }
+  return "?";
+}
+
+AlignmentCheck check_alignment(const OnlineOutput& estimate, const IncisionFrame& incision,
+                               const CorrectionOptions& o) {
+  o.check();
+  AlignmentCheck c;
+  if (!estimate.misalignment_m.allFinite() || !estimate.sd_m.allFinite()) {
+    c.message = "no estimate yet: move the instrument about the RCM";
+    return c;
+  }
+  const MoveBounds b = compute_move_bounds(estimate.misalignment_m, estimate.sd_m, o.confidence_z);
+  c.within_m = b.high;
+  c.confident = b.low > 0;
+  if (b.high <= o.tolerance_m) {
+    c.aligned = true;
+    c.message = fmt::format("aligned within {} (95 %)", format_mm(b.high));
+  } else if (!c.confident) {
+    c.message = fmt::format("not yet sure: {} +- {}; keep moving the instrument about the RCM",
+                            format_mm(b.distance), format_mm(b.high - b.distance));
+  } else {
+    c.message = fmt::format("{} remain ({} to {}): move the RCM {}", format_mm(b.distance), format_mm(b.low),
+                            format_mm(b.high), describe_rcm_move(estimate.misalignment_m, incision));
+  }
+  return c;
+}
+
+}  // namespace rcm
