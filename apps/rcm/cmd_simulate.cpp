@@ -10,9 +10,14 @@
 #include "command_registry.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/common/interrupt.hpp"
+#include "rcm/estimation/study.hpp"
+#include "rcm/io/atomic_file.hpp"
 #include "rcm/io/json_file.hpp"
+#include "rcm/io/session.hpp"
 #include "rcm/sim/bench.hpp"
+#include "rcm/sim/closed_loop.hpp"
 #include "rcm/sim/sim_config.hpp"
+#include "study_cli.hpp"
 
 namespace {
 
@@ -32,6 +37,7 @@ struct SimulateOptions {
   bool exact_sensors = false;
   double free_space_s = -1, trial_s = -1, calibration_s = -1;
   int threads = 0;
+  rcm::cli::FreeSpaceFlags free_space;  // closed-loop: the estimator's free-space model
 };
 
 std::string config_help() {
@@ -46,6 +52,63 @@ std::string config_help() {
 }
 
 nlohmann::json vec_json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
+
+// The closed-loop bench: a session to prepare the estimator on (free space,
+// calibration, one trial), then every incision motion open and closed loop.
+void run_closed_loop(const SimulateOptions& o, const rcm::sim::SimConfig& config, const std::filesystem::path& out_dir) {
+  using namespace rcm::sim;
+  const auto start = std::chrono::steady_clock::now();
+  SimConfig session_config = config;
+  session_config.protocol.coaxial_offsets_m = {config.protocol.calibration_offset_m};
+  session_config.protocol.radial_offsets_m = {Eigen::Vector2d::Zero()};
+  std::cerr << fmt::format("simulate: closed-loop bench, seed {}, tissue {}; the session the estimator is prepared "
+                           "on ({:.0f} s free space)\n",
+                           config.seed, config.tissue.preset, config.protocol.free_space_s);
+  const SessionWriteSummary written = simulate_session(
+      session_config, out_dir / "session", [](const std::string& msg) { std::cerr << "simulate: " << msg << "\n"; });
+  const rcm::Session session = rcm::load_session(written.manifest);
+  rcm::StudyOptions study = rcm::cli::make_study_options(o.free_space);
+  study.verbose = true;
+  const rcm::MonitorSetup setup = rcm::prepare_monitor(session, study, rcm::cli::get_torque_model_fitter());
+  const rcm::OnlinePipeline pipeline(
+      setup.free_space.model,
+      rcm::OnlineEstimator(setup.incision, setup.tissue, rcm::make_online_options(setup.joint_options)));
+
+  ClosedLoopOptions options;
+  const std::vector<IncisionMotion> motions = make_default_incision_motions();
+  std::cerr << fmt::format("simulate: {} motions, {:.0f} s each, open and closed loop ({} free-space model)\n",
+                           motions.size(), options.duration_s,
+                           rcm::dynamics::to_string(setup.free_space.model->kind()));
+  const std::vector<ClosedLoopScenario> scenarios = run_closed_loop_experiment(config, pipeline, motions, options);
+  nlohmann::json j = to_json(scenarios, options);
+  j["seed"] = config.seed;
+  j["tissue"] = config.tissue.preset;
+  j["free_space_model"] = rcm::dynamics::to_string(setup.free_space.model->kind());
+  j["session"] = written.manifest.string();
+  const std::string table = format_closed_loop_table(scenarios);
+  rcm::save_json_file(out_dir / "closed_loop.json", j);
+  rcm::write_file_atomic(out_dir / "closed_loop.md", "# Closed-loop bench\n\n" + table);
+  rcm::save_json_file(out_dir / "sim_config.json", config_to_json(config));
+  std::vector<std::string> figures;
+  if (config.force_angle.plot)
+    for (const auto& sc : scenarios)
+      for (const auto& f : save_closed_loop_plots(out_dir / ("closed_loop_" + sc.motion.name), sc))
+        figures.push_back(f.png.string());
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (o.json) {
+    j["figures"] = figures;
+    j["elapsed_s"] = elapsed;
+    rcm::cli::print_json(j);
+    return;
+  }
+  std::cout << table;
+  for (const auto& sc : scenarios) {
+    std::cout << fmt::format("\n{} (closed loop) advice:\n", sc.motion.name);
+    for (const auto& [t, words] : sc.closed.advice) std::cout << fmt::format("  {:7.2f} s  {}\n", t, words);
+  }
+  std::cout << fmt::format("\nwrote {} and {} figures in {:.1f} s\n", (out_dir / "closed_loop.json").string(),
+                           figures.size(), elapsed);
+}
 
 void run_simulate(const SimulateOptions& o) {
   using namespace rcm::sim;
@@ -191,10 +254,12 @@ void run_simulate(const SimulateOptions& o) {
     std::cout << fmt::format("\nwrote {}", csv.string());
     if (config.force_angle.plot) std::cout << fmt::format(", {}, {}", plot.png.string(), plot.svg.string());
     std::cout << fmt::format(" in {:.1f} s\n", elapsed);
+  } else if (o.experiment == "closed-loop") {
+    run_closed_loop(o, config, out_dir);
   } else {
     rcm::InputLocation loc;
     loc.file = "--experiment";
-    throw rcm::InputError(loc, "unknown experiment '" + o.experiment + "'; known: session, force-angle");
+    throw rcm::InputError(loc, "unknown experiment '" + o.experiment + "'; known: session, force-angle, closed-loop");
   }
 }
 
@@ -207,7 +272,13 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   cmd->add_option("--out", opts->out, "output directory");
   cmd->add_option("--seed", opts->seed, "random seed (default 1, or the config's)")
       ->each([opts](const std::string&) { opts->seed_given = true; });
-  cmd->add_option("--experiment", opts->experiment, "session (default) | force-angle");
+  cmd->add_option("--experiment", opts->experiment,
+                  "session (default) | force-angle | closed-loop (the correction in the loop against a moving "
+                  "incision, and the same runs open loop)");
+  cmd->add_option("--model", opts->free_space.model,
+                  "closed-loop: the estimator's free-space model, fitted on the session's free space (default: as "
+                  "rcm monitor)");
+  cmd->add_option("--model-file", opts->free_space.model_file, "closed-loop: a saved free-space model instead");
   cmd->add_option("--tissue", opts->tissue, "tissue preset: linear (default), stiffening, viscoelastic, sliding");
   cmd->add_option("--friction", opts->friction,
                   "joint friction preset: hysteretic (default: rate-independent, the real PSM's band), smooth");
@@ -218,7 +289,7 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   cmd->add_option("--calibration-s", opts->calibration_s, "calibration duration, s (default 60)");
   cmd->add_option("--threads", opts->threads, "worker threads (default 2)");
   cmd->add_flag("--no-truth", opts->no_truth, "do not write *_truth.csv");
-  cmd->add_flag("--no-plot", opts->no_plot, "force-angle: skip the gnuplot figure");
+  cmd->add_flag("--no-plot", opts->no_plot, "force-angle, closed-loop: skip the gnuplot figures");
   cmd->add_flag("--exact-sensors", opts->exact_sensors, "no sensor noise or quantization");
   cmd->add_flag("--print-config", opts->print_config, "print the resolved configuration as JSON and exit");
   cmd->add_flag("--json", opts->json, "print the summary as one JSON object");

@@ -12,6 +12,7 @@
 #include <exception>
 #include <fstream>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <stdexcept>
 #include <thread>
@@ -77,7 +78,7 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
                                              const ReferenceTrajectory& reference,
                                              const TissueModel* tissue,
                                              const std::vector<RunSegment>& segments,
-                                             std::uint64_t noise_seed) {
+                                             std::uint64_t noise_seed, const RunHooks* hooks) {
   const ControllerParams& C = config.controller;
   const SensorParams& S = config.sensors;
   const double dt = 1.0 / C.physics_rate_hz;
@@ -121,6 +122,10 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
     return m;
   };
   Eigen::Vector3d q_meas_prev = measure_position(q);
+  // With a moving incision, the tissue's anchor is moved in a copy at every step.
+  std::optional<TissueModel> moving;
+  if (tissue && hooks && hooks->get_misalignment) moving.emplace(*tissue);
+  const TissueModel* active_tissue = moving ? &*moving : tissue;
   Eigen::Vector3d velocity_filtered = Eigen::Vector3d::Zero();
   std::size_t buffer_index = 0;
   bool have_previous_row = false;
@@ -148,9 +153,13 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
     // Plant.
     const FrictionOutput fr = compute_friction(friction_params, z, qd);
     TissueOutput tis;
-    if (tissue) {
+    if (moving) {
+      moving->misalignment_m = hooks->get_misalignment(t);
+      moving->p_anchor_base = moving->R_base_inc * moving->misalignment_m;
+    }
+    if (active_tissue) {
       try {
-        tis = compute_tissue_force(*tissue, q, qd, axial_z);
+        tis = compute_tissue_force(*active_tissue, q, qd, axial_z);
       } catch (const std::domain_error& e) {
         throw std::runtime_error(fmt::format("simulation of '{}' at t = {:.3f} s: {}",
                                              segments.front().name, t, e.what()));
@@ -162,6 +171,13 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
 
     if (step >= 0 && step % decimation == 0) {
       const auto k = static_cast<std::size_t>(step / decimation);
+      // The loop reads the same noisy effort that the recording logs.
+      std::optional<Eigen::Vector3d> sensed_effort;
+      if (hooks && hooks->on_sample) {
+        sensed_effort.emplace();
+        for (int j = 0; j < 3; ++j) (*sensed_effort)[j] = tau[j] + (S.noise ? S.effort_noise[j] * normal(rng) : 0.0);
+        hooks->on_sample(static_cast<double>(k) / S.log_rate_hz, q_meas, v_meas, *sensed_effort, tis.f_inc_base);
+      }
       while (buffer_index < buffers.size() &&
              (k < buffers[buffer_index].k_begin || k >= buffers[buffer_index].k_end)) {
         // Segments are in time order; find the one holding k (if any).
@@ -186,7 +202,8 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
           rec.position.row(r) = q_meas.transpose();
           rec.velocity.row(r) = v_meas.transpose();
           for (int j = 0; j < 3; ++j) {
-            rec.effort(r, j) = tau[j] + (S.noise ? S.effort_noise[j] * normal(rng) : 0.0);
+            rec.effort(r, j) = sensed_effort ? (*sensed_effort)[j]
+                                             : tau[j] + (S.noise ? S.effort_noise[j] * normal(rng) : 0.0);
             (*rec.force)(r, j) =
                 tis.f_inc_base[j] + (S.noise ? S.force_noise_n * normal(rng) : 0.0);
           }
@@ -209,7 +226,7 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
     qd += dt * qdd;
     q += dt * qd;
     z = advance_friction_state(friction_params, z, qd, dt);
-    if (tissue) axial_z = advance_tissue_state(*tissue, axial_z, tis.axial_velocity, dt);
+    if (active_tissue) axial_z = advance_tissue_state(*active_tissue, axial_z, tis.axial_velocity, dt);
   }
 
   std::vector<SimulatedRecording> out;

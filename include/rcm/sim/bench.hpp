@@ -49,14 +49,29 @@ struct RunSegment {
   double t_begin = 0.0, t_end = 0.0;
 };
 
+// What a closed loop adds to a run (sim/closed_loop.hpp): an incision that
+// moves, and an RCM that is a setpoint (a software-RCM arm with the same
+// joint-space dynamics: the joints pivot about wherever the setpoint is).
+struct RunHooks {
+  // The incision relative to the RCM as it is at time t (incision frame),
+  // called every physics step: the tissue's anchor follows it.
+  std::function<Eigen::Vector3d(double t)> get_misalignment;
+  // Every logged sample as the sensors give it, and the true incision force
+  // (base frame), in time order; here the loop reads the arm and moves the RCM.
+  std::function<void(double t, const Eigen::Vector3d& q, const Eigen::Vector3d& qd, const Eigen::Vector3d& effort,
+                     const Eigen::Vector3d& f_true_base)>
+      on_sample;
+};
+
 // Simulates one continuous run from t = -settle_s to the last segment's end;
 // the robot starts at rest at the reference's initial pose. `tissue` null means
-// free space. Deterministic in (config, reference, tissue, noise_seed).
+// free space. Deterministic in (config, reference, tissue, noise_seed, and
+// what the hooks do).
 std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
                                              const ReferenceTrajectory& reference,
                                              const TissueModel* tissue,
                                              const std::vector<RunSegment>& segments,
-                                             std::uint64_t noise_seed);
+                                             std::uint64_t noise_seed, const RunHooks* hooks = nullptr);
 
 // A stream seed from the master seed and a name (splitmix64 of both).
 std::uint64_t derive_seed(std::uint64_t seed, const std::string& stream);

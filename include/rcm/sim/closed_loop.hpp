@@ -1,0 +1,93 @@
+#pragma once
+// The closed-loop bench: the simulated arm as a software-RCM arm (its pivot a
+// setpoint, the same joint-space dynamics) under teleoperation, an incision
+// that moves (a step, a slow drift, breathing), and the online estimator with
+// the correction (estimation/correction.hpp) in the loop, against the same run
+// with the RCM left where it was docked.
+//
+// Approximation: moving the pivot changes where the joints pivot, not the
+// joint-space dynamics, and the tissue's damping sees the shaft's motion about
+// the pivot, not the pivot's own motion (at most max_rate, 5 mm/s by default).
+#include <Eigen/Core>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "rcm/estimation/correction.hpp"
+#include "rcm/estimation/online.hpp"
+#include "rcm/io/plot.hpp"
+#include "rcm/sim/sim_config.hpp"
+
+namespace rcm::sim {
+
+// Where the incision is relative to where the arm was docked (incision frame):
+// offset_m, plus step_m from step_time_s on, plus a drift from drift_start_s to
+// drift_end_s, plus breathing (a sine of breathing_amplitude_m).
+struct IncisionMotion {
+  std::string name;
+  Eigen::Vector3d offset_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d step_m = Eigen::Vector3d::Zero();
+  double step_time_s = 0.0;
+  Eigen::Vector3d drift_m_per_s = Eigen::Vector3d::Zero();
+  double drift_start_s = 0.0, drift_end_s = 0.0;
+  Eigen::Vector3d breathing_amplitude_m = Eigen::Vector3d::Zero();
+  double breathing_hz = 0.0;
+  // When the incision starts to leave the RCM: the clock of the force measures.
+  double onset_s = 0.0;
+  Eigen::Vector3d get_misalignment(double t) const;
+};
+
+// step (the patient or table moves 10 mm at 20 s), drift (0.15 mm/s for 60 s
+// from 10 s: 9 mm) and breathing (a 6 mm offset from the start, with 3 mm of
+// breathing at 0.25 Hz along the insertion axis).
+std::vector<IncisionMotion> make_default_incision_motions();
+
+struct ClosedLoopOptions {
+  double duration_s = 90.0;
+  double settled_after_s = 30.0;  // from the motion's onset: the RMS force is over what follows
+  double force_threshold_n = 2.0;  // time_to_below: from onset until |f| stays below this
+  double series_rate_hz = 20.0;    // of the time series kept for the figures
+  CorrectionOptions correction;
+};
+
+struct ClosedLoopRun {
+  bool closed = false;
+  double peak_force_n = 0.0;             // max |f| from the onset
+  double rms_force_after_settle_n = 0.0;
+  // From the onset until |f| stays below force_threshold_n to the end (none:
+  // it never does, or not for the last 5 s).
+  std::optional<double> time_to_below_s;
+  double residual_misalignment_m = 0.0;  // mean |incision - RCM| over the last 10 s
+  int wrong_direction_moves = 0;         // commanded steps against the true remaining misalignment
+  int moves = 0;                         // commanded steps (carried out in the closed run only)
+  Eigen::Vector3d final_shift_base = Eigen::Vector3d::Zero();
+  // Time series at series_rate_hz: true |f|, true |incision - RCM|, the action.
+  std::vector<double> time_s, force_n, misalignment_m;
+  std::vector<CorrectionAction> action;
+  // Every change of the advice: (time, words).
+  std::vector<std::pair<double, std::string>> advice;
+};
+
+struct ClosedLoopScenario {
+  IncisionMotion motion;
+  ClosedLoopRun open, closed;
+};
+
+// Runs every motion open and closed loop with `pipeline` (prepared on this
+// config's session: free-space model, incision frame at q0, tissue model).
+std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& config, const OnlinePipeline& pipeline,
+                                                           const std::vector<IncisionMotion>& motions,
+                                                           const ClosedLoopOptions& options);
+
+// closed_loop.json: {"scenarios": {"step": {"open": {...}, "closed": {...}}, ...}}
+// with peak_force_n, rms_force_after_settle_n, time_to_below_2n_s (null if
+// never), residual_misalignment_m, wrong_direction_moves per run.
+nlohmann::json to_json(const std::vector<ClosedLoopScenario>& scenarios, const ClosedLoopOptions& options);
+std::string format_closed_loop_table(const std::vector<ClosedLoopScenario>& scenarios);
+// Three figures per scenario (stem_force, stem_misalignment, stem_advice): true
+// |f| and true misalignment against time in both runs, and the action.
+std::vector<PlotFiles> save_closed_loop_plots(const std::filesystem::path& stem, const ClosedLoopScenario& scenario);
+
+}  // namespace rcm::sim

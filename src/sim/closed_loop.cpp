@@ -1,0 +1,218 @@
+#include "rcm/sim/closed_loop.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "rcm/kinematics/incision.hpp"
+#include "rcm/sim/bench.hpp"
+#include "rcm/sim/tissue.hpp"
+
+namespace rcm::sim {
+
+Eigen::Vector3d IncisionMotion::get_misalignment(double t) const {
+  Eigen::Vector3d m = offset_m;
+  if (t >= step_time_s) m += step_m;
+  if (t > drift_start_s) m += drift_m_per_s * (std::min(t, drift_end_s) - drift_start_s);
+  if (breathing_hz > 0) m += breathing_amplitude_m * std::sin(2.0 * M_PI * breathing_hz * t);
+  return m;
+}
+
+std::vector<IncisionMotion> make_default_incision_motions() {
+  IncisionMotion step;
+  step.name = "step";
+  step.step_m = Eigen::Vector3d(0.006, 0.0, 0.008);  // 10 mm
+  step.step_time_s = 20.0;
+  step.onset_s = 20.0;
+  IncisionMotion drift;
+  drift.name = "drift";
+  drift.drift_m_per_s = Eigen::Vector3d(1.0, -1.0, 1.0).normalized() * 1.5e-4;
+  drift.drift_start_s = 10.0;
+  drift.drift_end_s = 70.0;
+  drift.onset_s = 10.0;
+  IncisionMotion breathing;
+  breathing.name = "breathing";
+  breathing.offset_m = Eigen::Vector3d(0.0, 0.0, 0.006);
+  breathing.breathing_amplitude_m = Eigen::Vector3d(0.0, 0.0, 0.003);
+  breathing.breathing_hz = 0.25;
+  breathing.onset_s = 0.0;
+  return {step, drift, breathing};
+}
+
+namespace {
+
+ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const IncisionMotion& motion,
+                      const ClosedLoopOptions& o, bool closed) {
+  const Eigen::Vector3d& q0 = config.protocol.q0;
+  const Eigen::Matrix3d R = loop.corrector().incision().R_base_inc;
+  const ReferenceTrajectory reference = make_teleop_reference(config, "closed-loop", o.duration_s);
+  // The tissue's own parameters; its anchor follows the hooks.
+  const TissueModel tissue(config.tissue, q0, motion.get_misalignment(0.0));
+
+  ClosedLoopRun run;
+  run.closed = closed;
+  CorrectionLoop::Workspace ws = loop.create_workspace();
+  Eigen::Vector3d shift_base = Eigen::Vector3d::Zero();  // the RCM setpoint minus the docked RCM
+  const double series_dt = 1.0 / o.series_rate_hz;
+  double next_series = 0.0;
+  std::vector<double> force_after_settle;
+  double last_above = -1.0, residual_sum = 0.0;
+  int residual_count = 0;
+  CorrectionAction last_action = CorrectionAction::hold;
+  HoldReason last_reason = HoldReason::no_onset;
+
+  RunHooks hooks;
+  hooks.get_misalignment = [&](double t) -> Eigen::Vector3d {
+    return motion.get_misalignment(t) - R.transpose() * shift_base;
+  };
+  hooks.on_sample = [&](double t, const Eigen::Vector3d& q, const Eigen::Vector3d& qd, const Eigen::Vector3d& effort,
+                        const Eigen::Vector3d& f_true) {
+    const Eigen::Vector3d remaining_inc = motion.get_misalignment(t) - R.transpose() * shift_base;
+    const CorrectionOutput& c =
+        loop.compute_sample(ws, t, q.data(), qd.data(), effort.data(), closed ? shift_base : Eigen::Vector3d::Zero());
+    if (!c.step_base.isZero()) {
+      ++run.moves;
+      if (c.step_base.dot(R * remaining_inc) < 0) ++run.wrong_direction_moves;
+      if (closed) shift_base = c.applied_base;  // the setpoint moves
+    }
+    if (c.action != last_action || c.reason != last_reason || run.advice.empty()) {
+      run.advice.emplace_back(t, describe_correction(c, loop.corrector()));
+      last_action = c.action;
+      last_reason = c.reason;
+    }
+    const double f = f_true.norm();
+    if (t >= motion.onset_s) run.peak_force_n = std::max(run.peak_force_n, f);
+    if (t >= motion.onset_s + o.settled_after_s) force_after_settle.push_back(f);
+    if (f > o.force_threshold_n) last_above = t;
+    if (t >= o.duration_s - 10.0) {
+      residual_sum += remaining_inc.norm();
+      ++residual_count;
+    }
+    if (t >= next_series) {
+      next_series += series_dt;
+      run.time_s.push_back(t);
+      run.force_n.push_back(f);
+      run.misalignment_m.push_back(remaining_inc.norm());
+      run.action.push_back(c.action);
+    }
+  };
+  simulate_run(config, reference, &tissue, {{"closed-loop " + motion.name, 0.0, o.duration_s}},
+               derive_seed(config.seed, "noise:closed-loop:" + motion.name), &hooks);
+
+  double sum_sq = 0.0;
+  for (double f : force_after_settle) sum_sq += f * f;
+  run.rms_force_after_settle_n = force_after_settle.empty() ? 0.0 : std::sqrt(sum_sq / force_after_settle.size());
+  if (last_above < o.duration_s - 5.0) run.time_to_below_s = std::max(0.0, last_above - motion.onset_s);
+  run.residual_misalignment_m = residual_count ? residual_sum / residual_count : 0.0;
+  run.final_shift_base = shift_base;
+  return run;
+}
+
+}  // namespace
+
+std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& config, const OnlinePipeline& pipeline,
+                                                           const std::vector<IncisionMotion>& motions,
+                                                           const ClosedLoopOptions& options) {
+  if (!(options.duration_s > 20.0)) throw std::invalid_argument("ClosedLoopOptions: duration_s must be > 20");
+  if (!(options.series_rate_hz > 0)) throw std::invalid_argument("ClosedLoopOptions: series_rate_hz must be > 0");
+  const CorrectionLoop loop(pipeline, RcmCorrector(pipeline.estimator().incision(), options.correction));
+  std::vector<ClosedLoopScenario> out;
+  for (const IncisionMotion& m : motions) {
+    ClosedLoopScenario s;
+    s.motion = m;
+    s.open = run_one(config, loop, m, options, false);
+    s.closed = run_one(config, loop, m, options, true);
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
+namespace {
+
+nlohmann::json run_json(const ClosedLoopRun& r) {
+  nlohmann::json j;
+  j["peak_force_n"] = r.peak_force_n;
+  j["rms_force_after_settle_n"] = r.rms_force_after_settle_n;
+  j["time_to_below_2n_s"] = r.time_to_below_s ? nlohmann::json(*r.time_to_below_s) : nlohmann::json(nullptr);
+  j["residual_misalignment_m"] = r.residual_misalignment_m;
+  j["wrong_direction_moves"] = r.wrong_direction_moves;
+  j["moves"] = r.moves;
+  j["final_shift_base_m"] = {r.final_shift_base[0], r.final_shift_base[1], r.final_shift_base[2]};
+  nlohmann::json advice = nlohmann::json::array();
+  for (const auto& [t, words] : r.advice) advice.push_back({{"time_s", t}, {"advice", words}});
+  j["advice"] = advice;
+  return j;
+}
+
+}  // namespace
+
+nlohmann::json to_json(const std::vector<ClosedLoopScenario>& scenarios, const ClosedLoopOptions& o) {
+  nlohmann::json j;
+  j["format"] = "rcm-closed-loop/1";
+  j["duration_s"] = o.duration_s;
+  j["settled_after_s"] = o.settled_after_s;
+  j["force_threshold_n"] = o.force_threshold_n;
+  j["correction"] = {{"tolerance_m", o.correction.tolerance_m},
+                     {"compensate_limit_m", o.correction.compensate_limit_m},
+                     {"max_rate_m_per_s", o.correction.max_rate_m_per_s}};
+  nlohmann::json s = nlohmann::json::object();
+  for (const auto& sc : scenarios) {
+    const IncisionMotion& m = sc.motion;
+    s[m.name] = {{"onset_s", m.onset_s},
+                 {"open", run_json(sc.open)},
+                 {"closed", run_json(sc.closed)}};
+  }
+  j["scenarios"] = s;
+  return j;
+}
+
+std::string format_closed_loop_table(const std::vector<ClosedLoopScenario>& scenarios) {
+  std::string t =
+      "| scenario | run | peak force (N) | RMS force after settling (N) | onset to force below 2 N (s) | residual "
+      "misalignment (mm) | moves | wrong-direction moves |\n|---|---|---|---|---|---|---|---|\n";
+  for (const auto& sc : scenarios)
+    for (const ClosedLoopRun* r : {&sc.open, &sc.closed})
+      t += fmt::format("| {} | {} | {:.1f} | {:.2f} | {} | {:.1f} | {} | {} |\n", sc.motion.name,
+                       r->closed ? "closed" : "open", r->peak_force_n, r->rms_force_after_settle_n,
+                       r->time_to_below_s ? fmt::format("{:.1f}", *r->time_to_below_s) : std::string("never"),
+                       r->residual_misalignment_m * 1e3, r->closed ? std::to_string(r->moves) : std::string("-"),
+                       r->wrong_direction_moves);
+  return t;
+}
+
+std::vector<PlotFiles> save_closed_loop_plots(const std::filesystem::path& stem, const ClosedLoopScenario& sc) {
+  auto series = [](const ClosedLoopRun& r, const std::vector<double>& y, double scale) {
+    PlotSeries s;
+    s.label = r.closed ? "closed loop" : "open loop";
+    s.style = PlotStyle::lines;
+    s.x = r.time_s;
+    for (double v : y) s.y.push_back(v * scale);
+    return s;
+  };
+  std::vector<PlotFiles> files;
+  PlotSpec force;
+  force.title = fmt::format("{}: true incision force", sc.motion.name);
+  force.x_label = "time (s)";
+  force.y_label = "|f| (N)";
+  force.legend = "top right";
+  force.series = {series(sc.open, sc.open.force_n, 1.0), series(sc.closed, sc.closed.force_n, 1.0)};
+  files.push_back(save_plot(force, stem.string() + "_force"));
+  PlotSpec mis = force;
+  mis.title = fmt::format("{}: true misalignment (incision to RCM)", sc.motion.name);
+  mis.y_label = "misalignment (mm)";
+  mis.series = {series(sc.open, sc.open.misalignment_m, 1e3), series(sc.closed, sc.closed.misalignment_m, 1e3)};
+  files.push_back(save_plot(mis, stem.string() + "_misalignment"));
+  PlotSpec advice = force;
+  advice.title = fmt::format("{}: advice (0 hold, 1 compensate, 2 reposition)", sc.motion.name);
+  advice.y_label = "action";
+  advice.y_range = std::make_pair(-0.2, 2.2);
+  std::vector<double> open_action, closed_action;
+  for (auto a : sc.open.action) open_action.push_back(static_cast<double>(a));
+  for (auto a : sc.closed.action) closed_action.push_back(static_cast<double>(a));
+  advice.series = {series(sc.open, open_action, 1.0), series(sc.closed, closed_action, 1.0)};
+  files.push_back(save_plot(advice, stem.string() + "_advice"));
+  return files;
+}
+
+}  // namespace rcm::sim
