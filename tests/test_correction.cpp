@@ -74,6 +74,21 @@ TEST(Correction, HoldsWithoutOnsetWhileUnsureAndWithinTolerance) {
   EXPECT_TRUE(c.step_base.isZero());
 }
 
+TEST(Correction, HoldsWhileTheModelDoesNotExplainTheTorques) {
+  const RcmCorrector corrector(make_frame(), {});
+  auto ws = corrector.create_workspace();
+  OnlineOutput e = make_estimate(0.0, Eigen::Vector3d(0.004, 0.0, 0.008), 0.0003);
+  e.fit_cost = 15.0;  // e.g. a payload the free-space model never saw
+  const auto& c = corrector.compute_correction(ws, e);
+  EXPECT_EQ(c.action, CorrectionAction::hold);
+  EXPECT_EQ(c.reason, HoldReason::model_mismatch);
+  EXPECT_TRUE(c.step_base.isZero());
+  EXPECT_NE(rcm::describe_correction(c, corrector).find("does not explain the joint torques (fit cost 15.0"),
+            std::string::npos);
+  e.fit_cost = 2.0;
+  EXPECT_EQ(corrector.compute_correction(ws, e).action, CorrectionAction::compensate);
+}
+
 TEST(Correction, CompensatesAtTheRateTowardTheIncisionAndNeverBeyondTheLowerBound) {
   const auto frame = make_frame();
   CorrectionOptions o;

@@ -12,6 +12,10 @@
 #include <memory>
 #include <string>
 
+#include "rcm/dynamics/linear_model.hpp"
+#include "rcm/estimation/study.hpp"
+#include "rcm/io/session.hpp"
+#include "rcm/sim/bench.hpp"
 #include "rcm/sim/closed_loop.hpp"
 #include "temp_dir.hpp"
 
@@ -97,4 +101,120 @@ TEST(ClosedLoopBench, TheCorrectionBringsTheRcmBackWithoutAWrongMove) {
             2);
 }
 
+// Safety: the correction never makes the force worse than leaving the RCM
+// where it was docked, and never moves the wrong way, where the estimate is
+// at its weakest. Each case: a quick session to prepare the estimator on (the
+// linear free-space model), then one incision motion open and closed loop.
+struct PreparedBench {
+  rcm::sim::SimConfig config;
+  std::unique_ptr<rcm::OnlinePipeline> pipeline;
+};
+
+rcm::sim::SimConfig make_quick_config(const std::string& tissue) {
+  rcm::sim::SimConfig c = rcm::sim::make_default_config();
+  c.protocol.free_space_s = 120.0;
+  c.protocol.calibration_s = 30.0;
+  c.protocol.trial_s = 30.0;
+  c.protocol.static_hold_s = 5.0;
+  c.protocol.coaxial_offsets_m = {c.protocol.calibration_offset_m};
+  c.protocol.radial_offsets_m = {Eigen::Vector2d::Zero()};
+  c.protocol.write_truth = false;
+  rcm::sim::apply_tissue_preset(c.tissue, tissue);
+  return c;
+}
+
+PreparedBench prepare_bench(const std::string& tissue, const rcm::test::TempDir& dir) {
+  PreparedBench b{make_quick_config(tissue), nullptr};
+  const auto written = rcm::sim::simulate_session(b.config, dir.path() / tissue);
+  rcm::StudyOptions options;
+  options.model_kind = rcm::dynamics::TorqueModelKind::linear;
+  const rcm::TorqueModelFitter fitter = [](rcm::dynamics::TorqueModelKind, const std::vector<rcm::Recording>& recs,
+                                           const rcm::dynamics::FitOptions& o) {
+    return rcm::dynamics::fit_linear_torque_model(recs, o);
+  };
+  const rcm::MonitorSetup setup = rcm::prepare_monitor(rcm::load_session(written.manifest), options, fitter);
+  b.pipeline = std::make_unique<rcm::OnlinePipeline>(
+      setup.free_space.model,
+      rcm::OnlineEstimator(setup.incision, setup.tissue, rcm::make_online_options(setup.joint_options)));
+  return b;
+}
+
+const PreparedBench& get_linear_bench() {
+  static rcm::test::TempDir dir("rcm_closed_loop_safety");
+  static const PreparedBench bench = prepare_bench("linear", dir);
+  return bench;
+}
+
+rcm::sim::IncisionMotion make_step(const Eigen::Vector3d& step) {
+  rcm::sim::IncisionMotion m;
+  m.name = "step";
+  m.step_m = step;
+  m.step_time_s = 15.0;
+  m.onset_s = 15.0;
+  return m;
+}
+
+void expect_safe(const rcm::sim::ClosedLoopScenario& s) {
+  const auto& open = s.open;
+  const auto& closed = s.closed;
+  EXPECT_EQ(closed.wrong_direction_moves, 0);
+  EXPECT_LE(closed.peak_force_n, open.peak_force_n + 0.5) << "open " << open.peak_force_n;
+  EXPECT_LE(closed.rms_force_after_settle_n, open.rms_force_after_settle_n + 0.1)
+      << "open " << open.rms_force_after_settle_n;
+  EXPECT_LE(closed.residual_misalignment_m, open.residual_misalignment_m + 0.0005)
+      << "open " << open.residual_misalignment_m;
+}
+
+rcm::sim::ClosedLoopOptions short_options() {
+  rcm::sim::ClosedLoopOptions o;
+  o.duration_s = 60.0;
+  o.settled_after_s = 25.0;
+  return o;
+}
+
+TEST(ClosedLoopSafety, AnUnseenPayloadNeverMakesItWorse) {
+  const PreparedBench& bench = get_linear_bench();
+  rcm::sim::SimConfig heavy = bench.config;
+  heavy.arm.insertion_stage.mass_kg += 0.2;  // 200 g the free-space model never saw
+  const auto r = rcm::sim::run_closed_loop_experiment(heavy, *bench.pipeline,
+                                                      {make_step(Eigen::Vector3d(0.006, 0.0, 0.008))}, short_options());
+  ASSERT_EQ(r.size(), 1u);
+  expect_safe(r[0]);
+  // The model cannot explain the torques: it says so, and holds.
+  bool mismatch = false;
+  for (const auto& a : r[0].closed.advice) mismatch |= a.second.find("does not explain") != std::string::npos;
+  EXPECT_TRUE(mismatch);
+}
+
+TEST(ClosedLoopSafety, AStiffeningTissueNeverMakesItWorse) {
+  static rcm::test::TempDir dir("rcm_closed_loop_stiffening");
+  const PreparedBench bench = prepare_bench("stiffening", dir);
+  const auto r = rcm::sim::run_closed_loop_experiment(bench.config, *bench.pipeline,
+                                                      {make_step(Eigen::Vector3d(0.006, 0.0, 0.008))}, short_options());
+  expect_safe(r[0]);
+  EXPECT_LT(r[0].closed.residual_misalignment_m, r[0].open.residual_misalignment_m) << "it should still help";
+}
+
+TEST(ClosedLoopSafety, APureRadialOffsetHoldsOrMovesTheRightWay) {
+  // D = 0: the pad plane through the RCM, where the paper's model cannot see a
+  // radial offset from the motion (the stretch does not change as the shaft pivots).
+  const PreparedBench& bench = get_linear_bench();
+  const auto r = rcm::sim::run_closed_loop_experiment(bench.config, *bench.pipeline,
+                                                      {make_step(Eigen::Vector3d(0.008, 0.0, 0.0))}, short_options());
+  expect_safe(r[0]);
+}
+
+TEST(ClosedLoopSafety, AnArmAtRestHolds) {
+  // No motion, no information: the correction must not move on a prior.
+  const PreparedBench& bench = get_linear_bench();
+  rcm::sim::ClosedLoopOptions o = short_options();
+  o.teleoperation = false;
+  const auto r = rcm::sim::run_closed_loop_experiment(bench.config, *bench.pipeline,
+                                                      {make_step(Eigen::Vector3d(0.006, 0.0, 0.008))}, o);
+  expect_safe(r[0]);
+  EXPECT_EQ(r[0].closed.moves, 0);
+  for (auto a : r[0].closed.action) EXPECT_EQ(a, rcm::CorrectionAction::hold);
+}
+
 }  // namespace
+

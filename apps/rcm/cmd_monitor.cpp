@@ -147,6 +147,7 @@ void run(const Options& o) {
                    {"axial_friction_n", setup.tissue.parameters[3]}};
     j["final"] = {{"misalignment_m", rcm::cli::to_json(final_out.misalignment_m)},
                   {"sd_m", rcm::cli::to_json(final_out.sd_m)},
+                  {"fit_cost", final_out.fit_cost},
                   {"hypothesis", final_out.hypothesis}};
     if (truth) {
       j["truth_m"] = rcm::cli::to_json(*truth);

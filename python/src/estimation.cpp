@@ -269,6 +269,8 @@ void bind_estimation(py::module_& m) {
       .def_readonly("f_inc_base", &OnlineOutput::f_inc_base, "the model's force now, base frame, N")
       .def_readonly("force_norm_n", &OnlineOutput::force_norm_n)
       .def_readonly("cusum", &OnlineOutput::cusum)
+      .def_readonly("fit_cost", &OnlineOutput::fit_cost,
+                    "the reported filter's mean robust loss per sample: about 1.5 when the model explains the residual")
       .def_readonly("onset", &OnlineOutput::onset)
       .def_readonly("onset_time", &OnlineOutput::onset_time)
       .def_readonly("alarm", &OnlineOutput::alarm)
@@ -355,6 +357,7 @@ void bind_estimation(py::module_& m) {
   py::enum_<HoldReason>(m, "HoldReason")
       .value("none", HoldReason::none)
       .value("no_onset", HoldReason::no_onset)
+      .value("model_mismatch", HoldReason::model_mismatch)
       .value("not_confident", HoldReason::not_confident)
       .value("within_tolerance", HoldReason::within_tolerance);
   py::class_<CorrectionOptions>(m, "CorrectionOptions", "Gates and limits of the RCM correction (m, m/s)")
@@ -364,6 +367,8 @@ void bind_estimation(py::module_& m) {
                      "software shifts up to this in all, beyond: re-docking (default 0.010)")
       .def_readwrite("max_rate_m_per_s", &CorrectionOptions::max_rate_m_per_s, "speed of the software shift (default 0.005)")
       .def_readwrite("confidence_z", &CorrectionOptions::confidence_z, "1.96: the 95 % interval")
+      .def_readwrite("max_fit_cost", &CorrectionOptions::max_fit_cost,
+                     "hold above this OnlineOutput.fit_cost: the model does not explain the torques (default 10)")
       .def_readwrite("release_fraction", &CorrectionOptions::release_fraction, "back to hold below this x tolerance")
       .def_readwrite("max_step_dt_s", &CorrectionOptions::max_step_dt_s, "a step after a gap covers at most this long");
   py::class_<CorrectionOutput>(m, "CorrectionOutput", "The action after a sample (estimation/correction.hpp)")
@@ -378,6 +383,7 @@ void bind_estimation(py::module_& m) {
       .def_readonly("distance_m", &CorrectionOutput::distance_m)
       .def_readonly("distance_low_m", &CorrectionOutput::distance_low_m)
       .def_readonly("distance_high_m", &CorrectionOutput::distance_high_m)
+      .def_readonly("fit_cost", &CorrectionOutput::fit_cost)
       .def_readonly("step_base", &CorrectionOutput::step_base, "software RCM shift commanded now, base frame, m")
       .def_readonly("applied_base", &CorrectionOutput::applied_base, "the shift in effect once the step is made")
       .def("__repr__", [](const CorrectionOutput& c) {

@@ -18,6 +18,7 @@ void CorrectionOptions::check() const {
   if (!(confidence_z > 0)) fail("confidence_z must be > 0");
   if (!(release_fraction > 0 && release_fraction <= 1)) fail("release_fraction must be in (0, 1]");
   if (!(max_step_dt_s > 0)) fail("max_step_dt_s must be > 0");
+  if (!(max_fit_cost > 0)) fail("max_fit_cost must be > 0");
 }
 
 const char* to_string(CorrectionAction action) {
@@ -33,6 +34,7 @@ const char* to_string(HoldReason reason) {
   switch (reason) {
     case HoldReason::none: return "none";
     case HoldReason::no_onset: return "no_onset";
+    case HoldReason::model_mismatch: return "model_mismatch";
     case HoldReason::not_confident: return "not_confident";
     case HoldReason::within_tolerance: return "within_tolerance";
   }
@@ -105,6 +107,7 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
   out.distance_m = b.distance;
   out.distance_low_m = b.low;
   out.distance_high_m = b.high;
+  out.fit_cost = estimate.fit_cost;
 
   auto hold = [&](HoldReason reason) {
     out.action = CorrectionAction::hold;
@@ -119,6 +122,8 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
   const HoldReason settled = b.high <= within_bound ? HoldReason::within_tolerance : HoldReason::not_confident;
   if (!finite || !estimate.onset) {
     hold(HoldReason::no_onset);
+  } else if (!(estimate.fit_cost <= o.max_fit_cost)) {
+    hold(HoldReason::model_mismatch);
   } else if (previous == CorrectionAction::hold && b.low <= o.tolerance_m) {
     hold(settled);
   } else if (previous != CorrectionAction::hold && b.low <= 0.0) {
@@ -203,6 +208,10 @@ std::string describe_correction(const CorrectionOutput& c, const RcmCorrector& c
     case CorrectionAction::hold:
       switch (c.reason) {
         case HoldReason::no_onset: return "hold: no misalignment detected";
+        case HoldReason::model_mismatch:
+          return fmt::format("hold: the model does not explain the joint torques (fit cost {:.1f} above {:.1f}): "
+                             "check the free-space model (payload, instrument) before trusting the estimate",
+                             c.fit_cost, o.max_fit_cost);
         case HoldReason::not_confident: return fmt::format("hold: not yet confident (estimate {}, {})", total, interval);
         case HoldReason::within_tolerance:
           return fmt::format("hold: the RCM is within {} of the incision (estimate {}, {})", format_mm(o.tolerance_m),

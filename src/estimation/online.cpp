@@ -71,6 +71,7 @@ void OnlineEstimator::reset(Workspace& ws) const {
     hyp.cost = 0.0;
   }
   ws.started = false;
+  ws.cost_weight = 0.0;
   ws.last_time = 0.0;
   ws.output = OnlineOutput{};
   ws.output.misalignment_m = ws.hypotheses[0].p;
@@ -133,6 +134,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     const double c = o.huber_scale * std::sqrt(3.0);
     auto rho = [c](double r) { return r <= c ? 0.5 * r * r : c * r - 0.5 * c * c; };
     double prior_cost_sample = 0.0;
+    ws.cost_weight = forget * ws.cost_weight + (1.0 - forget);
     for (int h = 0; h < ws.num_hypotheses; ++h) {
       Hypothesis& hyp = ws.hypotheses[static_cast<std::size_t>(h)];
       Jet p[3], tau[3];
@@ -190,6 +192,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
   out.hypothesis = best;
   out.misalignment_m = chosen.p;
   out.sd_m = chosen.P.diagonal().cwiseMax(0.0).cwiseSqrt();
+  out.fit_cost = ws.cost_weight > 0 ? chosen.cost / ws.cost_weight : 0.0;
 
   if (out.used) {
     Eigen::Vector3d f;

@@ -46,7 +46,11 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
                       const ClosedLoopOptions& o, bool closed) {
   const Eigen::Vector3d& q0 = config.protocol.q0;
   const Eigen::Matrix3d R = loop.corrector().incision().R_base_inc;
-  const ReferenceTrajectory reference = make_teleop_reference(config, "closed-loop", o.duration_s);
+  ReferenceTrajectory reference;
+  if (o.teleoperation)
+    reference = make_teleop_reference(config, "closed-loop", o.duration_s);
+  else
+    reference.add_hold(0.0, q0);
   // The tissue's own parameters; its anchor follows the hooks.
   const TissueModel tissue(config.tissue, q0, motion.get_misalignment(0.0));
 
@@ -82,7 +86,10 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
       last_reason = c.reason;
     }
     const double f = f_true.norm();
-    if (t >= motion.onset_s) run.peak_force_n = std::max(run.peak_force_n, f);
+    if (t >= motion.onset_s) {
+      run.peak_force_n = std::max(run.peak_force_n, f);
+      run.max_fit_cost = std::max(run.max_fit_cost, c.fit_cost);
+    }
     if (t >= motion.onset_s + o.settled_after_s) force_after_settle.push_back(f);
     if (f > o.force_threshold_n) last_above = t;
     if (t >= o.duration_s - 10.0) {
@@ -138,6 +145,7 @@ nlohmann::json run_json(const ClosedLoopRun& r) {
   j["residual_misalignment_m"] = r.residual_misalignment_m;
   j["wrong_direction_moves"] = r.wrong_direction_moves;
   j["moves"] = r.moves;
+  j["max_fit_cost"] = r.max_fit_cost;
   j["final_shift_base_m"] = {r.final_shift_base[0], r.final_shift_base[1], r.final_shift_base[2]};
   nlohmann::json advice = nlohmann::json::array();
   for (const auto& [t, words] : r.advice) advice.push_back({{"time_s", t}, {"advice", words}});

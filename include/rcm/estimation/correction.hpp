@@ -7,6 +7,10 @@
 // move that puts the RCM on the incision is p itself in I, and R_base_inc p in
 // the base frame. Three actions:
 //
+// - hold, first of all, while the model does not explain the joint torques
+//   (OnlineOutput::fit_cost above max_fit_cost): a free-space model that
+//   misses a payload or a tool makes the estimate confidently wrong, and a
+//   shift on it would stretch the tissue further.
 // - hold: the RCM is within tolerance of the incision (the 95 % upper bound of
 //   the distance is), or the estimate is not sure either way: no advice while
 //   the interval along the move is wider than the move (|p| <= z sd_u, sd_u the
@@ -45,6 +49,10 @@ struct CorrectionOptions {
   double compensate_limit_m = 0.010;   // software shifts up to this (in all, since reset), beyond: re-dock
   double max_rate_m_per_s = 0.005;     // speed of the software shift
   double confidence_z = 1.96;          // the 95 % interval
+  // Above this fit cost the model does not explain the residual: hold. 1.5 is
+  // a perfect fit; 10 is an RMS innovation of about 2.6 free-space-model sigma
+  // (docs/compensation.md has what it separates on the bench).
+  double max_fit_cost = 10.0;
   double release_fraction = 0.5;       // back to hold below this fraction of the tolerance
   // A sample after a gap in the stream moves the RCM by at most this much time
   // at max_rate: a silence is not a licence to jump.
@@ -56,8 +64,9 @@ enum class CorrectionAction { hold, compensate, reposition };
 const char* to_string(CorrectionAction action);
 
 // Why the corrector holds (none when it acts).
-// no_onset: the estimator has not detected a misalignment (or has no finite estimate).
-enum class HoldReason { none, no_onset, not_confident, within_tolerance };
+// no_onset: the estimator has not detected a misalignment (or has no finite
+// estimate); model_mismatch: the model does not explain the joint torques.
+enum class HoldReason { none, no_onset, model_mismatch, not_confident, within_tolerance };
 const char* to_string(HoldReason reason);
 
 struct CorrectionOutput {
@@ -74,6 +83,7 @@ struct CorrectionOutput {
   double distance_m = 0.0;       // |move|
   double distance_low_m = 0.0;   // |move| - z sd_u, at least 0
   double distance_high_m = 0.0;  // |move| + z sd_u
+  double fit_cost = 0.0;         // the estimate's (OnlineOutput::fit_cost)
   // The software shift of the RCM commanded at this sample (zero unless
   // compensating), and the shift in effect once it is made, base frame.
   Eigen::Vector3d step_base = Eigen::Vector3d::Zero();

@@ -89,6 +89,12 @@ struct OnlineOutput {
   Eigen::Vector3d f_inc_base = Eigen::Vector3d::Zero();      // the model's force now, base frame
   double force_norm_n = 0.0;
   double cusum = 0.0;
+  // How well the reported filter explains the residual: the forgotten mean of
+  // its robust loss rho(|nu / sigma|) per sample (normalized for the samples
+  // seen). About 1.5 (half a chi-square of 3) when the model and the free-space
+  // model's error scale fit the data; a residual the tissue model cannot
+  // explain (a payload the free-space model never saw) raises it.
+  double fit_cost = 0.0;
   bool onset = false;                // onset detected (at or before this sample)
   double onset_time = 0.0;
   bool alarm = false;                // force above the threshold now
@@ -113,6 +119,7 @@ class OnlineEstimator {
   struct Workspace {
     std::array<Hypothesis, kMaxHypotheses> hypotheses;
     int num_hypotheses = 0;
+    double cost_weight = 0.0;  // the forgotten weight of the samples in the costs
     bool started = false;
     double last_time = 0.0;
     OnlineOutput output;

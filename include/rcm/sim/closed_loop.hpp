@@ -49,6 +49,7 @@ struct ClosedLoopOptions {
   double settled_after_s = 30.0;  // from the motion's onset: the RMS force is over what follows
   double force_threshold_n = 2.0;  // time_to_below: from onset until |f| stays below this
   double series_rate_hz = 20.0;    // of the time series kept for the figures
+  bool teleoperation = true;       // false: the arm holds at q0 (no motion, no information)
   CorrectionOptions correction;
 };
 
@@ -62,6 +63,7 @@ struct ClosedLoopRun {
   double residual_misalignment_m = 0.0;  // mean |incision - RCM| over the last 10 s
   int wrong_direction_moves = 0;         // commanded steps against the true remaining misalignment
   int moves = 0;                         // commanded steps (carried out in the closed run only)
+  double max_fit_cost = 0.0;             // the estimate's largest fit cost from the onset
   Eigen::Vector3d final_shift_base = Eigen::Vector3d::Zero();
   // Time series at series_rate_hz: true |f|, true |incision - RCM|, the action.
   std::vector<double> time_s, force_n, misalignment_m;
