@@ -47,6 +47,14 @@
 
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the CDR reader below reads little-endian XCDR1 in place");
 
+// Instrumented, ASan reports a new/delete size mismatch inside Debian's Fast
+// DDS 2.9 itself (its statistics reader, allocated and freed by libfastrtps):
+// that one check is off in this test program, every other stays on
+// (ASAN_OPTIONS given to the process add to these defaults).
+#if defined(__SANITIZE_ADDRESS__)
+extern "C" const char* __asan_default_options() { return "new_delete_type_mismatch=0"; }
+#endif
+
 namespace {
 
 namespace fs = std::filesystem;
