@@ -22,15 +22,11 @@ namespace {
 
 // A small bench: 3 min of free space and the paper's protocol on 40 s trials at
 // D = 20 and 40 mm, with and without a radial offset.
+// The small bench: tests/data/study_bench_config.json over the defaults.
 rcm::sim::SimConfig make_small_config() {
   rcm::sim::SimConfig config = rcm::sim::make_default_config();
-  config.protocol.free_space_s = 180.0;
-  config.protocol.calibration_s = 40.0;
-  config.protocol.trial_s = 40.0;
-  config.protocol.static_hold_s = 4.0;
-  config.protocol.baseline_hold_s = 4.0;
-  config.protocol.coaxial_offsets_m = {0.020, 0.040};
-  config.protocol.write_truth = false;
+  const fs::path file = fs::path(RCM_SOURCE_DIR) / "tests" / "data" / "study_bench_config.json";
+  rcm::sim::apply_config_json(config, rcm::load_json_file(file), file.string());
   return config;
 }
 
@@ -39,20 +35,26 @@ struct Bench {
   rcm::Session session;
 };
 
-// The small bench, simulated once for the whole file.
+// The small bench: the ctest fixture's (study_test_session, simulated once per
+// run), or simulated here when the program runs on its own. `dir` is this
+// process's own folder for what the tests write.
 const Bench& bench() {
   static const Bench b = [] {
     Bench out;
     std::random_device rd;
     out.dir = fs::temp_directory_path() / ("rcm_test_study_" + std::to_string(rd()));
-    const rcm::sim::SimConfig config = make_small_config();
     static const fs::path cleanup_dir = out.dir;
     std::atexit([] {
       std::error_code ec;
       fs::remove_all(cleanup_dir, ec);
     });
-    const auto written = rcm::sim::simulate_session(config, out.dir);
-    out.session = rcm::load_session(written.manifest);
+    const fs::path fixture = fs::path(RCM_STUDY_TEST_DIR) / "session.json";
+    if (fs::exists(fixture)) {
+      fs::create_directories(out.dir);
+      out.session = rcm::load_session(fixture);
+    } else {
+      out.session = rcm::load_session(rcm::sim::simulate_session(make_small_config(), out.dir).manifest);
+    }
     return out;
   }();
   return b;
