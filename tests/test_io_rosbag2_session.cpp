@@ -17,6 +17,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "run_cli.hpp"
 #include "temp_dir.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/rosbag2.hpp"
@@ -34,16 +35,7 @@ struct TempDir : rcm::test::TempDir {
 
 constexpr const char* kForceTopic = "/PSM1/body/measured_cf";
 
-// Runs the CLI; returns its exit status, with stdout and stderr in `out`.
-int run_cli(const std::string& args, std::string& out) {
-  const std::string cmd = std::string(RCM_CLI_PATH) + " " + args + " 2>&1";
-  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(cmd.c_str(), "r"), pclose);
-  out.clear();
-  char buf[4096];
-  while (std::size_t n = fread(buf, 1, sizeof buf, pipe.get())) out.append(buf, n);
-  const int status = pclose(pipe.release());
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
+using rcm::test::run_cli;
 
 nlohmann::json read_json(const fs::path& p) {
   std::ifstream in(p);

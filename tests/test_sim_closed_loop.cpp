@@ -17,6 +17,7 @@
 #include "rcm/io/session.hpp"
 #include "rcm/sim/bench.hpp"
 #include "rcm/sim/closed_loop.hpp"
+#include "run_cli.hpp"
 #include "temp_dir.hpp"
 
 namespace fs = std::filesystem;
@@ -43,13 +44,7 @@ TEST(IncisionMotion, StepDriftAndBreathing) {
 }
 
 int run_cli(const std::string& args, std::string& out) {
-  const std::string cmd = std::string(RCM_CLI_PATH) + " " + args + " 2>/dev/null";
-  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(cmd.c_str(), "r"), pclose);
-  out.clear();
-  char buf[4096];
-  while (std::size_t n = fread(buf, 1, sizeof buf, pipe.get())) out.append(buf, n);
-  const int status = pclose(pipe.release());
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return rcm::test::run_cli(args, out, rcm::test::CliOutput::stdout_only);
 }
 
 TEST(ClosedLoopBench, TheCorrectionBringsTheRcmBackWithoutAWrongMove) {
