@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <memory>
 #include <string>
 
@@ -209,6 +210,28 @@ TEST(ClosedLoopSafety, AnArmAtRestHolds) {
   expect_safe(r[0]);
   EXPECT_EQ(r[0].closed.moves, 0);
   for (auto a : r[0].closed.action) EXPECT_EQ(a, rcm::CorrectionAction::hold);
+}
+
+// After a manual re-docking: a short motion about the new RCM, and the check
+// says how far the RCM still is from the incision, within 1.5 mm of the truth.
+TEST(ClosedLoopRedocking, TheResidualIsReportedWithin1p5MmOfTheTruth) {
+  const PreparedBench& bench = get_linear_bench();
+  rcm::sim::ClosedLoopOptions o = short_options();
+  o.duration_s = 40.0;
+  for (const Eigen::Vector3d residual : {Eigen::Vector3d(0.003, -0.002, 0.004), Eigen::Vector3d(0.0005, 0.0, 0.0005)}) {
+    rcm::sim::IncisionMotion redocked;
+    redocked.name = "redocked";
+    redocked.offset_m = residual;  // what the team's re-docking left
+    const auto r = rcm::sim::run_closed_loop_experiment(bench.config, *bench.pipeline, {redocked}, o);
+    const auto& run = r[0].open;  // the team does not let the software move the RCM here
+    std::cout << "[ redock   ] residual " << 1e3 * residual.norm() << " mm, estimate off by "
+              << 1e3 * (run.final_estimate_m - residual).norm() << " mm: " << run.alignment << "\n";
+    EXPECT_TRUE(run.final_truth_m.isApprox(residual, 1e-12));
+    EXPECT_LT((run.final_estimate_m - residual).norm(), 0.0015)
+        << "estimate " << run.final_estimate_m.transpose() << ", truth " << residual.transpose();
+    EXPECT_FALSE(run.alignment.empty());
+    if (residual.norm() > 0.004) EXPECT_EQ(run.alignment.find("aligned within"), std::string::npos) << run.alignment;
+  }
 }
 
 }  // namespace

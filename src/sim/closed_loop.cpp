@@ -113,6 +113,10 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   if (last_above < o.duration_s - 5.0) run.time_to_below_s = std::max(0.0, last_above - motion.onset_s);
   run.residual_misalignment_m = residual_count ? residual_sum / residual_count : 0.0;
   run.final_shift_base = shift_base;
+  const OnlineOutput& estimate = get_online_output(ws.pipeline.estimator);
+  run.final_estimate_m = estimate.misalignment_m;
+  run.final_truth_m = motion.get_misalignment(estimate.time) - R.transpose() * shift_base;
+  run.alignment = check_alignment(estimate, loop.corrector().incision(), loop.corrector().options()).message;
   return run;
 }
 
@@ -147,6 +151,9 @@ nlohmann::json run_json(const ClosedLoopRun& r) {
   j["moves"] = r.moves;
   j["max_fit_cost"] = r.max_fit_cost;
   j["final_shift_base_m"] = {r.final_shift_base[0], r.final_shift_base[1], r.final_shift_base[2]};
+  j["final_estimate_m"] = {r.final_estimate_m[0], r.final_estimate_m[1], r.final_estimate_m[2]};
+  j["final_truth_m"] = {r.final_truth_m[0], r.final_truth_m[1], r.final_truth_m[2]};
+  j["alignment"] = r.alignment;
   nlohmann::json advice = nlohmann::json::array();
   for (const auto& [t, words] : r.advice) advice.push_back({{"time_s", t}, {"advice", words}});
   j["advice"] = advice;

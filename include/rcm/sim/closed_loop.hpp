@@ -65,6 +65,11 @@ struct ClosedLoopRun {
   int moves = 0;                         // commanded steps (carried out in the closed run only)
   double max_fit_cost = 0.0;             // the estimate's largest fit cost from the onset
   Eigen::Vector3d final_shift_base = Eigen::Vector3d::Zero();
+  // At the end: the estimate (relative to the RCM as it then is), the true
+  // misalignment, and the re-docking check's words on that estimate.
+  Eigen::Vector3d final_estimate_m = Eigen::Vector3d::Zero();
+  Eigen::Vector3d final_truth_m = Eigen::Vector3d::Zero();
+  std::string alignment;
   // Time series at series_rate_hz: true |f|, true |incision - RCM|, the action.
   std::vector<double> time_s, force_n, misalignment_m;
   std::vector<CorrectionAction> action;
