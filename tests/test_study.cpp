@@ -9,12 +9,14 @@
 #include <memory>
 #include <random>
 
+#include "rcm/common/error.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/estimation/online.hpp"
 #include "rcm/estimation/study.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/sim/bench.hpp"
 #include "rcm/sim/sim_config.hpp"
+#include "test_dynamics_synthetic.hpp"
 
 namespace fs = std::filesystem;
 
@@ -88,6 +90,35 @@ rcm::TorqueModelFitter linear_fitter() {
 const rcm::StudyResult& study() {
   static const rcm::StudyResult r = rcm::run_study(bench().session, linear_options(), linear_fitter());
   return r;
+}
+
+// The fitter of rcm::core alone (what a program without rcm::torch passes to
+// run_study): the linear model, exactly as fit_linear_torque_model fits it, and
+// an InputError naming StudyOptions::model_kind for the networks.
+TEST(Study, LinearFitterFitsTheLinearModelAndRefusesTheNetworks) {
+  rcm::test::SyntheticArmOptions arm;
+  arm.duration_s = 30.0;
+  const std::vector<rcm::Recording> recordings{rcm::test::make_synthetic_free_space(arm)};
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const rcm::TorqueModelFitter fitter = rcm::get_linear_torque_model_fitter();
+  const rcm::dynamics::FitResult fit = fitter(rcm::dynamics::TorqueModelKind::linear, recordings, options);
+  ASSERT_TRUE(fit.model);
+  EXPECT_EQ(fit.model->kind(), rcm::dynamics::TorqueModelKind::linear);
+  const rcm::dynamics::FitResult direct = rcm::dynamics::fit_linear_torque_model(recordings, options);
+  // The same parameters (the file's "training" part records the fit's duration too).
+  EXPECT_EQ(rcm::dynamics::torque_model_to_json(*fit.model)["parameters"].dump(),
+            rcm::dynamics::torque_model_to_json(*direct.model)["parameters"].dump());
+  for (const auto kind : {rcm::dynamics::TorqueModelKind::lstm, rcm::dynamics::TorqueModelKind::mlp,
+                          rcm::dynamics::TorqueModelKind::hybrid}) {
+    try {
+      fitter(kind, recordings, options);
+      ADD_FAILURE() << rcm::dynamics::to_string(kind) << " was fitted";
+    } catch (const rcm::InputError& e) {
+      EXPECT_EQ(e.where().field, "model_kind");
+      EXPECT_NE(std::string(e.what()).find(rcm::dynamics::to_string(kind)), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(Study, RecoversSimulatedMisalignmentsWithTheRightSigns) {

@@ -7,6 +7,7 @@
 
 #include "rcm/common/error.hpp"
 #include "rcm/common/interrupt.hpp"
+#include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/force/incision_force.hpp"
 #include "rcm/io/json_file.hpp"
@@ -23,6 +24,17 @@ void progress(bool verbose, const std::string& text) {
 }
 
 }  // namespace
+
+TorqueModelFitter get_linear_torque_model_fitter() {
+  return [](dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings,
+            const dynamics::FitOptions& options) {
+    if (kind != dynamics::TorqueModelKind::linear)
+      throw InputError(InputLocation::plain("StudyOptions", "model_kind"),
+                       "rcm::core fits only the linear model; fit " + dynamics::to_string(kind) +
+                           " with rcm::torch (fit_torque_model) or `rcm dynamics fit` and pass it as model_file");
+    return dynamics::fit_linear_torque_model(recordings, options);
+  };
+}
 
 std::optional<double> TrialOutcome::get_error_m() const {
   if (!truth_m) return std::nullopt;

@@ -26,6 +26,12 @@ namespace rcm {
 using TorqueModelFitter = std::function<dynamics::FitResult(
     dynamics::TorqueModelKind, const std::vector<Recording>&, const dynamics::FitOptions&)>;
 
+// The fitter of rcm::core alone: fit_linear_torque_model for the linear kind;
+// any other kind throws InputError naming StudyOptions::model_kind (networks
+// are fitted with rcm::torch's fit_torque_model or `rcm dynamics fit` and reach
+// the study as StudyOptions::model_file, which needs no fitter at all).
+TorqueModelFitter get_linear_torque_model_fitter();
+
 struct StudyOptions {
   // "joint" (all offsets in torque space, with 95 % intervals; the three-step
   // estimate is computed beside it) or "three-step" (paper Algorithm 1 alone).
