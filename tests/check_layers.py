@@ -4,13 +4,14 @@
 Layers, bottom up (docs/architecture.md):
 
     common < kinematics < io < dynamics < force < tissue < estimation < live < sim
-           < apps, python, ros, dds   (the top: each of these includes the library,
-                                       none includes another)
+           < apps, python, ros, dds, examples   (the top: each of these includes
+                                                 the library, none includes another)
 
 A file's layer is its directory: include/rcm/<layer>/ and src/<layer>/ for the
-library, apps/ (the CLI), python/ (the module), ros/ and dds/ (the nodes). Every
-`#include "rcm/<layer>/..."` or `#include "<layer>/..."` (also with <...>) of
-every C/C++ file under include/, src/, apps/, python/, ros/ and dds/ is checked.
+library, apps/ (the CLI), python/ (the module), ros/ and dds/ (the nodes),
+examples/ (programs for users to copy). Every `#include "rcm/<layer>/..."` or
+`#include "<layer>/..."` (also with <...>) of every C/C++ file under include/,
+src/, apps/, python/, ros/, dds/ and examples/ is checked.
 An include of a layer above the file's own, of another top-level part, or of
 an rcm/<name>/ that is not a layer fails with FILE:LINE.
 
@@ -28,11 +29,11 @@ import sys
 import tempfile
 
 LIBRARY = ["common", "kinematics", "io", "dynamics", "force", "tissue", "estimation", "live", "sim"]
-TOP = ["apps", "python", "ros", "dds"]
+TOP = ["apps", "python", "ros", "dds", "examples"]
 RANK = {name: i for i, name in enumerate(LIBRARY)}
 RANK.update({name: len(LIBRARY) for name in TOP})
 
-SCANNED = ("include/", "src/", "apps/", "python/", "ros/", "dds/")
+SCANNED = ("include/", "src/", "apps/", "python/", "ros/", "dds/", "examples/")
 SOURCE_SUFFIXES = (".h", ".hh", ".hpp", ".hxx", ".c", ".cc", ".cpp", ".cxx", ".ipp", ".inl")
 
 # (file, included layer): why the include is allowed for now. Keep one line
