@@ -68,7 +68,7 @@ int main(int argc, char** argv) {
       std::printf(" joint %d %.3f", e.index, e.rmse);
     std::printf("\ntissue model: %s, k1 %.0f N/m\n", result.joint_tissue->family.c_str(),
                 result.joint_tissue->parameters[0]);
-    std::printf("%-12s %-28s %-40s %s\n", "trial", "estimate [dr_x, dr_y, D], mm", "95 % intervals, mm",
+    std::printf("%-12s %-30s %-40s %s\n", "trial", "estimate [dr_x, dr_y, D], mm", "95 % intervals, mm",
                 "three-step, mm");
     for (const rcm::TrialOutcome& trial : result.trials) {
       // joint is set whenever the method is "joint"; a solver that did not
@@ -80,7 +80,7 @@ int main(int argc, char** argv) {
       std::snprintf(estimate, sizeof estimate, "[%.2f, %.2f, %.2f]", p[0], p[1], p[2]);
       std::snprintf(intervals, sizeof intervals, "[%.1f, %.1f] [%.1f, %.1f] [%.1f, %.1f]", lo[0], hi[0], lo[1], hi[1],
                     lo[2], hi[2]);
-      std::printf("%-12s %-28s %-40s [%.1f, %.1f, %.1f]%s\n", trial.name.c_str(), estimate, intervals, three_step[0],
+      std::printf("%-12s %-30s %-40s [%.1f, %.1f, %.1f]%s\n", trial.name.c_str(), estimate, intervals, three_step[0],
                   three_step[1], three_step[2], joint.solver.converged ? "" : "  (solver did not converge)");
       // A simulated session carries the truth; a clinical one does not.
       if (trial.truth_m) {

@@ -54,7 +54,7 @@ def main(argv):
     errors = " ".join(f"joint {e.index} {e.rmse:.3f}" for e in result.free_space_errors)
     print(f"free-space model: {result.model.kind.name}, held-out RMSE {errors}")
     print(f"tissue model: {result.joint_tissue.family}, k1 {result.joint_tissue.parameters[0]:.0f} N/m")
-    print(f"{'trial':<12} {'estimate [dr_x, dr_y, D], mm':<28} {'95 % intervals, mm':<40} three-step, mm")
+    print(f"{'trial':<12} {'estimate [dr_x, dr_y, D], mm':<30} {'95 % intervals, mm':<40} three-step, mm")
     for trial in result.trials:
         # joint is set whenever the method is "joint"; a solver that did not
         # converge is reported, not raised.
@@ -64,7 +64,7 @@ def main(argv):
         estimate = f"[{p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}]"
         intervals = " ".join(f"[{lo[i]:.1f}, {hi[i]:.1f}]" for i in range(3))
         note = "" if joint.solver.converged else "  (solver did not converge)"
-        print(f"{trial.name:<12} {estimate:<28} {intervals:<40} "
+        print(f"{trial.name:<12} {estimate:<30} {intervals:<40} "
               f"[{three_step[0]:.1f}, {three_step[1]:.1f}, {three_step[2]:.1f}]{note}")
         # A simulated session carries the truth; a clinical one does not.
         if trial.truth_m is not None:
