@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <random>
 
@@ -119,16 +120,24 @@ TEST(RigidBody, PointMassOnTheInsertionAxisIsInTheSpan) {
 // A rigid arm under a tilted base with Dahl friction, driven along a periodic
 // path at `speed` (1: the fast run; 0.5: the same path points at half the
 // speed, logged at half the rate, as a dVRK identification run).
-rcm::Recording make_rigid_arm_run(double speed, double rate_hz, double duration_s, unsigned seed) {
+// The 19 inertia coefficients of an arm whose links are not those of a
+// remote-centre arm.
+Eigen::Matrix<double, kInertiaTerms, 1> get_free_inertia() {
+  Eigen::Matrix<double, kInertiaTerms, 1> inertia;
+  inertia << 0.4, 3.0, 0.15, 0.2, -3.0, 0.03, 0.1, 0.5, 0.02, 0.1, 0.4, -0.01, 0.2, 0.3, 0.5, 6.0, 0.01, -0.02, 0.01;
+  return inertia;
+}
+
+rcm::Recording make_rigid_arm_run(double speed, double rate_hz, double duration_s, unsigned seed,
+                                  const Eigen::Matrix<double, kInertiaTerms, 1>& inertia = get_free_inertia(),
+                                  double sliding_mass = 0.0) {
   const Eigen::Vector3d g = Eigen::Vector3d(0.25, -0.3, 0.92).normalized();
   Eigen::Matrix<double, kGravityMoments, 1> v;
   v << 0.3, -0.4, 1.2, -0.6, 0.2, 2.5, 0.8;
   Eigen::Matrix<double, 17, kGravityMoments> P;
   rcm::dynamics::compute_gravity_moment_map(g, P);
   const Eigen::Matrix<double, 17, 1> gravity = P * v;
-  Eigen::Matrix<double, kInertiaTerms, 1> inertia;
-  inertia << 0.4, 3.0, 0.15, 0.2, -3.0, 0.03, 0.1, 0.5, 0.02, 0.1, 0.4, -0.01, 0.2, 0.3, 0.5, 6.0, 0.01, -0.02, 0.01;
-  const Eigen::Vector3d armature(0.03, 0.04, 0.3), viscous(0.02, 0.03, 0.3), coulomb(0.06, 0.08, 0.4),
+  const Eigen::Vector3d armature(0.03, 0.04, 0.3 + sliding_mass), viscous(0.02, 0.03, 0.3), coulomb(0.06, 0.08, 0.4),
       offset(0.1, -0.15, -1.2), x_c(0.01, 0.01, 0.001);
   const double a[3][3] = {{0.3, 0.1, 0.05}, {0.35, 0.12, 0.04}, {0.04, 0.02, 0.01}};
   const double w0 = 2 * M_PI / 4.0;
@@ -168,6 +177,83 @@ rcm::Recording make_rigid_arm_run(double speed, double rate_hz, double duration_
     q_prev = qv;
   }
   return r;
+}
+
+// The inertia coefficients of a remote-centre arm: a point mass turning with
+// the pitch frame at r, and a body of mass m sliding along the instrument axis
+// e = (0, 1, 0) (beta = 90 deg) whose centre is at c + q3 e.
+struct RemoteCenterArm {
+  double m_turning = 0.8, m_sliding = 0.35;
+  Eigen::Vector3d r{0.02, -0.15, 0.09}, c{0.01, -0.3, 0.04};
+  double beta = M_PI / 2;
+  Eigen::Matrix3d get_inertia_about_rcm() const {
+    auto point = [](double m, const Eigen::Vector3d& p) {
+      return Eigen::Matrix3d(m * (p.squaredNorm() * Eigen::Matrix3d::Identity() - p * p.transpose()));
+    };
+    return point(m_turning, r) + point(m_sliding, c);
+  }
+  Eigen::Matrix<double, rcm::dynamics::kRemoteCenterTerms, 1> get_parameters() const {
+    const Eigen::Matrix3d I = get_inertia_about_rcm();
+    const Eigen::Vector3d h = m_sliding * c;
+    Eigen::Matrix<double, rcm::dynamics::kRemoteCenterTerms, 1> x;
+    x << m_sliding, h[0], h[1], h[2], 0.5 * (I(2, 2) - I(1, 1)), I(1, 2), I(0, 2), I(0, 1);
+    return x;
+  }
+  Eigen::Matrix<double, kInertiaTerms, 1> get_inertia_coefficients() const {
+    Eigen::Matrix<double, kInertiaTerms, rcm::dynamics::kRemoteCenterTerms> M;
+    rcm::dynamics::compute_remote_center_map(beta, M);
+    return M * get_parameters();
+  }
+};
+
+TEST(RigidBody, RemoteCenterMapIsTheEnergyOfItsParameters) {
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 50; ++trial) {
+    const double beta = M_PI * (0.5 + 0.5 * u(rng));
+    Eigen::Matrix<double, rcm::dynamics::kRemoteCenterTerms, 1> x;
+    for (int k = 0; k < rcm::dynamics::kRemoteCenterTerms; ++k) x[k] = u(rng);
+    Eigen::Matrix<double, kInertiaTerms, rcm::dynamics::kRemoteCenterTerms> M;
+    rcm::dynamics::compute_remote_center_map(beta, M);
+    const double q[3] = {1.5 * u(rng), 1.2 * u(rng), 0.12 + 0.1 * u(rng)}, qd[3] = {u(rng), u(rng), 0.2 * u(rng)};
+    const Eigen::Matrix<double, kInertiaTerms, 1> theta = M * x;
+    EXPECT_NEAR(rcm::dynamics::compute_inertia_energy(theta, q, qd),
+                rcm::dynamics::compute_remote_center_energy(beta, x, q, qd), 1e-12)
+        << "trial " << trial;
+  }
+}
+
+TEST(RigidBody, RemoteCenterEnergyIsThatOfTheMovingMasses) {
+  // Half the mass times the squared speed of each point, by finite differences
+  // of its position in the base frame, against the remote-centre energy plus
+  // the constant diagonal terms (the armatures: (I_yy + I_zz) / 2 for yaw,
+  // I_xx for pitch, the sliding mass for insertion).
+  const RemoteCenterArm arm;
+  const Eigen::Vector3d e(0.0, std::sin(arm.beta), std::cos(arm.beta));
+  auto positions = [&](double t, Eigen::Vector3d& turning, Eigen::Vector3d& sliding) {
+    double q[3], qd[3], qdd[3];
+    path(t, q, qd, qdd);
+    const Eigen::Matrix3d R = (Eigen::AngleAxisd(q[0], Eigen::Vector3d::UnitZ()) *
+                               Eigen::AngleAxisd(q[1], Eigen::Vector3d::UnitX())).toRotationMatrix();
+    turning = R * arm.r;
+    sliding = R * (arm.c + q[2] * e);
+  };
+  const Eigen::Matrix3d I = arm.get_inertia_about_rcm();
+  for (double t : {0.3, 1.1, 2.6, 4.0}) {
+    const double h = 1e-6;
+    Eigen::Vector3d a1, b1, a0, b0;
+    positions(t + h, a1, b1);
+    positions(t - h, a0, b0);
+    const double T = 0.5 * arm.m_turning * ((a1 - a0) / (2 * h)).squaredNorm() +
+                     0.5 * arm.m_sliding * ((b1 - b0) / (2 * h)).squaredNorm();
+    double q[3], qd[3], qdd[3];
+    path(t, q, qd, qdd);
+    const double armatures = 0.5 * (0.5 * (I(1, 1) + I(2, 2)) * qd[0] * qd[0] + I(0, 0) * qd[1] * qd[1] +
+                                    arm.m_sliding * qd[2] * qd[2]);
+    EXPECT_NEAR(rcm::dynamics::compute_remote_center_energy(arm.beta, arm.get_parameters(), q, qd) + armatures, T,
+                1e-7 * (1.0 + T))
+        << "t " << t;
+  }
 }
 
 TEST(RigidBodyFit, CarriesAFastRunToTheSlowOne) {
@@ -225,6 +311,28 @@ TEST(RigidBodyFit, InertiaTravelsWithTheModelFileAndIsChecked) {
   } catch (const rcm::InputError& e) {
     EXPECT_NE(std::string(e.what()).find("parameters.sqrt_viscous"), std::string::npos) << e.what();
   }
+}
+
+TEST(RigidBodyFit, RemoteCenterArmTiesItsInertiaAndCarriesToTheSlowRun) {
+  // Links that are those of a remote-centre arm: the fit keeps the tied
+  // inertia, finds the sliding mass, and carries the fast run to the slow one.
+  const RemoteCenterArm arm;
+  const auto inertia = arm.get_inertia_coefficients();
+  const rcm::Recording fast = make_rigid_arm_run(1.0, 200.0, 60.0, 7, inertia, arm.m_sliding),
+                       slow = make_rigid_arm_run(0.5, 100.0, 120.0, 8, inertia, arm.m_sliding);
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const auto tied = rcm::dynamics::fit_linear_torque_model({fast}, options);
+  EXPECT_EQ(tied.summary.structure, "remote-center");
+  const auto& p = static_cast<const rcm::dynamics::LinearTorqueModel&>(*tied.model).parameters();
+  EXPECT_NEAR(p.inertia[15], arm.m_sliding, 0.05 * arm.m_sliding);  // qd2^2 q3^2: the sliding mass
+  EXPECT_NEAR(p.inertia[1], 0.5 * arm.m_sliding, 0.05 * arm.m_sliding);
+  EXPECT_EQ(p.inertia[10], 0.0);  // no qd1 qd2 q3^2 term for a body sliding across the pitch axis
+  const auto e = rcm::dynamics::evaluate_torque_model(*tied.model, {slow});
+  for (int j = 0; j < 3; ++j) EXPECT_LT(e[j].nrmse_percent, 2.0) << "joint " << j + 1;
+  // Off, the free coefficients are fitted.
+  options.remote_center = false;
+  EXPECT_EQ(rcm::dynamics::fit_linear_torque_model({fast}, options).summary.structure, "rigid-body");
 }
 
 }  // namespace

@@ -35,6 +35,7 @@ struct DynamicsArgs {
   bool json = false;
   bool streaming = false;
   bool generic_structure = false;
+  bool free_inertia = false;
   std::string model_path;
   double max_minutes = 10.0;
   int hidden = 0, layers = 0, max_epochs = 300, threads = 2, window = 0, streams = 0;
@@ -109,6 +110,9 @@ void run_fit(const DynamicsArgs& a) {
   if (a.generic_structure && kind != TorqueModelKind::linear && kind != TorqueModelKind::hybrid)
     throw rcm::InputError(rcm::cli::flag_location("--generic-structure"), "is for --model linear or hybrid only");
   o.rigid_body = !a.generic_structure;
+  if (a.free_inertia && kind != TorqueModelKind::linear && kind != TorqueModelKind::hybrid)
+    throw rcm::InputError(rcm::cli::flag_location("--free-inertia"), "is for --model linear or hybrid only");
+  o.remote_center = !a.free_inertia;
   const auto recs = load_all(a.recordings, a.dedupe);
   if (a.output_delay && kind == TorqueModelKind::lstm && !recs.empty()) {
     // Checked here too, so that a delay longer than the burn-in names the flag.
@@ -277,6 +281,9 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->add_flag("--generic-structure", args->generic_structure,
                 "linear, hybrid: a free 17-term potential and a constant armature per joint instead of the rigid-body "
                 "structure (configuration-dependent inertia, velocity products, rigid links under one gravity direction)");
+  fit->add_flag("--free-inertia", args->free_inertia,
+                "linear, hybrid: the rigid-body structure's 19 inertia coefficients free instead of tied by the bodies "
+                "of a remote-centre arm (links turning about the RCM, a body sliding along the instrument axis)");
   fit->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   fit->add_flag("--json", args->json, "print the fit summary as one JSON object");
   fit->callback([args] { run_fit(*args); });

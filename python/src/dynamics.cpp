@@ -244,6 +244,9 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readwrite("max_minutes", &FitOptions::max_minutes, "wall-clock budget")
       .def_readwrite("rigid_body", &FitOptions::rigid_body,
                      "linear, hybrid: the rigid-body structure of joints 1-3 (default True; False: generic potential)")
+      .def_readwrite("remote_center", &FitOptions::remote_center,
+                     "linear, hybrid: the rigid-body inertia tied by the bodies of a remote-centre arm (default True; "
+                     "False: 19 free coefficients)")
       .def("check", &FitOptions::check, "rcm.InputError when a value is out of range");
   py::class_<JointTorqueError>(d, "JointTorqueError", "Table II: per-joint RMSE and NRMSE")
       .def_readonly("index", &JointTorqueError::index, "1-based joint number")
@@ -262,7 +265,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("seconds", &FitSummary::seconds)
       .def_readonly("test_errors", &FitSummary::test_errors, "on the held-out last 10 %")
       .def_readonly("warnings", &FitSummary::warnings)
-      .def_readonly("structure", &FitSummary::structure, "linear: 'rigid-body' or 'generic'")
+      .def_readonly("structure", &FitSummary::structure, "linear: 'remote-center', 'rigid-body' or 'generic'")
       .def("brief_report", &FitSummary::brief_report)
       .def("to_dict", [](const FitSummary& s) { return to_python(s.to_json()); });
   py::class_<PyFitResult>(d, "FitResult")

@@ -349,11 +349,12 @@ class TestDynamics(unittest.TestCase):
         self.assertIsInstance(rcm.sim.QUICK_PROTOCOL["protocol"]["free_space_s"], float)
 
     def test_rigid_body_regressors_give_the_model_its_torque(self):
-        # The default linear fit has the rigid-body structure; its offline
+        # The default linear fit has the rigid-body structure, its inertia tied
+        # by the bodies of a remote-centre arm (the simulated arm is one); its offline
         # torque at one sample is rebuilt from the exposed regressors.
         model = self.model()
         p = model.parameters
-        self.assertEqual(_state["fit"].summary.structure, "rigid-body")
+        self.assertEqual(_state["fit"].summary.structure, "remote-center")
         self.assertEqual(len(p.inertia), 19)
         self.assertAlmostEqual(float(np.linalg.norm(p.gravity_direction)), 1.0, places=12)
         q, qd, qdd = [0.2, -0.3, 0.14], [0.5, -0.4, 0.05], [1.0, 2.0, -0.3]

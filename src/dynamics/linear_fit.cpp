@@ -222,14 +222,14 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
   // over 40-120 ms, with or without a light low-pass after them.
   const std::vector<AccelerationChoice> accelerations = {
       {0.0, kDefaultAccelerationFilter}, {0.0, 0.01}, {0.0, 0.02}, {0.0, 0.05}, {0.04, 0.0}, {0.06, 0.0},
-      {0.08, 0.0}, {0.10, 0.0}, {0.12, 0.0}, {0.06, 0.01}, {0.10, 0.01}};
+      {0.08, 0.0}, {0.10, 0.0}, {0.12, 0.0}, {0.16, 0.0}, {0.20, 0.0}, {0.06, 0.01}, {0.10, 0.01}};
   // Zero-phase windows (predict_torque); the fit regresses on the chosen one.
   // Recordings read from files have increasing time; one built in memory whose
   // time goes back gets the causal estimate only.
   bool sorted = true;
   for (const auto& r : recordings) sorted = sorted && is_time_sorted(r.time);
   const std::vector<double> batch_windows =
-      sorted ? std::vector<double>{0.03, 0.05, 0.07, 0.10} : std::vector<double>{};
+      sorted ? std::vector<double>{0.03, 0.05, 0.07, 0.10, 0.15, 0.20} : std::vector<double>{};
   const int K = static_cast<int>(grid.size());
   const int A = static_cast<int>(accelerations.size());
   const int B = static_cast<int>(batch_windows.size());
@@ -335,21 +335,57 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
   summary.structure = "generic";
 
   // Rigid-body stage: the same estimators, the structure of rigid_body.hpp, kept
-  // unless the validation split says it does not describe this arm.
+  // unless the validation split says it does not describe this arm; then the
+  // inertia tied by the bodies of a remote-centre arm, kept unless it fits
+  // the validation split much worse than the free inertia coefficients.
   if (options.rigid_body && M >= 3) {
     std::vector<detail::JointEstimatorChoice> estimators(M);
     for (int j = 0; j < M; ++j)
       estimators[j] = {p.dahl_displacement[j], p.acceleration_window_s[j], p.acceleration_filter_s[j],
                        p.batch_acceleration_window_s[j]};
-    const detail::ModelStats train_stats =
-        detail::accumulate_rigid_body_stats(recordings, split.train, estimators, weight, sample_period);
-    const detail::ModelStats val_stats =
-        detail::accumulate_rigid_body_stats(recordings, split.validation, estimators, weight, sample_period);
+    // The time split's training and validation samples, and the same samples
+    // cut by speed (split_by_speed: slow, fast), in one pass.
+    enum { kTrain, kValidation, kSlow, kFast };
+    std::vector<SampleSegment> fitted = split.train;
+    fitted.insert(fitted.end(), split.validation.begin(), split.validation.end());
+    std::vector<std::vector<SampleSegment>> groups = {split.train, split.validation};
+    for (auto& g : detail::split_by_speed(recordings, fitted, M)) groups.push_back(std::move(g));
+    const std::vector<detail::ModelStats> stats =
+        detail::accumulate_rigid_body_stats(recordings, groups, estimators, weight, sample_period);
+    const detail::ModelStats& train_stats = stats[kTrain];
+    const detail::ModelStats& val_stats = stats[kValidation];
     const double rigid_validation = val_stats.compute_loss(detail::solve_rigid_body(train_stats, M).theta);
     if (rigid_validation <= kRigidBodyTolerance * best) {
+      // The instrument axis is perpendicular to the yaw axis at q2 = 0: the
+      // insertion axis z3(q) of every robot rcm loads (docs/formats.md).
+      const double beta = M_PI / 2;
+      // What the remaining choices are scored by: the mean squared residual on
+      // the validation slice plus, fitted on the slow half and scored on the
+      // fast one and the other way round, on the other speed.
+      auto score = [&](detail::InertiaStructure structure) {
+        auto mean_loss = [&](int scored, int fitted_on) {
+          const detail::RigidBodySolution fit = detail::solve_rigid_body(stats[fitted_on], M, structure, beta);
+          return stats[scored].compute_loss(fit.theta) / static_cast<double>(std::max<std::size_t>(stats[scored].rows, 1));
+        };
+        return mean_loss(kValidation, kTrain) + 0.5 * (mean_loss(kFast, kSlow) + mean_loss(kSlow, kFast));
+      };
+      detail::InertiaStructure inertia = detail::InertiaStructure::free;
+      if (options.remote_center) {
+        const double free_score = score(detail::InertiaStructure::free);
+        const double tied_score = score(detail::InertiaStructure::remote_center);
+        if (tied_score <= kRigidBodyTolerance * free_score) {
+          inertia = detail::InertiaStructure::remote_center;
+        } else {
+          summary.warnings.push_back(fmt::format(
+              "the bodies of a remote-centre arm fit {:.0f} % worse than free inertia coefficients: kept the free "
+              "ones",
+              100.0 * (tied_score / free_score - 1.0)));
+        }
+      }
       detail::ModelStats all = train_stats;
       all += val_stats;
-      const detail::RigidBodySolution rigid = detail::solve_rigid_body(all, M);
+      const detail::RigidBodySolution rigid = detail::solve_rigid_body(all, M, inertia, beta);
+      best = val_stats.compute_loss(detail::solve_rigid_body(train_stats, M, inertia, beta).theta);
       p.gravity = rigid.theta.head(G);
       p.inertia = rigid.theta.segment(G, kInertiaTerms);
       p.gravity_direction = rigid.gravity_direction;
@@ -365,9 +401,9 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
         p.coulomb_slow[j] = rigid.theta(detail::rigid_body_block_index(j, 4));
         p.sqrt_viscous[j] = rigid.theta(detail::rigid_body_block_index(j, 5));
       }
-      best = rigid_validation;
-      params = kGravityMoments + 2 + kInertiaTerms + detail::kRigidBodyBlock * M;
-      summary.structure = "rigid-body";
+      const bool tied = inertia == detail::InertiaStructure::remote_center;
+      params = kGravityMoments + 2 + (tied ? kRemoteCenterTerms : kInertiaTerms) + detail::kRigidBodyBlock * M;
+      summary.structure = tied ? "remote-center" : "rigid-body";
     } else {
       summary.warnings.push_back(fmt::format(
           "the rigid-body structure fits the validation split {:.0f} % worse than the generic potential: kept the "

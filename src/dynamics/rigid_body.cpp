@@ -1,5 +1,6 @@
 #include "rcm/dynamics/rigid_body.hpp"
 
+#include <Eigen/Geometry>
 #include <array>
 #include <cmath>
 
@@ -77,6 +78,49 @@ double compute_inertia_energy(const Eigen::Matrix<double, kInertiaTerms, 1>& the
     T += theta[k] * f.f2[e.f2] * f.f3[e.f3] * s;
   }
   return T;
+}
+
+void compute_remote_center_map(double beta, Eigen::Matrix<double, kInertiaTerms, kRemoteCenterTerms>& M) {
+  // Term indices as in kTerms; parameters as in the header.
+  enum { kMass, kHx, kHy, kHz, kIc2, kIs2, kIc, kIs };
+  const double sb = std::sin(beta), cb = std::cos(beta);
+  M.setZero();
+  // 1/2 m q3^2 [qd2^2 + qd1^2 sin^2(q2 - beta)]: no qd1 qd2 q3^2 terms.
+  M(1, kMass) = 0.5;
+  M(4, kMass) = -0.5 * std::cos(2.0 * beta);
+  M(7, kMass) = -0.5 * std::sin(2.0 * beta);
+  M(15, kMass) = 1.0;
+  // q3 [|w|^2 (e.h) - (w.e)(w.h)], w.e = qd1 cos(q2 - beta).
+  M(0, kHy) = sb, M(0, kHz) = cb;
+  M(3, kHy) = sb, M(3, kHz) = -cb;
+  M(6, kHy) = -cb, M(6, kHz) = -sb;
+  M(14, kHy) = 2.0 * sb, M(14, kHz) = 2.0 * cb;
+  M(9, kHx) = -cb;
+  M(12, kHx) = -sb;
+  // qd3 w.(h x e).
+  M(16, kHx) = sb;
+  M(17, kHx) = -cb;
+  M(18, kHy) = cb, M(18, kHz) = -sb;
+  // 1/2 w.I.w beyond the armatures.
+  M(2, kIc2) = 1.0;
+  M(5, kIs2) = 1.0;
+  M(8, kIc) = 1.0;
+  M(11, kIs) = 1.0;
+}
+
+double compute_remote_center_energy(double beta, const Eigen::Matrix<double, kRemoteCenterTerms, 1>& x,
+                                    const double* q, const double* qd) {
+  const double s = std::sin(q[1]), c = std::cos(q[1]);
+  const Eigen::Vector3d w(qd[1], qd[0] * s, qd[0] * c);
+  const Eigen::Vector3d e(0.0, std::sin(beta), std::cos(beta));
+  const Eigen::Vector3d h(x[1], x[2], x[3]);
+  // I without its constant diagonal (the armatures): I_zz - I_yy = 2 x4 split
+  // as +-x4, the trace part dropped.
+  Eigen::Matrix3d I;
+  I << 0.0, x[7], x[6], x[7], -x[4], x[5], x[6], x[5], x[4];
+  const double m = x[0], q3 = q[2];
+  return 0.5 * w.dot(I * w) + q3 * (w.squaredNorm() * e.dot(h) - w.dot(e) * w.dot(h)) +
+         0.5 * m * q3 * q3 * (w.squaredNorm() - w.dot(e) * w.dot(e)) + qd[2] * w.dot(h.cross(e));
 }
 
 void compute_gravity_moment_map(const Eigen::Vector3d& g, Eigen::Matrix<double, 17, kGravityMoments>& P) {

@@ -3,6 +3,7 @@
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include "acceleration.hpp"
 #include "rcm/dynamics/linear_model.hpp"
@@ -22,6 +23,7 @@ ModelStats& ModelStats::operator+=(const ModelStats& o) {
   A += o.A;
   b += o.b;
   yy += o.yy;
+  rows += o.rows;
   return *this;
 }
 
@@ -29,42 +31,55 @@ double ModelStats::compute_loss(const Eigen::VectorXd& theta) const {
   return yy - 2.0 * theta.dot(b) + theta.dot(A * theta);
 }
 
-ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
-                                       const std::vector<SampleSegment>& segments,
-                                       const std::vector<JointEstimatorChoice>& choices,
-                                       const std::vector<double>& weight, double sample_period_s) {
+std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
+                                                    const std::vector<std::vector<SampleSegment>>& groups,
+                                                    const std::vector<JointEstimatorChoice>& choices,
+                                                    const std::vector<double>& weight, double sample_period_s) {
   const int M = static_cast<int>(choices.size());
   const int P = kRigidBodyShared + kRigidBodyBlock * M;
-  ModelStats s{Eigen::MatrixXd::Zero(P, P), Eigen::VectorXd::Zero(P), 0.0};
-  constexpr Eigen::Index kChunk = 4096;
-  Eigen::MatrixXd F(kChunk, P);
-  Eigen::VectorXd y(kChunk);
+  const std::size_t num_groups = groups.size();
+  std::vector<ModelStats> stats(num_groups, ModelStats{Eigen::MatrixXd::Zero(P, P), Eigen::VectorXd::Zero(P), 0.0, 0});
+  // Which groups each sample of each recording belongs to (bit g), and how far
+  // each recording is needed.
+  std::vector<std::vector<std::uint32_t>> member(recordings.size());
+  std::vector<Eigen::Index> needed(recordings.size(), 0);
+  for (std::size_t g = 0; g < num_groups; ++g)
+    for (const auto& seg : groups[g]) {
+      auto& m = member[static_cast<std::size_t>(seg.recording)];
+      if (m.empty()) m.assign(static_cast<std::size_t>(recordings[seg.recording].time.size()), 0u);
+      for (Eigen::Index t = seg.begin; t < seg.end; ++t) m[static_cast<std::size_t>(t)] |= 1u << g;
+      needed[seg.recording] = std::max(needed[seg.recording], seg.end);
+    }
+  constexpr Eigen::Index kChunk = 2048;
+  std::vector<Eigen::MatrixXd> F(num_groups, Eigen::MatrixXd(kChunk, P));
+  std::vector<Eigen::VectorXd> y(num_groups, Eigen::VectorXd(kChunk));
+  std::vector<Eigen::Index> n(num_groups, 0);
+  auto flush = [&](std::size_t g) {
+    const Eigen::Index k = n[g];
+    stats[g].A.noalias() += F[g].topRows(k).transpose() * F[g].topRows(k);
+    stats[g].b.noalias() += F[g].topRows(k).transpose() * y[g].head(k);
+    stats[g].yy += y[g].head(k).squaredNorm();
+    n[g] = 0;
+  };
+  Eigen::RowVectorXd row(P);
   Eigen::Matrix<double, 3, G> Yg;
   Eigen::Matrix<double, 3, kInertiaTerms> Yi;
   std::vector<AccelerationEstimator> estimators;
   for (const auto& c : choices) estimators.emplace_back(c.causal_window_s, c.causal_filter_s, sample_period_s);
+  std::vector<Eigen::VectorXd> batch(M);
   Eigen::VectorXd z(M), z_slow(M), qdd(M);
-  // The zero-phase qddot of each joint whose choice regresses on it, per recording.
-  std::vector<std::vector<Eigen::VectorXd>> batch(recordings.size(), std::vector<Eigen::VectorXd>(M));
-  for (const auto& seg : segments)
+  for (std::size_t r = 0; r < recordings.size(); ++r) {
+    if (needed[r] == 0) continue;
+    const auto& rec = recordings[r];
+    // The zero-phase qddot of each joint whose choice regresses on it.
     for (int j = 0; j < M; ++j)
-      if (choices[j].batch_window_s > 0 && batch[seg.recording][j].size() == 0) {
-        const auto& rec = recordings[seg.recording];
-        batch[seg.recording][j] = compute_zero_phase_acceleration(rec.time, rec.velocity.col(j), choices[j].batch_window_s);
-      }
-  for (const auto& seg : segments) {
-    const auto& rec = recordings[seg.recording];
+      batch[j] = choices[j].batch_window_s > 0
+                     ? compute_zero_phase_acceleration(rec.time, rec.velocity.col(j), choices[j].batch_window_s)
+                     : Eigen::VectorXd();
     for (auto& e : estimators) e.reset();
     z.setZero();
     z_slow.setZero();
-    Eigen::Index n = 0;
-    auto flush = [&]() {
-      s.A.noalias() += F.topRows(n).transpose() * F.topRows(n);
-      s.b.noalias() += F.topRows(n).transpose() * y.head(n);
-      s.yy += y.head(n).squaredNorm();
-      n = 0;
-    };
-    for (Eigen::Index t = 0; t < seg.end; ++t) {
+    for (Eigen::Index t = 0; t < needed[r]; ++t) {
       for (int j = 0; j < M; ++j) {
         if (t > 0) {
           const double dq = rec.position(t, j) - rec.position(t - 1, j);
@@ -73,33 +88,88 @@ ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
         }
         estimators[j].update(rec.time(t), rec.velocity(t, j));
       }
-      if (t < seg.begin) continue;
-      for (int j = 0; j < M; ++j)
-        qdd[j] = choices[j].batch_window_s > 0 ? batch[seg.recording][j](t) : estimators[j].value();
+      const std::uint32_t in = member[r][static_cast<std::size_t>(t)];
+      if (!in) continue;
+      for (int j = 0; j < M; ++j) qdd[j] = batch[j].size() ? batch[j](t) : estimators[j].value();
       const double q[3] = {rec.position(t, 0), rec.position(t, 1), rec.position(t, 2)};
       const double qd[3] = {rec.velocity(t, 0), rec.velocity(t, 1), rec.velocity(t, 2)};
       LinearTorqueModel::compute_gravity_regressor(q, Yg);
       compute_inertia_regressor(q, qd, qdd.data(), Yi);
       for (int j = 0; j < M; ++j) {
         const double w = weight[j];
-        F.row(n).setZero();
+        row.setZero();
         if (j < 3) {
-          F.row(n).head(G) = Yg.row(j) * w;
-          F.row(n).segment(G, kInertiaTerms) = Yi.row(j) * w;
+          row.head(G) = Yg.row(j) * w;
+          row.segment(G, kInertiaTerms) = Yi.row(j) * w;
         }
-        F(n, rigid_body_block_index(j, 0)) = qdd[j] * w;
-        F(n, rigid_body_block_index(j, 1)) = rec.velocity(t, j) * w;
-        F(n, rigid_body_block_index(j, 2)) = z[j] * w;
-        F(n, rigid_body_block_index(j, 3)) = w;
-        F(n, rigid_body_block_index(j, 4)) = z_slow[j] * w;
-        F(n, rigid_body_block_index(j, 5)) = compute_sqrt_velocity(rec.velocity(t, j)) * w;
-        y(n) = rec.effort(t, j) * w;
-        if (++n == kChunk) flush();
+        row(rigid_body_block_index(j, 0)) = qdd[j] * w;
+        row(rigid_body_block_index(j, 1)) = rec.velocity(t, j) * w;
+        row(rigid_body_block_index(j, 2)) = z[j] * w;
+        row(rigid_body_block_index(j, 3)) = w;
+        row(rigid_body_block_index(j, 4)) = z_slow[j] * w;
+        row(rigid_body_block_index(j, 5)) = compute_sqrt_velocity(rec.velocity(t, j)) * w;
+        for (std::size_t g = 0; g < num_groups; ++g)
+          if (in & (1u << g)) {
+            F[g].row(n[g]) = row;
+            y[g](n[g]) = rec.effort(t, j) * w;
+            ++stats[g].rows;
+            if (++n[g] == kChunk) flush(g);
+          }
       }
     }
-    if (n) flush();
   }
-  return s;
+  for (std::size_t g = 0; g < num_groups; ++g)
+    if (n[g]) flush(g);
+  return stats;
+}
+
+ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
+                                       const std::vector<SampleSegment>& segments,
+                                       const std::vector<JointEstimatorChoice>& choices,
+                                       const std::vector<double>& weight, double sample_period_s) {
+  return accumulate_rigid_body_stats(recordings, std::vector<std::vector<SampleSegment>>{segments}, choices, weight,
+                                     sample_period_s)
+      .front();
+}
+
+std::vector<std::vector<SampleSegment>> split_by_speed(const std::vector<Recording>& recordings,
+                                                       const std::vector<SampleSegment>& segments, int M,
+                                                       double chunk_s) {
+  // Each joint's speed in units of its standard deviation over the segments.
+  Eigen::VectorXd sum2 = Eigen::VectorXd::Zero(M);
+  double count = 0;
+  for (const auto& seg : segments) {
+    sum2 += recordings[seg.recording].velocity.block(seg.begin, 0, seg.size(), M).colwise().squaredNorm().transpose();
+    count += static_cast<double>(seg.size());
+  }
+  Eigen::VectorXd inv_sd(M);
+  for (int j = 0; j < M; ++j) inv_sd[j] = sum2[j] > 0 ? std::sqrt(count / sum2[j]) : 0.0;
+  struct Chunk {
+    SampleSegment segment;
+    double speed;
+  };
+  std::vector<Chunk> chunks;
+  for (const auto& seg : segments) {
+    const auto& rec = recordings[seg.recording];
+    Eigen::Index begin = seg.begin;
+    while (begin < seg.end) {
+      Eigen::Index end = begin + 1;
+      while (end < seg.end && rec.time(end) - rec.time(begin) < chunk_s) ++end;
+      double speed = 0.0;
+      for (Eigen::Index t = begin; t < end; ++t)
+        speed += (rec.velocity.row(t).head(M).transpose().cwiseProduct(inv_sd)).norm();
+      chunks.push_back({{seg.recording, begin, end}, speed / static_cast<double>(end - begin)});
+      begin = end;
+    }
+  }
+  std::vector<double> speeds;
+  for (const auto& c : chunks) speeds.push_back(c.speed);
+  std::vector<std::vector<SampleSegment>> out(2);
+  if (speeds.empty()) return out;
+  std::nth_element(speeds.begin(), speeds.begin() + static_cast<std::ptrdiff_t>(speeds.size() / 2), speeds.end());
+  const double median = speeds[speeds.size() / 2];
+  for (const auto& c : chunks) out[c.speed <= median ? 0 : 1].push_back(c.segment);
+  return out;
 }
 
 Eigen::VectorXd solve_bounded_normal_equations(const Eigen::MatrixXd& A_in, const Eigen::VectorXd& b,
@@ -129,34 +199,73 @@ Eigen::VectorXd solve_bounded_normal_equations(const Eigen::MatrixXd& A_in, cons
   return theta;
 }
 
-RigidBodySolution solve_rigid_body(const ModelStats& stats, int M) {
-  const int P = static_cast<int>(stats.A.rows());
-  const int rest = P - G;  // inertia and the joint blocks
-  const int R = kGravityMoments + rest;
-  std::vector<int> nonnegative;  // viscous and Coulomb, in the reduced layout
-  for (int j = 0; j < M; ++j)
-    for (int k : {1, 2, 4, 5}) nonnegative.push_back(rigid_body_block_index(j, k) - G + kGravityMoments);
-  Eigen::Matrix<double, 17, kGravityMoments> Pg;
-  Eigen::MatrixXd T = Eigen::MatrixXd::Zero(P, R);
-  T.bottomRightCorner(rest, rest).setIdentity();
-  auto solve_at = [&](const Eigen::Vector3d& g) {
-    compute_gravity_moment_map(g, Pg);
-    T.topLeftCorner(G, kGravityMoments) = Pg;
-    const Eigen::MatrixXd Ar = T.transpose() * stats.A * T;
-    const Eigen::VectorXd br = T.transpose() * stats.b;
+namespace {
+
+// The reduced problem of one structure: T maps [7 moments | inertia | joint
+// blocks] to the full layout, its gravity block filled for each g.
+class RigidBodyProblem {
+ public:
+  RigidBodyProblem(const ModelStats& stats, int M, InertiaStructure structure, double beta) : stats_(stats) {
+    const int P = static_cast<int>(stats.A.rows());
+    const int blocks = P - kRigidBodyShared;
+    const bool tied = structure == InertiaStructure::remote_center;
+    const int first_block = kGravityMoments + (tied ? kRemoteCenterTerms : kInertiaTerms);
+    T_ = Eigen::MatrixXd::Zero(P, first_block + blocks);
+    T_.bottomRightCorner(blocks, blocks).setIdentity();
+    for (int j = 0; j < M; ++j) {
+      // Friction >= 0; with the remote-centre bodies the armatures are
+      // inertias (>= 0) and the viscous term may bend a sqrt-viscous one
+      // over (friction that saturates with speed).
+      for (int k : {1, 2, 4, 5})
+        if (!(tied && k == 1)) nonnegative_.push_back(first_block + kRigidBodyBlock * j + k);
+      if (tied) nonnegative_.push_back(first_block + kRigidBodyBlock * j);
+    }
+    if (tied) {
+      Eigen::Matrix<double, kInertiaTerms, kRemoteCenterTerms> Mrc;
+      compute_remote_center_map(beta, Mrc);
+      T_.block(G, kGravityMoments, kInertiaTerms, kRemoteCenterTerms) = Mrc;
+      T_(rigid_body_block_index(2, 0), kGravityMoments) = 1.0;  // the sliding mass is insertion inertia too
+      nonnegative_.push_back(kGravityMoments);
+    } else {
+      T_.block(G, kGravityMoments, kInertiaTerms, kInertiaTerms).setIdentity();
+    }
+  }
+
+  RigidBodySolution solve_at(const Eigen::Vector3d& g) {
+    compute_gravity_moment_map(g, Pg_);
+    T_.topLeftCorner(G, kGravityMoments) = Pg_;
+    const Eigen::MatrixXd Ar = T_.transpose() * stats_.A * T_;
+    const Eigen::VectorXd br = T_.transpose() * stats_.b;
     RigidBodySolution s;
-    s.theta = T * solve_bounded_normal_equations(Ar, br, nonnegative);
+    s.theta = T_ * solve_bounded_normal_equations(Ar, br, nonnegative_);
     s.gravity_direction = g;
-    s.loss = stats.compute_loss(s.theta);
+    s.loss = stats_.compute_loss(s.theta);
     return s;
-  };
+  }
+
+ private:
+  const ModelStats& stats_;
+  Eigen::MatrixXd T_;
+  std::vector<int> nonnegative_;
+  Eigen::Matrix<double, 17, kGravityMoments> Pg_;
+};
+
+}  // namespace
+
+RigidBodySolution solve_rigid_body_at(const ModelStats& stats, int M, InertiaStructure structure, double beta,
+                                      const Eigen::Vector3d& g) {
+  return RigidBodyProblem(stats, M, structure, beta).solve_at(g);
+}
+
+RigidBodySolution solve_rigid_body(const ModelStats& stats, int M, InertiaStructure structure, double beta) {
+  RigidBodyProblem problem(stats, M, structure, beta);
   // g and -g give the same span: the upper half sphere is enough.
   RigidBodySolution best;
   double best_polar = 0.0, best_azimuth = 0.0;
   bool first = true;
   for (int polar = 0; polar <= 90; polar += 5)
     for (int azimuth = 0; azimuth < 360; azimuth += (polar == 0 ? 360 : 15)) {
-      RigidBodySolution s = solve_at(direction(polar * kDegree, azimuth * kDegree));
+      RigidBodySolution s = problem.solve_at(direction(polar * kDegree, azimuth * kDegree));
       if (first || s.loss < best.loss) {
         best = std::move(s);
         best_polar = polar;
@@ -167,7 +276,7 @@ RigidBodySolution solve_rigid_body(const ModelStats& stats, int M) {
   const double p0 = best_polar, a0 = best_azimuth;
   for (int dp = -5; dp <= 5; ++dp)
     for (int da = -8; da <= 8; ++da) {
-      RigidBodySolution s = solve_at(direction((p0 + dp) * kDegree, (a0 + da) * kDegree));
+      RigidBodySolution s = problem.solve_at(direction((p0 + dp) * kDegree, (a0 + da) * kDegree));
       if (s.loss < best.loss) best = std::move(s);
     }
   return best;

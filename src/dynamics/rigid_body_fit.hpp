@@ -27,6 +27,7 @@ struct ModelStats {
   Eigen::MatrixXd A;
   Eigen::VectorXd b;
   double yy = 0.0;
+  std::size_t rows = 0;
   ModelStats& operator+=(const ModelStats& o);
   // Weighted sum of squared residuals of theta (full layout).
   double compute_loss(const Eigen::VectorXd& theta) const;
@@ -42,6 +43,26 @@ ModelStats accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
                                        const std::vector<JointEstimatorChoice>& choices,
                                        const std::vector<double>& weight, double sample_period_s);
 
+// The same statistics for several groups of segments at once (the groups may
+// overlap), from one pass over each recording.
+std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>& recordings,
+                                                    const std::vector<std::vector<SampleSegment>>& groups,
+                                                    const std::vector<JointEstimatorChoice>& choices,
+                                                    const std::vector<double>& weight, double sample_period_s);
+
+// Two groups of the samples in `segments` by speed: chunks of about
+// chunk_s seconds whose mean normalized joint speed is at most the median
+// (slow, group 0) or above it (fast, group 1). Fitting one and scoring the
+// other asks what the data cannot show by a later slice of the same motion:
+// does the model carry to another speed?
+std::vector<std::vector<SampleSegment>> split_by_speed(const std::vector<Recording>& recordings,
+                                                       const std::vector<SampleSegment>& segments, int num_outputs,
+                                                       double chunk_s = 0.5);
+
+// How the 19 inertia coefficients are fitted: free, or tied by the bodies of
+// a remote-centre arm (rigid_body.hpp, compute_remote_center_map).
+enum class InertiaStructure { free, remote_center };
+
 struct RigidBodySolution {
   Eigen::VectorXd theta;                // full layout, gravity = P(g) v
   Eigen::Vector3d gravity_direction;    // unit, base frame (sign free)
@@ -50,8 +71,14 @@ struct RigidBodySolution {
 
 // The gravity direction by a grid over the half sphere (5 deg), refined to
 // 1 deg, each with the moments and every other parameter by least squares
-// (viscous, Coulomb, slow Coulomb and sqrt-viscous >= 0).
-RigidBodySolution solve_rigid_body(const ModelStats& stats, int num_outputs);
+// (viscous, Coulomb, slow Coulomb and sqrt-viscous >= 0; with the remote-centre
+// structure also the sliding mass and the armatures, which are inertias).
+// beta: the instrument-axis angle of the remote-centre structure, rad.
+RigidBodySolution solve_rigid_body(const ModelStats& stats, int num_outputs,
+                                   InertiaStructure structure = InertiaStructure::free, double beta = 0.0);
+// The same at one gravity direction g.
+RigidBodySolution solve_rigid_body_at(const ModelStats& stats, int num_outputs, InertiaStructure structure,
+                                      double beta, const Eigen::Vector3d& g);
 
 // min |A^(1/2) x - ...|: (A + ridge) x = b with x[i] >= 0 for i in `nonnegative`
 // by an active set; the ridge, relative to each diagonal, picks the small-norm

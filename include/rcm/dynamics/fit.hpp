@@ -73,6 +73,12 @@ struct FitOptions {
   // constant armature (an arm that does not pivot as yaw-pitch-insertion);
   // false: the generic one always.
   bool rigid_body = true;
+  // linear and hybrid, with the rigid-body structure: tie the 19 inertia
+  // coefficients by the bodies of a remote-centre arm (rigid_body.hpp: links
+  // turning about the RCM, and one body sliding along the instrument axis)
+  // unless that fits the validation split more than 25 % worse than the free
+  // coefficients; false: the free coefficients always.
+  bool remote_center = true;
 
   // Throws InputError when a value is out of range.
   void check() const;
@@ -92,7 +98,7 @@ struct FitSummary {
   int output_delay_samples = 0;  // lstm: see FitOptions::output_delay_s
   double seconds = 0.0;
   std::string device = "cpu";
-  std::string structure;  // linear (and hybrid's base): "rigid-body" or "generic"
+  std::string structure;  // linear (and hybrid's base): "remote-center", "rigid-body" or "generic"
   std::vector<JointTorqueError> test_errors;  // on the held-out last 10 %
   std::vector<std::string> warnings;          // e.g. data too few to trust
   nlohmann::json to_json() const;

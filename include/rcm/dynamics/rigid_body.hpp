@@ -32,12 +32,31 @@
 // stops the potential from absorbing inertia on a short periodic path, where
 // qddot is nearly a function of q.
 
+// The bodies of a remote-centre arm. The 19 inertia coefficients above are
+// those of any rigid links on such a chain; the links of an arm that pivots
+// about a remote centre of motion (RCM) and slides its instrument through it
+// tie them together. Every link that turns with yaw and pitch about the RCM
+// has an inertia tensor I about the RCM; everything that slides with the
+// insertion (carriage, instrument) is one body of mass m and first moment h
+// (mass times centre, at q3 = 0, pitch frame) moving along the instrument
+// axis e = (0, sin beta, cos beta) of the pitch frame, beta the angle between
+// the instrument axis and the yaw axis at q2 = 0 (90 deg on the dVRK PSM). In
+// the pitch frame, with w = (qd2, qd1 sin q2, qd1 cos q2),
+//   T = 1/2 w.I.w + q3 [|w|^2 (e.h) - (w.e)(w.h)] + 1/2 m q3^2 [|w|^2 - (w.e)^2]
+//       + qd3 w.(h x e) + 1/2 m qd3^2,
+// so the 19 coefficients are linear in 8 parameters [m, h (3), and the four
+// entries of I that are not constant, (I_zz - I_yy) / 2, I_yz, I_xz, I_xy]
+// (the constant ones join the armatures, and m joins the insertion's). What a
+// slow run cannot tell apart (the q3-dependence of the yaw and pitch inertia,
+// the velocity products) is then fixed by what it can (the sliding mass).
+
 #include <Eigen/Core>
 
 namespace rcm::dynamics {
 
 constexpr int kInertiaTerms = 19;
 constexpr int kGravityMoments = 7;
+constexpr int kRemoteCenterTerms = 8;
 
 // dtau / dtheta of the 19 non-constant energy terms above at (q, qd, qdd),
 // joints 1-3.
@@ -48,6 +67,16 @@ void compute_inertia_regressor(const double* q, const double* qd, const double* 
 // differentiates; for tests and documentation).
 double compute_inertia_energy(const Eigen::Matrix<double, kInertiaTerms, 1>& theta, const double* q,
                               const double* qd);
+
+// M such that the 19 inertia coefficients are M x for the remote-centre
+// parameters x = [m, h_x, h_y, h_z, (I_zz - I_yy) / 2, I_yz, I_xz, I_xy] at
+// instrument-axis angle beta (rad); the insertion's armature gains m.
+void compute_remote_center_map(double beta, Eigen::Matrix<double, kInertiaTerms, kRemoteCenterTerms>& M);
+
+// T above for the remote-centre parameters x, the armatures left out (for tests
+// and documentation).
+double compute_remote_center_energy(double beta, const Eigen::Matrix<double, kRemoteCenterTerms, 1>& x,
+                                    const double* q, const double* qd);
 
 // P such that the 17 generic potential coefficients are P v for the moments
 // v = [v0y, v1x, v1y, v1z, v2x, v2y, v2z] under gravity direction g.
