@@ -166,7 +166,7 @@ SequenceData prepare_data(const std::vector<Recording>& recs, const std::vector<
       x.col(k) = ((recs[r].position.col(k).array() - mean(k)) / sd(k)).cast<float>();
       x.col(N + k) = ((recs[r].velocity.col(k).array() - mean(N + k)) / sd(N + k)).cast<float>();
     }
-    // Computed in float as the kernel does (normalize_input in networks.cpp).
+    // Computed in float as the kernel does (normalize_input in src/dynamics/networks.cpp).
     for (Eigen::Index f = 0; f < F * N; ++f)
       x.col(2 * N + f) = (recs[r].velocity.col(f % N).cast<float>().array() / d.norm.velocity_tanh_scale(f)).tanh();
     for (Eigen::Index f = 0; f < K * N; ++f)
