@@ -65,6 +65,8 @@ void bind_dynamics(py::module_& m, py::module_& dynamics);
 void bind_force(py::module_& m);
 void bind_tissue(py::module_& m);
 void bind_estimation(py::module_& m);
+void bind_online(py::module_& m);
+void bind_study(py::module_& m);
 void bind_sim(py::module_& m, py::module_& sim);
 
 }  // namespace rcm::python

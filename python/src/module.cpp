@@ -46,5 +46,7 @@ PYBIND11_MODULE(rcm, m) {
   rcm::python::bind_force(m);
   rcm::python::bind_tissue(m);
   rcm::python::bind_estimation(m);
+  rcm::python::bind_online(m);
+  rcm::python::bind_study(m);
   rcm::python::bind_sim(m, sim);
 }

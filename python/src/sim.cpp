@@ -1,6 +1,6 @@
 // rcm.sim: the simulated phantom bench (docs/simulator.md). The configuration
 // crosses into Python as a dict in the JSON layout of `rcm simulate --config`,
-// so that one table of fields (sim_config.cpp) keeps load, save and Python in step.
+// so that one table of fields (src/sim/sim_config.cpp) keeps load, save and Python in step.
 
 #include "common.hpp"
 #include "rcm/sim/bench.hpp"

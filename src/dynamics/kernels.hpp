@@ -6,7 +6,7 @@
 // no inline function shared with the rest of the library (one definition rule:
 // an AVX2 copy of a shared inline function could be picked by the linker).
 //
-// Layouts (built by LstmKernel / DensePanels in networks.cpp):
+// Layouts (built by LstmKernel / DensePanels in network_kernels.cpp):
 // * LSTM layer panels. Hidden units are taken in blocks of kUnitBlock = 16; the
 //   panel of block b holds the 64 gate rows (i, f, g, o) x (units 16b .. 16b+15)
 //   of the fused matrix [W_ih W_hh], column after column: 64 floats of column 0,

@@ -1,148 +1,24 @@
 #include "io/rosbag2/mcap_reader.hpp"
 
-#include <lz4frame.h>
-#include <zstd.h>
+// The MCAP reader (rosbag2's .mcap storage): the file's records in order,
+// chunks decompressed (zstd, lz4) and checked against their CRCs, the messages
+// of the wanted channels handed on. The records' layout and the CRC are in
+// mcap_records.cpp.
 
 #include <algorithm>
-#include <cstdio>
 #include <fstream>
 #include <memory>
 #include <system_error>
 #include <unordered_map>
 #include <utility>
 
+#include "io/rosbag2/mcap_records.hpp"
 #include "rcm/common/error.hpp"
 
 namespace rcm::mcap {
 namespace {
 
-constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
-constexpr std::uint64_t kPrefix = 9;       // opcode + uint64 content length
-constexpr std::uint64_t kFooterBody = 20;  // summary_start, summary_offset_start, summary_crc
-constexpr std::uint64_t kTail = kPrefix + kFooterBody + sizeof kMagic;
-constexpr std::uint64_t kChunkFixed = 8 + 8 + 8 + 4 + 4;  // times, sizes, crc, compression length
-constexpr std::uint64_t kMessageFixed = 2 + 4 + 8 + 8;
-constexpr std::size_t kReadBlock = 1 << 16;
-
-// clang-format off
-enum Op : std::uint8_t {
-  kHeader = 0x01, kFooter, kSchema, kChannel, kMessage, kChunk, kMessageIndex, kChunkIndex, kAttachment,
-  kAttachmentIndex, kStatistics, kMetadata, kMetadataIndex, kSummaryOffset, kDataEnd
-};
-// clang-format on
-
-std::string record_name(std::uint8_t op) {
-  static const char* const names[] = {"Header",     "Footer",       "Schema",        "Channel",       "Message",
-                                      "Chunk",      "MessageIndex", "ChunkIndex",    "Attachment",    "AttachmentIndex",
-                                      "Statistics", "Metadata",     "MetadataIndex", "SummaryOffset", "DataEnd"};
-  if (op >= kHeader && op <= kDataEnd) return names[op - 1];
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "unknown opcode 0x%02x", op);
-  return buf;
-}
-
-std::string hex32(std::uint32_t v) {
-  char buf[16];
-  std::snprintf(buf, sizeof buf, "0x%08x", v);
-  return buf;
-}
-
-std::uint64_t le(const std::uint8_t* p, int bytes) {
-  std::uint64_t v = 0;
-  for (int i = bytes - 1; i >= 0; --i) v = (v << 8) | p[i];
-  return v;
-}
-
-// CRC-32 as in zlib (reflected polynomial 0xEDB88320), sliced by 8 because the
-// data-section CRC covers every byte of a possibly multi-GB recording.
-struct CrcTables {
-  std::uint32_t t[8][256];
-};
-
-const CrcTables& crc_tables() {
-  static const CrcTables tables = [] {
-    CrcTables c{};
-    for (std::uint32_t i = 0; i < 256; ++i) {
-      std::uint32_t v = i;
-      for (int k = 0; k < 8; ++k) v = (v >> 1) ^ (0xEDB88320u & (0u - (v & 1u)));
-      c.t[0][i] = v;
-    }
-    for (int s = 1; s < 8; ++s)
-      for (int i = 0; i < 256; ++i) c.t[s][i] = (c.t[s - 1][i] >> 8) ^ c.t[0][c.t[s - 1][i] & 0xff];
-    return c;
-  }();
-  return tables;
-}
-
-// Same chaining convention as zlib's crc32(): start from 0, feed pieces in order.
-std::uint32_t crc32_update(std::uint32_t crc, const std::uint8_t* p, std::size_t n) {
-  const auto& t = crc_tables().t;
-  std::uint32_t c = ~crc;
-  for (; n >= 8; p += 8, n -= 8) {
-    const std::uint32_t lo = c ^ static_cast<std::uint32_t>(le(p, 4));
-    const std::uint32_t hi = static_cast<std::uint32_t>(le(p + 4, 4));
-    c = t[7][lo & 0xff] ^ t[6][(lo >> 8) & 0xff] ^ t[5][(lo >> 16) & 0xff] ^ t[4][lo >> 24] ^ t[3][hi & 0xff] ^
-        t[2][(hi >> 8) & 0xff] ^ t[1][(hi >> 16) & 0xff] ^ t[0][hi >> 24];
-  }
-  for (; n > 0; ++p, --n) c = (c >> 8) ^ t[0][(c ^ *p) & 0xff];
-  return ~c;
-}
-
-// Decodes the fields of one record body held in memory. A field that does not
-// fit clears ok() instead of throwing, so that a record is checked once after
-// all its fields are read.
-class Fields {
- public:
-  Fields(const std::uint8_t* p, std::uint64_t n) : p_(p), n_(n) {}
-  std::uint64_t uint(int bytes) { return take(bytes) ? le(p_ + pos_ - bytes, bytes) : 0; }
-  std::string str() {
-    const std::uint64_t len = uint(4);
-    if (!take(len)) return {};
-    return std::string(reinterpret_cast<const char*>(p_ + pos_ - len), len);
-  }
-  void skip_prefixed() { take(uint(4)); }  // uint32-length bytes or map
-  bool ok() const { return ok_; }
-
- private:
-  bool take(std::uint64_t k) {
-    if (!ok_ || k > n_ - pos_) return ok_ = false;
-    pos_ += k;
-    return true;
-  }
-  const std::uint8_t* p_;
-  std::uint64_t n_, pos_ = 0;
-  bool ok_ = true;
-};
-
-std::string at(std::uint64_t offset, const std::string& what) {
-  return "byte " + std::to_string(offset) + " (" + what + ")";
-}
-
-// Where a record is; formatted only when an error is reported, so that the
-// per-message path does not build strings.
-struct Where {
-  std::uint64_t offset = 0;  // of the record, in the file or in the chunk's decompressed records
-  std::uint8_t op = 0;
-  bool in_chunk = false;
-  std::uint64_t chunk = 0;  // offset of the enclosing Chunk record
-  std::string str() const {
-    if (!in_chunk) return at(offset, record_name(op) + " record");
-    return at(chunk, "Chunk record") + ", " + at(offset, record_name(op) + " record in its decompressed records");
-  }
-};
-
-// Buffers are reused from record to record and grow geometrically, so that
-// reading allocates a few times per file rather than per chunk or message.
-void grow(std::vector<std::uint8_t>& v, std::uint64_t n) {
-  if (v.size() < n) v.resize(std::max<std::uint64_t>(n, std::min<std::uint64_t>(2 * v.size(), kMaxRecordBytes + 1)));
-}
-
-struct ZstdFree {
-  void operator()(ZSTD_DCtx* c) const { ZSTD_freeDCtx(c); }
-};
-struct Lz4Free {
-  void operator()(LZ4F_dctx* c) const { LZ4F_freeDecompressionContext(c); }
-};
+using namespace detail;
 
 class Reader {
  public:

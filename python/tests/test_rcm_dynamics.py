@@ -1,0 +1,177 @@
+"""Tests of the Python module's torque models (rcm.dynamics) and the incision
+force, cross-checked against the C++ CLI (rcm_test_support.py)."""
+
+import base64
+import csv
+import unittest
+
+import numpy as np
+
+import rcm
+from rcm_test_support import (Q0, _state, run_cli, session_file, set_up_session, tmp_path)
+
+
+def setUpModule():
+    set_up_session()
+
+
+class TestDynamics(unittest.TestCase):
+    def model(self):
+        return _state["fit"].model
+
+    def test_submodules_import(self):
+        import rcm.dynamics
+        import rcm.sim
+        self.assertIs(rcm.dynamics.TorqueModel, rcm.dynamics.LinearTorqueModel.__mro__[1])
+        self.assertIsInstance(rcm.sim.QUICK_PROTOCOL["protocol"]["free_space_s"], float)
+
+    def test_rigid_body_regressors_give_the_model_its_torque(self):
+        # The default linear fit has the rigid-body structure, its inertia tied
+        # by the bodies of a remote-centre arm (the simulated arm is one); its
+        # offline torque at one sample is rebuilt from the exposed regressors.
+        model = self.model()
+        p = model.parameters
+        self.assertEqual(_state["fit"].summary.structure, "remote-center")
+        self.assertEqual(len(p.inertia), 19)
+        self.assertAlmostEqual(float(np.linalg.norm(p.gravity_direction)), 1.0, places=12)
+        q, qd, qdd = [0.2, -0.3, 0.14], [0.5, -0.4, 0.05], [1.0, 2.0, -0.3]
+        Y = rcm.dynamics.compute_inertia_regressor(q, qd, qdd)
+        self.assertEqual(Y.shape, (3, 19))
+        self.assertEqual(rcm.dynamics.compute_gravity_regressor(q).shape, (3, 17))
+        P = rcm.dynamics.compute_gravity_moment_map(p.gravity_direction)
+        self.assertEqual(P.shape, (17, 7))
+        # The fitted potential is one of rigid links under that direction: in P's span.
+        v = np.linalg.lstsq(P, p.gravity, rcond=None)[0]
+        np.testing.assert_allclose(P @ v, p.gravity, atol=1e-9 * (1 + np.abs(p.gravity).max()))
+        # A point mass m on the instrument axis: yaw inertia m q3^2 sin^2 q2.
+        m, theta = 0.3, np.zeros(19)
+        theta[[1, 4, 15]] = [m / 2, -m / 2, m]
+        tau = Y @ theta
+        s2 = np.sin(q[1])
+        expected_yaw = m * (2 * q[2] * qd[2] * s2 ** 2 * qd[0] + q[2] ** 2 * 2 * s2 * np.cos(q[1]) * qd[1] * qd[0]
+                            + q[2] ** 2 * s2 ** 2 * qdd[0])
+        self.assertAlmostEqual(tau[0], expected_yaw, places=12)
+        with self.assertRaises(rcm.InputError):
+            rcm.dynamics.compute_inertia_regressor(q, qd[:2], qdd)
+
+    def test_fit_matches_cli_fit(self):
+        out = tmp_path("cli_linear.json")
+        run_cli("dynamics", "fit", "--model", "linear", "--out", out, session_file("free_space.csv"), json_out=False)
+        cli_model = rcm.dynamics.load_torque_model(out)
+        self.assertIsInstance(cli_model, rcm.dynamics.LinearTorqueModel)
+        cal = rcm.load_recording(session_file("calibration.csv"))
+        np.testing.assert_allclose(rcm.dynamics.predict_torque(self.model(), cal),
+                                   rcm.dynamics.predict_torque(cli_model, cal), rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(self.model().parameters.gravity, cli_model.parameters.gravity, rtol=1e-9, atol=1e-12)
+
+    def test_eval_matches_cli(self):
+        cli = run_cli("dynamics", "eval", _state["model_path"], session_file("free_space.csv"), "--json")
+        errors = rcm.dynamics.evaluate_torque_model(self.model(), [_state["free"]])
+        self.assertEqual(len(errors), len(cli["joints"]))
+        for e, c in zip(errors, cli["joints"]):
+            self.assertEqual(e.index, c["index"])
+            self.assertAlmostEqual(e.rmse / c["rmse"], 1.0, places=12)
+            self.assertAlmostEqual(e.nrmse_percent / c["nrmse_percent"], 1.0, places=12)
+        cli_streaming = run_cli("dynamics", "eval", _state["model_path"], session_file("free_space.csv"), "--json",
+                                "--streaming")
+        self.assertEqual(cli_streaming["mode"], "streaming")
+        streaming = rcm.dynamics.evaluate_torque_model(self.model(), [_state["free"]], streaming=True)
+        for e, c in zip(streaming, cli_streaming["joints"]):
+            self.assertAlmostEqual(e.rmse / c["rmse"], 1.0, places=12)
+        measured = _state["free"].effort[:, :3]
+        streamed = rcm.dynamics.predict_torque_streaming(self.model(), _state["free"])
+        for e, k in zip(streaming, range(3)):
+            self.assertAlmostEqual(e.rmse, float(np.sqrt(np.mean((streamed[:, k] - measured[:, k]) ** 2))), places=12)
+        # The held-out split of the fit: the linear model's accuracy on the bench.
+        summary = _state["fit"].summary
+        self.assertEqual([e.index for e in summary.test_errors], [1, 2, 3])
+        self.assertLess(summary.test_errors[0].nrmse_percent, 10.0)
+
+    def test_save_load_is_bit_exact(self):
+        loaded = rcm.dynamics.load_torque_model(_state["model_path"])
+        self.assertEqual(loaded.kind, rcm.dynamics.TorqueModelKind.linear)
+        rec = _state["free"]
+        self.assertTrue(np.array_equal(rcm.dynamics.predict_torque(loaded, rec), rcm.dynamics.predict_torque(self.model(), rec)))
+        self.assertEqual(loaded.to_json()["parameters"], self.model().to_json()["parameters"])
+
+    def test_streaming_step_equals_sequence(self):
+        model = self.model()
+        rec = rcm.load_recording(session_file("D30_r10_15.csv"))
+        T = 1500
+        streamed = rcm.dynamics.predict_torque_streaming(model, rec.time[:T], rec.position[:T], rec.velocity[:T])
+        ws = model.create_workspace()
+        steps = np.array([model.compute_step(ws, rec.time[t], rec.position[t], rec.velocity[t]) for t in range(T)])
+        self.assertEqual(steps.shape, (T, model.num_outputs))
+        self.assertEqual(model.output_delay, 0)  # so step t is row t
+        self.assertTrue(np.array_equal(steps, streamed))
+        # reset_state forgets the friction memory: the first steps repeat exactly.
+        model.reset_state(ws)
+        again = np.array([model.compute_step(ws, rec.time[t], rec.position[t], rec.velocity[t]) for t in range(20)])
+        self.assertTrue(np.array_equal(again, steps[:20]))
+        # Offline, the fitted model's qddot is zero-phase (uses later samples): not the causal stream.
+        offline = rcm.dynamics.predict_torque(model, rec.time[:T], rec.position[:T], rec.velocity[:T])
+        self.assertGreater(np.max(np.abs(offline - streamed)), 1e-6)
+        # With the zero-phase window off, whole-sequence prediction is the step loop.
+        document = model.to_json()
+        zeros = base64.b64encode(np.zeros(model.num_outputs, dtype="<f8").tobytes()).decode()
+        document["parameters"]["batch_acceleration_window_s"]["data"] = zeros
+        causal = rcm.dynamics.torque_model_from_json(document)
+        self.assertTrue(np.array_equal(rcm.dynamics.predict_torque(causal, rec.time[:T], rec.position[:T],
+                                                                   rec.velocity[:T]), streamed))
+
+    def test_workspace_and_step_checks(self):
+        model = self.model()
+        other = rcm.dynamics.load_torque_model(_state["model_path"])
+        ws = other.create_workspace()
+        with self.assertRaises(rcm.InputError) as cm:
+            model.compute_step(ws, 0.0, [0, 0, 0.12], [0, 0, 0])
+        self.assertEqual(cm.exception.field, "workspace")
+        ws = model.create_workspace()
+        with self.assertRaises(rcm.InputError) as cm:
+            model.compute_step(ws, 0.0, [0, 0], [0, 0, 0])
+        self.assertEqual(cm.exception.field, "q")
+        with self.assertRaises(rcm.InputError):
+            model.compute_step(ws, float("nan"), [0, 0, 0.12], [0, 0, 0])
+        with self.assertRaises(rcm.InputError):
+            rcm.dynamics.fit_torque_model(rcm.dynamics.TorqueModelKind.lstm, [_state["free"]])
+        with self.assertRaises(rcm.InputError):
+            rcm.dynamics.predict_torque(model, [0.0, 0.005], np.zeros((2, 2)), np.zeros((2, 2)))
+        with self.assertRaises(rcm.InputError) as cm:
+            rcm.dynamics.load_torque_model(session_file("session.json"))
+        self.assertEqual(cm.exception.file, session_file("session.json"))
+
+
+class TestForce(unittest.TestCase):
+    def test_series_matches_cli(self):
+        path = session_file("D30_r10_15.csv")
+        out = tmp_path("force.csv")
+        cli = run_cli("force", "--model", _state["model_path"], "--offset", "0.03", "--q0", "0,0,0.12", path,
+                      "--out", out, "--json")
+        rec = rcm.load_recording(path)
+        tau_fs = rcm.dynamics.predict_torque(_state["fit"].model, rec)
+        incision = rcm.make_incision_frame(Q0)
+        series = rcm.compute_incision_force_series(incision, rec, tau_fs, 0.03)
+        with open(out) as f:
+            rows = list(csv.DictReader(f))
+        self.assertEqual(len(rows), rec.num_samples)
+        cli_f = np.array([[float(r["force_x"]), float(r["force_y"]), float(r["force_z"])] for r in rows])
+        np.testing.assert_allclose(series.f_inc_base, cli_f, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(series.theta, [float(r["theta"]) for r in rows], rtol=1e-14, atol=1e-15)
+        self.assertEqual([rcm.JacobianStatus.__members__[r["status"]] for r in rows], list(series.status))
+        self.assertEqual(series.num_singular, cli["singular"])
+        self.assertEqual(series.num_ill_conditioned, cli["ill_conditioned"])
+        rmse = np.sqrt(np.mean((series.f_inc_base - rec.force) ** 2, axis=0))
+        np.testing.assert_allclose(rmse, [cli["rmse"]["x"], cli["rmse"]["y"], cli["rmse"]["z"]], rtol=1e-10)
+        # One sample through the per-sample function is the same row.
+        t = 1234
+        one = rcm.compute_incision_force(incision, rec.position[t, :3], 0.03, rec.effort[t, :3] - tau_fs[t, :3])
+        np.testing.assert_allclose(one.f_inc_base, series.f_inc_base[t], rtol=1e-14, atol=1e-14)
+
+    def test_tau_fs_shape_is_checked(self):
+        rec = rcm.load_recording(session_file("baseline.csv"))
+        with self.assertRaises(rcm.InputError):
+            rcm.compute_incision_force_series(rcm.make_incision_frame(Q0), rec, np.zeros((rec.num_samples - 1, 3)), 0.03)
+
+
+if __name__ == "__main__":
+    unittest.main()

@@ -1,0 +1,90 @@
+// The simulator's defaults (make_default_config: a Classic PSM on the phantom
+// bench) and its friction and tissue presets (docs/simulator.md).
+
+#include "rcm/common/error.hpp"
+#include "rcm/sim/sim_config.hpp"
+
+namespace rcm::sim {
+
+namespace {
+
+[[noreturn]] void throw_unknown_preset(const std::string& section, const std::string& name,
+                                      const std::vector<std::string>& known_names) {
+  std::string known;
+  for (const auto& n : known_names) known += (known.empty() ? "" : ", ") + n;
+  InputLocation loc;
+  loc.field = section + ".preset";
+  loc.kind = InputLocation::Kind::json_field;
+  throw InputError(loc, "unknown " + section + " '" + name + "'; known: " + known);
+}
+
+}  // namespace
+
+SimConfig make_default_config() {
+  SimConfig c;
+  // Mass model: effective inertia ~0.16 (yaw) and ~0.20 kg m^2 (pitch) at q0 and
+  // 0.85 kg on the insertion axis; counterweighted parallelogram (COM 11 cm above the RCM),
+  // yaw link COM 8 cm below it.
+  c.arm.yaw_link = {1.0, Eigen::Vector3d(0.0, 0.0, -0.08), Eigen::Vector3d(0.010, 0.0076, 0.010)};
+  c.arm.pitch_link = {2.2, Eigen::Vector3d(0.0, 0.0, -0.11), Eigen::Vector3d(0.0909, 0.1449, 0.020)};
+  c.arm.insertion_stage = {0.85, Eigen::Vector3d(0.0, 0.0, -0.22), Eigen::Vector3d(0.020, 0.020, 0.001)};
+  c.arm.gravity_base_m_s2 = Eigen::Vector3d(0.0, 0.0, -9.81);
+  c.arm.insertion_counterbalance_n = 7.0;
+  apply_friction_preset(c, "hysteretic");
+  apply_tissue_preset(c.tissue, "linear");
+  return c;
+}
+
+std::vector<std::string> get_friction_preset_names() { return {"hysteretic", "smooth"}; }
+
+void apply_friction_preset(SimConfig& c, const std::string& name) {
+  if (name == "hysteretic") {
+    // The real Classic PSM: friction that barely depends on speed and keeps what
+    // the last motion left, so a joint at rest holds anywhere in a band of about
+    // +-0.12 / +-0.24 N m / +-0.6 N. Coulomb levels at the band, a little viscous
+    // friction, no Stribeck peak; the bristles take 2 mrad / 0.2 mm to reverse.
+    c.friction[0] = {0.125, 0.115, 1.0, 0.02, 0.01, 60.0, 1.0, 0.008};
+    c.friction[1] = {0.25, 0.23, 1.0, 0.02, 0.02, 120.0, 2.0, -0.012};
+    c.friction[2] = {0.58, 0.62, 1.0, 0.004, 0.2, 3000.0, 40.0, 0.0};
+  } else if (name == "smooth") {
+    // Smaller Coulomb levels with a Stribeck peak and stiff bristles, and most of
+    // the friction viscous: Coulomb ~0.050 / 0.067 N m and 0.45 / 0.58 N, viscous
+    // 0.09 / 0.22 N m s/rad and 1.2 N s/m.
+    c.friction[0] = {0.052, 0.048, 1.3, 0.02, 0.09, 500.0, 2.0, 0.008};
+    c.friction[1] = {0.070, 0.064, 1.3, 0.02, 0.22, 600.0, 2.5, -0.012};
+    c.friction[2] = {0.45, 0.58, 1.25, 0.004, 1.2, 2.5e4, 40.0, 0.0};
+  } else {
+    throw_unknown_preset("friction", name, get_friction_preset_names());
+  }
+  c.friction_preset = name;
+}
+
+std::vector<std::string> get_tissue_preset_names() {
+  return {"linear", "stiffening", "viscoelastic", "sliding"};
+}
+
+void apply_tissue_preset(TissueParams& t, const std::string& name) {
+  const TissueParams defaults;
+  const double min_cos = t.min_pad_cosine;
+  t = defaults;
+  t.min_pad_cosine = min_cos;
+  t.preset = name;
+  if (name == "linear") {
+    // 875 N/m: 35.0 N at D = 40 mm, 45 deg (Fig. 3); inside the paper's 651-972 N/m band.
+    t.stiffness_n_per_m = 875.0;
+  } else if (name == "stiffening") {
+    // k1 x + k3 x^3 through (20 mm, 12 N) and (40 mm, 35 N): Fig. 3 read literally.
+    t.stiffness_n_per_m = 508.33;
+    t.cubic_n_per_m3 = 2.2917e5;
+  } else if (name == "viscoelastic") {
+    t.stiffness_n_per_m = 875.0;
+    t.damping_n_s_per_m = 40.0;
+  } else if (name == "sliding") {
+    t.stiffness_n_per_m = 875.0;
+    t.axial_friction_n = 1.5;
+  } else {
+    throw_unknown_preset("tissue", name, get_tissue_preset_names());
+  }
+}
+
+}  // namespace rcm::sim
