@@ -316,6 +316,14 @@ TEST(Study, JointIntervalsWidenWhenTheFreeSpaceModelMissesAPayload) {
   }
   EXPECT_GT(worst_D_error, 0.002) << "the payload must matter for this test to mean anything";
   EXPECT_GE(covered_D, 3) << "of " << r.trials.size();
+  // The streamed trials say the torque residual is not what the models explain.
+  int residual_flagged = 0;
+  for (std::size_t i = 0; i < r.trials.size(); ++i) {
+    const std::size_t bit = rcm::dynamics::kResidualRegimeBit;
+    residual_flagged += r.trials[i].regime.counts[bit] > 0;
+    EXPECT_EQ(r_matched.trials[i].regime.counts[bit], 0u) << r_matched.trials[i].name;
+  }
+  EXPECT_GE(residual_flagged, 3) << "of " << r.trials.size();
   std::error_code ec;
   fs::remove_all(dir, ec);
 }

@@ -231,7 +231,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
     return predict_torque_streaming(model, t.time, t.position, t.velocity);
   }, py::arg("model"), py::arg("time"), py::arg("position"), py::arg("velocity"));
   d.def("check_sample_period", &check_sample_period, py::arg("model"), py::arg("recording"),
-        "A warning sentence when the recording's rate differs from the training rate by > 10 % (recurrent kinds); '' otherwise");
+        "A warning sentence when the recording's samples are over 4 training periods apart (recurrent kinds, whose network steps at its training rate on interpolated inputs); '' otherwise");
 
   py::class_<FitOptions>(d, "FitOptions", "Options of every fit_* (defaults as the CLI)")
       .def(py::init<>())

@@ -46,6 +46,11 @@ struct LstmWorkspace final : TorqueModelWorkspace {
   Eigen::VectorXf x, y;
   Eigen::VectorXd base;  // hybrid: model-based part
   std::unique_ptr<TorqueModelWorkspace> base_ws;
+  // The network's clock (advance_network): step k at clock_origin + k period.
+  bool clock_started = false;
+  double clock_origin = 0.0, last_time = 0.0;
+  long long next_step = 0;
+  Eigen::VectorXd last_q, last_qd, step_q, step_qd;
 };
 
 // x: n.network_inputs(N) floats; acceleration, dahl: the filters' values (read
@@ -73,11 +78,13 @@ void normalize_input(const Normalization& n, int N, const double* q, const doubl
 void init_filters(const Normalization& n, int N, LstmWorkspace& ws) {
   ws.acceleration = AccelerationFilter(n.acceleration_filter_s, N);
   ws.dahl = DahlFilter(n.dahl_displacement, N);
+  for (Eigen::VectorXd* v : {&ws.last_q, &ws.last_qd, &ws.step_q, &ws.step_qd}) *v = Eigen::VectorXd::Zero(N);
 }
 
 void reset_filters(LstmWorkspace& ws) {
   ws.acceleration.reset();
   ws.dahl.reset();
+  ws.clock_started = false;
 }
 
 // Advances the feature filters by one sample and writes the network input to ws.x.
@@ -86,6 +93,53 @@ void compute_network_input(const Normalization& n, int N, LstmWorkspace& ws, dou
   if (n.has_acceleration()) ws.acceleration.update(t, qd);
   if (n.has_dahl()) ws.dahl.update(q);
   normalize_input(n, N, q, qd, ws.acceleration.values().data(), ws.dahl.values().data(), ws.x.data());
+}
+
+// A gap in the stream longer than this restarts the network's clock at the
+// next sample instead of stepping through it: a straight line between two
+// samples that far apart is no motion the arm made, and a live callback must
+// not run thousands of steps after a silence.
+constexpr double kMaxInterpolatedGap = 0.25;
+
+// The network learned the dynamics of one step of its training period, so it
+// steps on its own clock, every `period` seconds, whatever rate the samples come
+// at (the dVRK streams at 100 Hz to 1.5 kHz): every tick up to the sample's
+// time t, on inputs interpolated linearly between the previous sample and this
+// one; ws.y is then the output of the latest tick (held until the next). A tick
+// within 1 % of a period of t is this sample's, so that at the training rate
+// each sample is one step on its own values, as the network was trained. The
+// first sample, a time that goes back or a gap over kMaxInterpolatedGap
+// restarts the clock at t with one step.
+void advance_network(const LstmKernel& kernel, const Normalization& n, int N, double period, LstmWorkspace& ws,
+                     double t, const double* q, const double* qd) {
+  const double gap = t - ws.last_time;
+  if (!ws.clock_started || !(gap >= 0) || gap > kMaxInterpolatedGap || !(period > 0)) {
+    ws.clock_started = true;
+    ws.clock_origin = t;
+    ws.next_step = 1;
+    compute_network_input(n, N, ws, t, q, qd);
+    kernel.step(ws.state, ws.x.data(), ws.y.data());
+  } else {
+    const double own = 0.01 * period;
+    for (;;) {
+      const double tick = ws.clock_origin + static_cast<double>(ws.next_step) * period;
+      if (tick > t + own) break;
+      if (tick >= t - own) {
+        compute_network_input(n, N, ws, t, q, qd);
+      } else {
+        const double a = (tick - ws.last_time) / gap;
+        for (int k = 0; k < N; ++k) {
+          ws.step_q[k] = ws.last_q[k] + a * (q[k] - ws.last_q[k]);
+          ws.step_qd[k] = ws.last_qd[k] + a * (qd[k] - ws.last_qd[k]);
+        }
+        compute_network_input(n, N, ws, tick, ws.step_q.data(), ws.step_qd.data());
+      }
+      kernel.step(ws.state, ws.x.data(), ws.y.data());
+      ++ws.next_step;
+    }
+  }
+  ws.last_time = t;
+  for (int k = 0; k < N; ++k) ws.last_q[k] = q[k], ws.last_qd[k] = qd[k];
 }
 
 }  // namespace
@@ -124,8 +178,7 @@ void LstmTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
 void LstmTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                                    double* tau) const {
   auto& ws = static_cast<LstmWorkspace&>(workspace);
-  compute_network_input(normalization_, num_joints(), ws, t, q, qd);
-  kernel_.step(ws.state, ws.x.data(), ws.y.data());
+  advance_network(kernel_, normalization_, num_joints(), info().sample_period_s, ws, t, q, qd);
   for (int j = 0; j < num_outputs(); ++j)
     tau[j] = static_cast<double>(ws.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
 }
@@ -225,8 +278,7 @@ void HybridTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, 
                                      double* tau) const {
   auto& ws = static_cast<LstmWorkspace&>(workspace);
   base_->compute_step(*ws.base_ws, t, q, qd, tau);
-  compute_network_input(normalization_, num_joints(), ws, t, q, qd);
-  kernel_.step(ws.state, ws.x.data(), ws.y.data());
+  advance_network(kernel_, normalization_, num_joints(), info().sample_period_s, ws, t, q, qd);
   for (int j = 0; j < num_outputs(); ++j)
     tau[j] += static_cast<double>(ws.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
 }
@@ -243,8 +295,7 @@ Eigen::MatrixXd HybridTorqueModel::predict_sequence(const Eigen::VectorXd& time,
   for (Eigen::Index t = 0; t < time.size(); ++t) {
     q = position.row(t).head(N).transpose();
     qd = velocity.row(t).head(N).transpose();
-    compute_network_input(normalization_, N, lw, time[t], q.data(), qd.data());
-    kernel_.step(lw.state, lw.x.data(), lw.y.data());
+    advance_network(kernel_, normalization_, N, info().sample_period_s, lw, time[t], q.data(), qd.data());
     for (int j = 0; j < num_outputs(); ++j)
       out(t, j) += static_cast<double>(lw.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
   }

@@ -14,6 +14,7 @@ namespace rcm::dynamics {
 namespace {
 
 const char* const kQuantityNames[3] = {"position", "velocity", "acceleration"};
+const char* const kResidualDescription = "torque residual no incision force explains (a payload change?)";
 
 // The causal acceleration estimate of the header: one update over dt > 0, in place.
 inline void update_acceleration(double& acceleration, double& last_velocity, double dt, double velocity,
@@ -133,6 +134,9 @@ void RegimeCheckOptions::check() const {
                                     std::pair{acceleration_margin, "acceleration_margin"}})
     if (!(value >= 0) || !std::isfinite(value))
       throw std::invalid_argument(fmt::format("RegimeCheckOptions: {} must be finite and >= 0", name));
+  if (!(max_fit_cost > 0)) throw std::invalid_argument("RegimeCheckOptions: max_fit_cost must be > 0");
+  if (!(residual_persistence_s >= 0) || !std::isfinite(residual_persistence_s))
+    throw std::invalid_argument("RegimeCheckOptions: residual_persistence_s must be finite and >= 0");
 }
 
 std::string describe_regime_flags(std::uint32_t flags) {
@@ -141,6 +145,8 @@ std::string describe_regime_flags(std::uint32_t flags) {
     for (int k = 0; k < 3; ++k)
       if (flags & regime_bit(j, static_cast<RegimeQuantity>(k)))
         out += fmt::format("{}joint {} {}", out.empty() ? "" : ", ", j + 1, kQuantityNames[k]);
+  if (flags & get_residual_regime_flag())
+    out += fmt::format("{}{}", out.empty() ? "" : ", ", kResidualDescription);
   return out;
 }
 
@@ -200,8 +206,8 @@ void RegimeSummary::add(double time, std::uint32_t flags) {
   ++flagged;
   all_flags |= flags;
   if (!first_time_s) first_time_s = time;
-  if (counts.size() < 3 * kMaxRegimeJoints) counts.resize(3 * kMaxRegimeJoints, 0);
-  for (int b = 0; b < 3 * kMaxRegimeJoints; ++b)
+  if (counts.size() < kRegimeBits) counts.resize(kRegimeBits, 0);
+  for (int b = 0; b < kRegimeBits; ++b)
     if (flags & (std::uint32_t{1} << b)) ++counts[static_cast<std::size_t>(b)];
 }
 
@@ -210,7 +216,7 @@ std::string RegimeSummary::to_text() const {
   if (flagged == 0)
     return fmt::format("all {} samples inside the free-space model's training regime", samples);
   std::string parts;
-  for (int b = 0; b < 3 * kMaxRegimeJoints; ++b)
+  for (int b = 0; b < kRegimeBits; ++b)
     if (static_cast<std::size_t>(b) < counts.size() && counts[static_cast<std::size_t>(b)] > 0)
       parts += fmt::format("{}{} {:.1f} %", parts.empty() ? "" : ", ", describe_regime_flags(std::uint32_t{1} << b),
                            100.0 * static_cast<double>(counts[static_cast<std::size_t>(b)]) / static_cast<double>(samples));
@@ -226,11 +232,15 @@ nlohmann::json RegimeSummary::to_json() const {
   j["fraction"] = get_fraction();
   j["first_time_s"] = first_time_s ? nlohmann::json(*first_time_s) : nlohmann::json(nullptr);
   nlohmann::json per = nlohmann::json::array();
-  for (int b = 0; b < 3 * kMaxRegimeJoints; ++b)
-    if (static_cast<std::size_t>(b) < counts.size() && counts[static_cast<std::size_t>(b)] > 0)
-      per.push_back({{"joint", b / 3 + 1},
-                     {"quantity", kQuantityNames[b % 3]},
-                     {"samples", counts[static_cast<std::size_t>(b)]}});
+  for (int b = 0; b < kRegimeBits; ++b)
+    if (static_cast<std::size_t>(b) < counts.size() && counts[static_cast<std::size_t>(b)] > 0) {
+      if (b == kResidualRegimeBit)
+        per.push_back({{"joint", nullptr}, {"quantity", "residual"}, {"samples", counts[static_cast<std::size_t>(b)]}});
+      else
+        per.push_back({{"joint", b / 3 + 1},
+                       {"quantity", kQuantityNames[b % 3]},
+                       {"samples", counts[static_cast<std::size_t>(b)]}});
+    }
   j["by_cause"] = per;
   return j;
 }

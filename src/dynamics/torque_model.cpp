@@ -214,17 +214,22 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& 
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::VectorXd& time,
                                          const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity) {
   check_sizes(model, time, position, velocity);
-  const Eigen::Index T = time.size(), d = model.output_delay();
+  const Eigen::Index T = time.size();
   auto ws = model.create_workspace();
   const int N = model.num_joints();
   Eigen::VectorXd q(N), qd(N), tau(model.num_outputs());
   Eigen::MatrixXd out(T, model.num_outputs());
   if (T == 0) return out;
-  // A fixed-lag model needs d samples past the last one: the last sample held,
-  // time advancing (a repeated stamp would be read as the same sample).
-  const double dt = model.info().sample_period_s > 0 ? model.info().sample_period_s
-                    : T > 1                          ? (time(T - 1) - time(0)) / static_cast<double>(T - 1)
-                                                     : 1.0;
+  // The recording's period (the model's own when they agree within 1 %): the
+  // delay in its samples, and the step of the held last sample (a repeated
+  // stamp would be read as the same sample).
+  const double model_dt = model.info().sample_period_s;
+  double dt = T > 1 && time(T - 1) > time(0) ? (time(T - 1) - time(0)) / static_cast<double>(T - 1)
+              : model_dt > 0                  ? model_dt
+                                              : 1.0;
+  if (model_dt > 0 && std::abs(dt / model_dt - 1.0) < 0.01) dt = model_dt;
+  const Eigen::Index d =
+      model.output_delay() == 0 ? 0 : static_cast<Eigen::Index>(std::lround(model.get_output_delay_s() / dt));
   for (Eigen::Index k = 0; k < T + d; ++k) {
     const Eigen::Index t = std::min(k, T - 1);
     q = position.row(t).head(N).transpose();
@@ -267,6 +272,11 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& record
                                            : predict_torque(model, recording);
 }
 
+namespace {
+// Samples this many network periods apart or more are interpolated coarsely.
+constexpr double kMaxInterpolatedPeriods = 4.0;
+}  // namespace
+
 std::string check_sample_period(const TorqueModel& model, const Recording& recording) {
   if (model.kind() != TorqueModelKind::lstm && model.kind() != TorqueModelKind::hybrid) return {};
   if (recording.num_samples() < 3 || model.info().sample_period_s <= 0) return {};
@@ -276,11 +286,11 @@ std::string check_sample_period(const TorqueModel& model, const Recording& recor
   std::nth_element(dt.begin(), dt.begin() + dt.size() / 2, dt.end());
   const double median = dt[dt.size() / 2];
   const double ratio = median / model.info().sample_period_s;
-  if (std::abs(ratio - 1.0) <= 0.1) return {};
+  if (ratio <= kMaxInterpolatedPeriods) return {};
   return fmt::format(
-      "{}: sampled at {:.1f} Hz but the {} model was trained at {:.1f} Hz; its state dynamics are "
-      "per sample, so resample the recording to the training rate",
-      recording.source, 1.0 / median, to_string(model.kind()), 1.0 / model.info().sample_period_s);
+      "{}: sampled at {:.1f} Hz; the {} model's network steps at its training rate of {:.1f} Hz on inputs "
+      "interpolated over {:.0f} steps between samples, which are straight lines the arm did not quite follow",
+      recording.source, 1.0 / median, to_string(model.kind()), 1.0 / model.info().sample_period_s, ratio);
 }
 
 nlohmann::json torque_model_to_json(const TorqueModel& model) {

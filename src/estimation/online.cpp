@@ -215,13 +215,20 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
 
 namespace {
 constexpr std::ptrdiff_t kDelayStride = 10;  // time, q 1-3, qd 1-3, effort 1-3
+// The fastest stream the delay line is sized for (the dVRK streams up to 1.5 kHz).
+constexpr double kFastestRateHz = 2000.0;
+// A sample this close after the delayed time is the delayed sample (stamps at
+// the model's own rate differ from it by rounding only).
+constexpr double kDelayTolerance_s = 1e-6;
 }  // namespace
 
 OnlinePipeline::OnlinePipeline(std::shared_ptr<const dynamics::TorqueModel> model, OnlineEstimator estimator,
                                const dynamics::RegimeCheckOptions& regime_options)
     : model_(std::move(model)),
       estimator_(std::move(estimator)),
-      regime_(model_ ? model_->info().regime : dynamics::TrainingRegime{}, regime_options) {
+      regime_(model_ ? model_->info().regime : dynamics::TrainingRegime{}, regime_options),
+      max_fit_cost_(regime_options.max_fit_cost),
+      residual_persistence_s_(regime_options.residual_persistence_s) {
   if (!model_ || model_->num_outputs() < 3)
     throw std::invalid_argument("OnlinePipeline: the free-space model must predict joints 1-3");
 }
@@ -233,7 +240,10 @@ OnlinePipeline::Workspace OnlinePipeline::create_workspace() const {
   ws.regime = regime_.create_workspace();
   ws.tau_fs.assign(static_cast<std::size_t>(model_->num_outputs()), 0.0);
   const int d = model_->output_delay();
-  if (d > 0) ws.delay_line.assign(static_cast<std::size_t>(d + 1) * kDelayStride, 0.0);
+  if (d > 0) {
+    const auto at_fastest = static_cast<int>(std::ceil(model_->get_output_delay_s() * kFastestRateHz)) + 2;
+    ws.delay_line.assign(static_cast<std::size_t>(std::max(d + 1, at_fastest)) * kDelayStride, 0.0);
+  }
   reset(ws);
   return ws;
 }
@@ -243,28 +253,44 @@ void OnlinePipeline::reset(Workspace& ws) const {
   estimator_.reset(ws.estimator);
   regime_.reset(ws.regime);
   ws.delay_next = ws.delay_filled = 0;
+  ws.residual_since = std::numeric_limits<double>::quiet_NaN();
 }
 
 const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, const double* q, const double* qd,
                                                    const double* effort) const {
   model_->compute_step(*ws.model, time, q, qd, ws.tau_fs.data());
-  const int d = model_->output_delay();
-  if (d > 0) {
-    // The torque is that of the sample d calls ago: pair it with that sample.
+  if (!ws.delay_line.empty()) {
+    // The torque is that of the sample get_output_delay_s() before: pair it
+    // with the recent sample nearest that time (d calls ago at the model's rate).
+    const int capacity = static_cast<int>(ws.delay_line.size() / kDelayStride);
     double* slot = ws.delay_line.data() + static_cast<std::ptrdiff_t>(ws.delay_next) * kDelayStride;
     slot[0] = time;
     std::copy(q, q + 3, slot + 1);
     std::copy(qd, qd + 3, slot + 4);
     std::copy(effort, effort + 3, slot + 7);
-    ws.delay_next = (ws.delay_next + 1) % (d + 1);
-    if (ws.delay_filled < d) {
-      ++ws.delay_filled;
-      return get_online_output(ws.estimator);
+    ws.delay_next = (ws.delay_next + 1) % capacity;
+    ws.delay_filled = std::min(ws.delay_filled + 1, capacity);
+    const double target = time - model_->get_output_delay_s();
+    int pick = -1;
+    for (int back = 1; back <= ws.delay_filled; ++back) {
+      const int i = (ws.delay_next - back + capacity) % capacity;
+      const double t_i = ws.delay_line[static_cast<std::size_t>(i) * kDelayStride];
+      if (t_i <= target + kDelayTolerance_s) {
+        pick = i;
+        // The newer neighbour may be nearer the target.
+        if (back > 1) {
+          const int newer = (i + 1) % capacity;
+          if (ws.delay_line[static_cast<std::size_t>(newer) * kDelayStride] - target < target - t_i) pick = newer;
+        }
+        break;
+      }
     }
-    time = ws.delay_line[static_cast<std::size_t>(ws.delay_next) * kDelayStride];
-    q = ws.delay_line.data() + static_cast<std::ptrdiff_t>(ws.delay_next) * kDelayStride + 1;
-    qd = q + 3;
-    effort = q + 6;
+    if (pick < 0) return get_online_output(ws.estimator);  // not yet that much stream
+    const double* paired = ws.delay_line.data() + static_cast<std::ptrdiff_t>(pick) * kDelayStride;
+    time = paired[0];
+    q = paired + 1;
+    qd = paired + 4;
+    effort = paired + 7;
   }
   const Eigen::Vector3d dtau(effort[0] - ws.tau_fs[0], effort[1] - ws.tau_fs[1], effort[2] - ws.tau_fs[2]);
   estimator_.compute_update(ws.estimator, time, Eigen::Vector3d(q[0], q[1], q[2]), Eigen::Vector3d(qd[0], qd[1], qd[2]),
@@ -272,6 +298,12 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
   // The regime of the sample the estimate is for (the delayed one, if any).
   OnlineOutput& out = ws.estimator.output;
   out.regime_flags = regime_.compute_flags(ws.regime, time, q, qd);
+  if (out.fit_cost <= max_fit_cost_) {
+    ws.residual_since = std::numeric_limits<double>::quiet_NaN();
+  } else {
+    if (!(time >= ws.residual_since)) ws.residual_since = time;  // NaN, or a time that went back
+    if (time - ws.residual_since >= residual_persistence_s_) out.regime_flags |= dynamics::get_residual_regime_flag();
+  }
   out.out_of_regime = out.regime_flags != 0;
   return out;
 }

@@ -315,7 +315,9 @@ std::filesystem::path write_study_report(const StudyResult& r, const Session& se
 
   md += "\n## Free-space model regime\n\nSamples of each trial whose position, velocity or acceleration lies beyond "
         "what the free-space model was fitted on (with margins): its torque, and every force and offset computed from it, "
-        "are extrapolations there.\n\n";
+        "are extrapolations there. With the joint method, also the samples of the trial streamed through the online "
+        "estimator whose torque residual no incision force explained for 2 s (a payload the free-space model never "
+        "saw).\n\n";
   for (const auto& t : r.trials) md += fmt::format("- {}: {}\n", t.name, t.regime.to_text());
 
   md += "\n## Solver summaries\n\n| trial | coaxial solve | samples | radial inverse |\n|---|---|---|---|\n";

@@ -275,6 +275,11 @@ StudyResult run_study(const Session& session, const StudyOptions& options, FreeS
         const OnlinePipeline pipeline(result.model, OnlineEstimator(incision, *result.joint_tissue,
                                                                     make_online_options(joint_options)));
         out.online = replay_online(pipeline, trial);
+        // The stream's summary adds what the samples alone cannot show: a torque
+        // residual that no incision force explains (a payload change).
+        if (out.online->regime.flagged > out.regime.flagged && out.regime.flagged == 0)
+          progress(options.verbose, "  warning: " + out.online->regime.to_text());
+        out.regime = out.online->regime;
       }
       out.estimate = estimate_three_step(incision, g, trial, tau_fs, dtau_radial, options.three_step);
       if (out.hold)

@@ -30,7 +30,8 @@ std::string to_string(TorqueModelKind kind);
 TorqueModelKind parse_torque_model_kind(const std::string& text, const std::string& what = "--model");
 
 // What every model shares: which joints it reads and predicts and the sampling
-// period it was trained at (recurrent models learn per-sample dynamics).
+// period it was trained at (the networks step at that period, whatever the
+// rate of the samples they are given).
 struct TorqueModelInfo {
   int num_joints = 0;        // joints read: q and qdot of joints 1..num_joints
   int num_outputs = 0;       // joints predicted: 1..num_outputs (<= num_joints)
@@ -75,6 +76,9 @@ class TorqueModel {
   // caller pairs it with the effort and joint state of d samples before
   // (OnlinePipeline does); predict_torque and predict_torque_streaming align it.
   virtual int output_delay() const { return 0; }
+  // The same in seconds, d samples of the training period: what a caller
+  // streaming at another rate pairs by (the networks step on their own clock).
+  double get_output_delay_s() const { return output_delay() * info_.sample_period_s; }
 
   // Body of the model file (see docs/dynamics.md); `info` is written by the caller.
   virtual nlohmann::json save_parameters() const = 0;
@@ -101,9 +105,10 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& 
 
 // What the live robot gets over a recording: compute_step() on every sample
 // from the reset state, causal whatever the model (predict_torque may use later
-// samples). Row t is the torque of sample t: for a model with output_delay() = d,
-// the output of call t + d, the last d rows from d more calls that repeat the
-// last sample (a zero-order hold) at the model's sample period. Same size checks.
+// samples). Row t is the torque of sample t: for a model whose torque trails by
+// get_output_delay_s(), the output of call t + s, s that delay in samples of the
+// recording (d at the training rate), the last s rows from s more calls that
+// repeat the last sample (a zero-order hold), time advancing. Same size checks.
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::VectorXd& time,
                                          const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Recording& recording);
@@ -120,8 +125,10 @@ std::unique_ptr<TorqueModel> torque_model_from_json(const nlohmann::json& docume
 void save_torque_model(const std::filesystem::path& path, const TorqueModel& model);
 std::unique_ptr<TorqueModel> load_torque_model(const std::filesystem::path& path);
 
-// When the recording's median sampling period differs from the one the model was
-// trained at by more than 10 %, a sentence saying so (recurrent kinds only);
+// The recurrent kinds step their network on its own clock, at the period they
+// were trained at, on inputs interpolated between samples, so any rate works;
+// when the recording's median period is over 4 training periods (the network
+// then sees straight lines between samples far apart), a sentence saying so;
 // empty otherwise.
 std::string check_sample_period(const TorqueModel& model, const Recording& recording);
 

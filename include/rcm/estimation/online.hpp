@@ -35,6 +35,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -101,8 +102,11 @@ struct OnlineOutput {
   bool alarm_raised = false;         // ... and this is the sample it rose
   bool alarm_cleared = false;
   // The sample left the free-space model's training regime (dynamics/regime.hpp):
-  // which joint and quantity, and whether any. The estimate is computed as
-  // always; its torque residual is not covered by what the model saw.
+  // which joint and quantity, or a torque residual the models do not explain
+  // (fit_cost above RegimeCheckOptions::max_fit_cost for its
+  // residual_persistence_s), and whether any. The
+  // estimate is computed as always; its torque residual is not covered by what
+  // the model saw.
   std::uint32_t regime_flags = 0;
   bool out_of_regime = false;
 };
@@ -164,11 +168,14 @@ class OnlinePipeline {
     std::unique_ptr<dynamics::TorqueModelWorkspace> model;
     OnlineEstimator::Workspace estimator;
     std::vector<double> tau_fs;  // num_outputs
-    // The last d + 1 samples [time, q 1-3, qd 1-3, effort 1-3] for a model whose
-    // torque trails by d = output_delay() samples; empty when d = 0.
+    // The last samples [time, q 1-3, qd 1-3, effort 1-3] for a model whose
+    // torque trails its input (get_output_delay_s() > 0): as many as that
+    // delay spans at 2 kHz, and at least d + 1; empty without a delay.
     std::vector<double> delay_line;
     int delay_next = 0, delay_filled = 0;
     dynamics::RegimeMonitor::Workspace regime;
+    // Since when the fit cost has been above the regime's max_fit_cost (NaN: not).
+    double residual_since = std::numeric_limits<double>::quiet_NaN();
   };
 
   // Throws std::invalid_argument when the model predicts fewer than 3 joints.
@@ -179,9 +186,10 @@ class OnlinePipeline {
   void reset(Workspace& workspace) const;
 
   // q, qd, effort: at least model.num_joints() values (joint 3 in m, m/s, N).
-  // With a model whose torque trails by d = output_delay() samples, the update
-  // is for the sample of d calls before, with its own joint state and effort
-  // (OnlineOutput::time says which); the first d calls return the reset output.
+  // With a model whose torque trails by get_output_delay_s() (d samples at its
+  // training rate), the update is for the sample that long before, with its
+  // own joint state and effort (OnlineOutput::time says which); until the
+  // stream is that long, calls return the reset output.
   const OnlineOutput& compute_sample(Workspace& workspace, double time, const double* q, const double* qd,
                                      const double* effort) const;
 
@@ -198,6 +206,7 @@ class OnlinePipeline {
   std::shared_ptr<const dynamics::TorqueModel> model_;
   OnlineEstimator estimator_;
   dynamics::RegimeMonitor regime_;
+  double max_fit_cost_, residual_persistence_s_;
 };
 
 // A whole recording streamed through a pipeline, as `rcm monitor` and the study
