@@ -87,6 +87,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
                     "of the causal estimate: low-pass (acceleration_filter_s) of the velocity's backward difference")
       .def_readonly("acceleration_filter_s", &TrainingRegime::acceleration_filter_s)
       .def_readonly("samples", &TrainingRegime::samples);
+  d.def("get_residual_regime_flag", &get_residual_regime_flag,
+        "the bit of OnlineOutput.regime_flags set while a torque residual no incision force explains persists");
   d.def("describe_regime_flags", &describe_regime_flags, py::arg("flags"),
         "'joint 1 velocity, joint 3 position' for OnlineOutput.regime_flags");
   py::class_<RegimeSummary>(d, "RegimeSummary", "Samples outside a free-space model's training regime")

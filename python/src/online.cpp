@@ -77,7 +77,8 @@ void bind_online(py::module_& m) {
       .def_readonly("alarm_cleared", &OnlineOutput::alarm_cleared)
       .def_readonly("out_of_regime", &OnlineOutput::out_of_regime,
                     "the sample lies beyond the free-space model's training data (rcm.dynamics.describe_regime_flags)")
-      .def_readonly("regime_flags", &OnlineOutput::regime_flags, "bit 3 j + k: joint j position (k 0), velocity (1), acceleration (2)")
+      .def_readonly("regime_flags", &OnlineOutput::regime_flags, "bit 3 j + k: joint j position (k 0), velocity (1), acceleration (2); "
+                    "rcm.dynamics.get_residual_regime_flag(): a torque residual no incision force explains")
       .def("__repr__", [](const OnlineOutput& o) {
         return "<rcm.OnlineOutput t=" + std::to_string(o.time) + " [" + std::to_string(o.misalignment_m[0]) + ", " +
                std::to_string(o.misalignment_m[1]) + ", " + std::to_string(o.misalignment_m[2]) + "] m" +
