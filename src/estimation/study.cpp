@@ -7,6 +7,7 @@
 
 #include "rcm/common/error.hpp"
 #include "rcm/common/interrupt.hpp"
+#include "rcm/common/options.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/force/incision_force.hpp"
@@ -25,15 +26,49 @@ void progress(bool verbose, const std::string& text) {
 
 }  // namespace
 
-TorqueModelFitter get_linear_torque_model_fitter() {
-  return [](dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings,
-            const dynamics::FitOptions& options) {
-    if (kind != dynamics::TorqueModelKind::linear)
-      throw InputError(InputLocation::plain("StudyOptions", "model_kind"),
-                       "rcm::core fits only the linear model; fit " + dynamics::to_string(kind) +
-                           " with rcm::torch (fit_torque_model) or `rcm dynamics fit` and pass it as model_file");
-    return dynamics::fit_linear_torque_model(recordings, options);
-  };
+TorqueModelFitter get_linear_torque_model_fitter(const InputLocation& where) {
+  return TorqueModelFitter(
+      [where](dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings,
+              const dynamics::FitOptions& options) {
+        return dynamics::fit_torque_model_without_networks(kind, recordings, options, where);
+      },
+      false);
+}
+
+const OptionTable<StudyOptions>& get_option_table(OptionTag<StudyOptions>) {
+  static const auto table =
+      OptionTable<StudyOptions>("StudyOptions")
+          .add("method", &StudyOptions::method,
+               "joint: all offsets in torque space with 95 % intervals, three-step beside it; three-step: paper "
+               "Algorithm 1 alone",
+               "", {}, {"joint", "three-step"})
+          .add_section("joint", &StudyOptions::joint, "the joint torque-space estimator")
+          .add("model_kind", &StudyOptions::model_kind,
+               "free-space model to fit (null: hybrid where the networks can be trained, linear otherwise)")
+          .add("model_file", &StudyOptions::model_file, "use this saved free-space model instead of fitting one")
+          .add_section("fit", &StudyOptions::fit, "the free-space model's fit")
+          .add_section("tissue", &StudyOptions::tissue, "the tissue law's symbolic regression")
+          .add_section("tissue_pairs", &StudyOptions::tissue_pairs, "the calibration's pairs x, |f_inc|")
+          .add("tissue_sensitivity_delta_m", &StudyOptions::tissue_sensitivity_delta_m,
+               "the tissue law refitted at D* +- this (paper V-D; 0: not refitted)", "m", OptionLimits::at_least(0))
+          .add("tissue_sensitivity_steps", &StudyOptions::tissue_sensitivity_steps,
+               "offsets refitted in [D* - delta, D* + delta]", "", OptionLimits::at_least(2))
+          .add_section("three_step", &StudyOptions::three_step, "the three-step method")
+          .add_section("rest", &StudyOptions::rest, "when a sample is at rest at q0 (steps 1 and 3b)")
+          .add("static_step", &StudyOptions::static_step,
+               "how step 3b reads the static file: balanced (holds approached from both sides averaged apart) or "
+               "last-hold (the paper's)")
+          .add_section("read", &StudyOptions::read, "how the session's recordings are read")
+          .add("paper_settle_s", &StudyOptions::paper_settle_s,
+               "the paper's f(q0, 0): the model stepped at rest from its reset state this long", "s",
+               OptionLimits::at_least(0))
+          .add("hold_chatter_width_counts", &StudyOptions::hold_chatter_width_counts,
+               "encoder chatter removed from a static file's positions, in encoder counts (0: none)", "counts",
+               OptionLimits::at_least(0))
+          .add("verbose", &StudyOptions::verbose, "progress to stderr")
+          .add("export_problems_dir", &StudyOptions::export_problems_dir,
+               "write every trial's coaxial problem as JSON into this folder (solver cross-checks)");
+  return table;
 }
 
 std::optional<double> TrialOutcome::get_error_m() const {
@@ -77,7 +112,7 @@ FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOption
                                        const TorqueModelFitter& fitter) {
   const auto start = std::chrono::steady_clock::now();
   FreeSpaceModelStep out;
-  out.kind = options.model_kind;
+  out.kind = fitter.resolve_kind(options.model_kind);
   std::vector<Recording> free_space;
   for (const auto& p : session.free_space) free_space.push_back(load_recording(p, get_read_options(session, options.read)));
   if (options.model_file) {
@@ -87,9 +122,9 @@ FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOption
     const dynamics::TimeSplit split = dynamics::split_in_time(free_space, 0.7, 0.2);
     out.errors = dynamics::evaluate_on_segments(*out.model, free_space, split.test);
   } else {
-    progress(options.verbose, "fitting the " + dynamics::to_string(options.model_kind) + " free-space model on " +
+    progress(options.verbose, "fitting the " + dynamics::to_string(out.kind) + " free-space model on " +
                                   std::to_string(free_space.size()) + " recording(s)");
-    dynamics::FitResult fit = fitter(options.model_kind, free_space, options.fit);
+    dynamics::FitResult fit = fitter(out.kind, free_space, options.fit);
     // A network whose training was cut short is not the model the study asked for.
     if (fit.summary.interrupted) throw Interrupted("interrupted while fitting the free-space model");
     out.fit = fit.summary;
@@ -150,12 +185,7 @@ void check_study_inputs(const Session& session, const StudyOptions& options) {
     manifest_where.field = "trials";
     throw InputError(manifest_where, "no trials to estimate");
   }
-  options.three_step.check();
-  if (options.method != "three-step" && options.method != "joint") {
-    InputLocation where;
-    where.file = "method";
-    throw InputError(where, "expected three-step or joint, got '" + options.method + "'");
-  }
+  check_options(options, "StudyOptions");
 }
 
 StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
@@ -225,8 +255,9 @@ void identify_tissue_law(const StudyContext& c, const CalibrationData& calibrati
       return compute_tissue_pairs(calibration.recording, calibration.tau_fs, c.session.q0, D, options.tissue_pairs)
           .pairs;
     };
-    result.tissue_sensitivity = fit_tissue_sensitivity(make_pairs, result.calibration_offset_m,
-                                                       options.tissue_sensitivity_delta_m, 3, options.tissue);
+    result.tissue_sensitivity =
+        fit_tissue_sensitivity(make_pairs, result.calibration_offset_m, options.tissue_sensitivity_delta_m,
+                               options.tissue_sensitivity_steps, options.tissue);
   }
 }
 
