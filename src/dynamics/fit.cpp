@@ -246,6 +246,9 @@ const OptionTable<FitOptions>& get_option_table(OptionTag<FitOptions>) {
           .add("rigid_body", &FitOptions::rigid_body,
                "linear, hybrid: the rigid-body structure of joints 1-3 (false: a free potential and constant "
                "armature)")
+          .add("remote_center", &FitOptions::remote_center,
+               "linear, hybrid, with the rigid-body structure: its inertia tied by the bodies of a remote-centre "
+               "arm (false: 19 free coefficients)")
           .add_check([](const FitOptions& o) { o.check(); });
   return table;
 }
