@@ -124,10 +124,7 @@ PreparedBench prepare_bench(const std::string& tissue, const rcm::test::TempDir&
   const auto written = rcm::sim::simulate_session(b.config, dir.path() / tissue);
   rcm::StudyOptions options;
   options.model_kind = rcm::dynamics::TorqueModelKind::linear;
-  const rcm::TorqueModelFitter fitter = [](rcm::dynamics::TorqueModelKind, const std::vector<rcm::Recording>& recs,
-                                           const rcm::dynamics::FitOptions& o) {
-    return rcm::dynamics::fit_linear_torque_model(recs, o);
-  };
+  const rcm::TorqueModelFitter fitter = rcm::get_linear_torque_model_fitter();
   const rcm::MonitorSetup setup = rcm::prepare_monitor(rcm::load_session(written.manifest), options, fitter);
   b.pipeline = std::make_unique<rcm::OnlinePipeline>(
       setup.free_space.model,

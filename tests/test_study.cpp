@@ -82,10 +82,7 @@ rcm::StudyOptions quick_joint_options() {
   return o;
 }
 
-rcm::TorqueModelFitter linear_fitter() {
-  return [](rcm::dynamics::TorqueModelKind, const std::vector<rcm::Recording>& recs,
-            const rcm::dynamics::FitOptions& o) { return rcm::dynamics::fit_linear_torque_model(recs, o); };
-}
+rcm::TorqueModelFitter linear_fitter() { return rcm::get_linear_torque_model_fitter(); }
 
 const rcm::StudyResult& study() {
   static const rcm::StudyResult r = rcm::run_study(bench().session, linear_options(), linear_fitter());

@@ -14,7 +14,8 @@
 namespace {
 
 struct Options {
-  std::string out = "demo-out", model, method = rcm::StudyOptions{}.method;
+  std::string out = "demo-out";
+  rcm::cli::OptionFlags<rcm::StudyOptions> study;  // --model, --method
   unsigned seed = 1;
   bool quick = false, json = false;
   double max_minutes = 0.0;
@@ -22,6 +23,7 @@ struct Options {
 
 void run(const Options& o) {
   const auto start = std::chrono::steady_clock::now();
+  rcm::StudyOptions options = rcm::cli::make_study_options(o.study);  // bad flags stop before the simulation
   const std::filesystem::path out(o.out);
   const std::filesystem::path bench_dir = out / "bench";
   rcm::sim::SimConfig config = rcm::sim::make_default_config();
@@ -52,12 +54,8 @@ void run(const Options& o) {
   rcm::save_session(written.manifest, session);
   session = rcm::load_session(written.manifest);
 
-  rcm::cli::FreeSpaceFlags flags;
-  flags.model = o.model;
-  flags.seed = o.seed;
-  flags.max_minutes = o.max_minutes > 0 ? o.max_minutes : (o.quick ? 0.75 : 5.0);
-  rcm::StudyOptions options = rcm::cli::make_study_options(flags);
-  options.method = o.method;
+  options.fit.seed = options.joint.seed = o.seed;
+  options.fit.max_minutes = o.max_minutes > 0 ? o.max_minutes : (o.quick ? 0.75 : 5.0);
   if (o.quick) {
     options.joint.bootstrap_replicates = 20;
     options.joint.calibration_bootstrap_replicates = 10;
@@ -96,9 +94,10 @@ const bool registered = rcm::cli::register_command({"demo", 5, [](CLI::App& app)
   cmd->add_option("--out", o->out, "output folder (default demo-out): bench/ (the session) and report/");
   cmd->add_flag("--quick", o->quick, "shorter recordings and training, for a smoke test");
   cmd->add_option("--seed", o->seed, "seed of the simulation and of the model fit");
-  cmd->add_option("--model", o->model, "free-space model: hybrid (default with LibTorch), lstm, mlp, linear");
-  cmd->add_option("--method", o->method,
-                  "joint (default: all offsets in torque space, with the paper's three-step method beside it) or three-step");
+  const auto kind = rcm::cli::get_torque_model_fitter().resolve_kind(std::nullopt);
+  o->study.add(cmd, "--model", {"model_kind"},
+               "free-space model: lstm, mlp, linear or hybrid (unset: " + rcm::dynamics::to_string(kind) + ")");
+  o->study.add(cmd, "--method", {"method"});
   cmd->add_option("--max-train-minutes", o->max_minutes, "budget of the free-space fit (default 5, --quick 0.75)");
   cmd->add_flag("--json", o->json, "print results.json (plus demo_seconds) on stdout");
   cmd->callback([o] { run(*o); });

@@ -30,16 +30,13 @@ struct DynamicsArgs {
   std::string model_kind;  // empty: the default of rcm run, rcm monitor and the node
   std::string out;
   std::vector<std::string> recordings;
-  unsigned seed = 1;
   bool dedupe = false;
   bool json = false;
   bool streaming = false;
   bool generic_structure = false;
   bool free_inertia = false;
   std::string model_path;
-  double max_minutes = 10.0;
-  int hidden = 0, layers = 0, max_epochs = 300, threads = 2, window = 0, streams = 0;
-  double learning_rate = 2e-3;
+  rcm::cli::OptionFlags<rcm::dynamics::FitOptions> fit;  // the flags that are fields of FitOptions
   std::optional<std::string> direction_features;     // unset: the kind's default
   std::optional<std::string> acceleration_features;  // unset: the kind's default
   std::optional<std::string> dahl_features;          // unset: the kind's default
@@ -74,18 +71,11 @@ std::vector<rcm::Recording> load_all(const std::vector<std::string>& paths, bool
 
 void run_fit(const DynamicsArgs& a) {
   using namespace rcm::dynamics;
-  const auto kind = a.model_kind.empty() ? rcm::cli::get_default_model_kind()
+  const rcm::TorqueModelFitter fitter = rcm::cli::get_torque_model_fitter();
+  const auto kind = a.model_kind.empty() ? fitter.resolve_kind(std::nullopt)
                                          : parse_torque_model_kind(a.model_kind, "--model");
   rcm::dynamics::FitOptions o;
-  o.seed = a.seed;
-  o.max_minutes = a.max_minutes;
-  o.hidden_size = a.hidden;
-  o.num_layers = a.layers;
-  o.max_epochs = a.max_epochs;
-  o.threads = a.threads;
-  o.window = a.window;
-  o.streams = a.streams;
-  o.learning_rate = a.learning_rate;
+  a.fit.apply(o);
   if (a.direction_features)
     o.velocity_tanh_scales = parse_feature_list(*a.direction_features, "--direction-features", kind);
   if (a.acceleration_features)
@@ -130,20 +120,16 @@ void run_fit(const DynamicsArgs& a) {
   if (!a.torchscript_out.empty() && kind != TorqueModelKind::lstm) {
     throw rcm::InputError(rcm::cli::flag_location("--torchscript"), "TorchScript export is for --model lstm only");
   }
+#endif
   try {
-    fit = fit_torque_model(kind, recs, o);
+    fit = fitter(kind, recs, o);
   } catch (const rcm::Interrupted& e) {
     throw rcm::Interrupted(std::string(e.what()) + "; nothing saved, " + a.out + " not written");
   }
+#if defined(RCM_HAVE_TORCH)
   if (!a.torchscript_out.empty()) {
     export_torchscript(static_cast<const LstmTorqueModel&>(*fit.model), a.torchscript_out);
   }
-#else
-  if (kind != TorqueModelKind::linear) {
-    throw rcm::InputError(rcm::cli::flag_location("--model"),
-                          "this rcm was built without LibTorch (RCM_WITH_TORCH=OFF); only --model linear can be fitted");
-  }
-  fit = fit_linear_torque_model(recs, o);
 #endif
   save_torque_model(a.out, *fit.model);
   if (a.json) {
@@ -244,17 +230,17 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
 
   auto* fit = dyn->add_subcommand("fit", "Learn tau_fs from free-space recordings (70/20/10 split in time order)");
   fit->add_option("--model", args->model_kind,
-                  fmt::format("lstm | mlp | linear | hybrid (default {}: the model rcm run, rcm monitor and the node fit)",
-                              rcm::dynamics::to_string(rcm::cli::get_default_model_kind())));
+                  fmt::format("lstm | mlp | linear | hybrid (default {}: the model rcm run and rcm monitor fit)",
+                              rcm::dynamics::to_string(rcm::cli::get_torque_model_fitter().resolve_kind(std::nullopt))));
   fit->add_option("--out", args->out, "model file to write (rcm-torque-model/1 JSON)")->required();
   fit->add_option("recordings", args->recordings, "free-space recordings (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
-  fit->add_option("--seed", args->seed, "random seed (network initialization and batching)");
-  fit->add_option("--max-minutes", args->max_minutes, "wall-clock budget of the training (default 10)");
-  fit->add_option("--hidden", args->hidden, "LSTM hidden size (default: 128, or 32 on < 5 min of data)");
-  fit->add_option("--layers", args->layers, "LSTM layers (default 1)");
-  fit->add_option("--window", args->window, "truncated-BPTT window, samples (default 100, or 50 on < 5 min of data)");
-  fit->add_option("--streams", args->streams, "contiguous streams per batch (default 32)");
-  fit->add_option("--learning-rate", args->learning_rate, "initial Adam learning rate (default 2e-3)");
+  args->fit.add(fit, "--seed", {"seed"});
+  args->fit.add(fit, "--max-minutes", {"max_minutes"});
+  args->fit.add(fit, "--hidden", {"hidden_size"});
+  args->fit.add(fit, "--layers", {"num_layers"});
+  args->fit.add(fit, "--window", {"window"});
+  args->fit.add(fit, "--streams", {"streams"});
+  args->fit.add(fit, "--learning-rate", {"learning_rate"});
   fit->add_option("--direction-features", args->direction_features,
                   "lstm, hybrid: extra inputs tanh(qdot / (s x velocity sd)) for each s of this comma-separated "
                   "list, or 'none' (default: 0.01,0.03,0.1 for lstm, none for hybrid)");
@@ -273,8 +259,8 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
                   "lstm: seconds by which the network's torque trails its input, so that it sees what follows "
                   "the sample it predicts (rounded to samples; 0: causal; default 0.04); the live pipeline "
                   "pairs it with the effort of as long before");
-  fit->add_option("--threads", args->threads, "LibTorch intra-op threads (default 2)");
-  fit->add_option("--max-epochs", args->max_epochs, "epoch limit (early stopping usually ends sooner)");
+  args->fit.add(fit, "--threads", {"threads"});
+  args->fit.add(fit, "--max-epochs", {"max_epochs"});
 #if defined(RCM_HAVE_TORCH)
   fit->add_option("--torchscript", args->torchscript_out, "also export the LSTM as TorchScript to this file");
 #endif

@@ -22,13 +22,12 @@
 namespace {
 
 struct Options {
-  std::string session, recording, out;
-  rcm::cli::FreeSpaceFlags free_space;
+  std::string session, recording, out, options_file;
+  rcm::cli::OptionFlags<rcm::StudyOptions> study;
+  rcm::cli::OptionFlags<rcm::OnlineEstimatorOptions> online;  // over the options the joint method gives it
+  rcm::cli::OptionFlags<rcm::CorrectionOptions> correction;
+  rcm::cli::OptionFlags<rcm::OnlineReplayOptions> replay;
   double print_every_s = 1.0;
-  double alarm_force_n = 10.0;
-  double onset_threshold = rcm::OnlineEstimatorOptions{}.onset_threshold;
-  double settle_band_m = 0.005;
-  rcm::CorrectionOptions correction;
   bool json = false, quiet = false;
 };
 
@@ -42,28 +41,26 @@ std::optional<Eigen::Vector3d> find_truth(const rcm::Session& session, const std
 
 void run(const Options& o) {
   if (!(o.print_every_s >= 0)) throw rcm::InputError(rcm::cli::flag_location("--print-every"), "must be >= 0");
-  if (!(o.alarm_force_n > 0)) throw rcm::InputError(rcm::cli::flag_location("--alarm-force"), "must be > 0");
-  if (!(o.settle_band_m > 0)) throw rcm::InputError(rcm::cli::flag_location("--settle-band"), "must be > 0");
-  if (!(o.onset_threshold > 0)) throw rcm::InputError(rcm::cli::flag_location("--onset-threshold"), "must be > 0");
-  if (!(o.correction.tolerance_m > 0)) throw rcm::InputError(rcm::cli::flag_location("--tolerance"), "must be > 0");
-  if (!(o.correction.compensate_limit_m >= o.correction.tolerance_m))
-    throw rcm::InputError(rcm::cli::flag_location("--compensate-limit"), "must be >= --tolerance");
-  if (!(o.correction.max_rate_m_per_s > 0))
-    throw rcm::InputError(rcm::cli::flag_location("--max-shift-rate"), "must be > 0");
+  // Every flag checked before the work: the online estimator's over its defaults here.
+  rcm::OnlineEstimatorOptions online_flags_alone;
+  o.online.apply(online_flags_alone);
+  rcm::CorrectionOptions correction;
+  o.correction.apply(correction);
+  rcm::OnlineReplayOptions replay_options;
+  o.replay.apply(replay_options);
+  const rcm::StudyOptions options = rcm::cli::make_study_options(o.study, o.options_file);
   const rcm::Session session = rcm::load_session(o.session);
-  const rcm::StudyOptions options = rcm::cli::make_study_options(o.free_space);
   const rcm::Recording rec = rcm::load_recording(o.recording, options.read);
   const rcm::MonitorSetup setup = rcm::prepare_monitor(session, options, rcm::cli::get_torque_model_fitter());
   const rcm::dynamics::TorqueModel& model = *setup.free_space.model;
   if (auto w = rcm::dynamics::check_sample_period(model, rec); !w.empty()) std::cerr << "warning: " << w << "\n";
 
   rcm::OnlineEstimatorOptions online = rcm::make_online_options(setup.joint_options);
-  online.alarm_force_n = o.alarm_force_n;
-  online.onset_threshold = o.onset_threshold;
+  o.online.apply(online);
   const rcm::OnlinePipeline pipeline(setup.free_space.model, rcm::OnlineEstimator(setup.incision, setup.tissue, online));
   // A replay: the recorded RCM never moved, so no software shift is in effect;
   // the correction says what the arm would be told at each sample.
-  const rcm::RcmCorrector corrector(setup.incision, o.correction);
+  const rcm::RcmCorrector corrector(setup.incision, correction);
   rcm::RcmCorrector::Workspace correction_ws = corrector.create_workspace();
   nlohmann::json correction_events = nlohmann::json::array();
   std::cerr << fmt::format("[rcm] tissue model ({}): k1 {:.1f} N/m, k3 {:.3g} N/m^3, c {:.2f} N s/m, F {:.2f} N\n",
@@ -109,7 +106,7 @@ void run(const Options& o) {
     }
     if (out.alarm_raised)
       std::cout << fmt::format("{:9.3f}  ALARM: incision force {:.1f} N above {:.1f} N\n", out.time, out.force_norm_n,
-                               o.alarm_force_n);
+                               online.alarm_force_n);
     if (out.alarm_cleared) std::cout << fmt::format("{:9.3f}  alarm cleared ({:.1f} N)\n", out.time, out.force_norm_n);
     if (!o.quiet && o.print_every_s > 0 && out.time >= next_print) {
       next_print = out.time + o.print_every_s;
@@ -120,15 +117,13 @@ void run(const Options& o) {
       regime_since_print = 0;
     }
   };
-  rcm::OnlineReplayOptions replay_options;
-  replay_options.settle_band_m = o.settle_band_m;
   const rcm::OnlineReplay replay = rcm::replay_online(pipeline, rec, replay_options, on_sample);
   if (!o.out.empty()) rcm::write_file_atomic(o.out, csv);
 
   const rcm::OnlineOutput& final_out = replay.final_output;
   const rcm::CorrectionOutput& final_correction = correction_ws.output;
   const std::string final_advice = rcm::describe_correction(final_correction, corrector);
-  const rcm::AlignmentCheck alignment = rcm::check_alignment(final_out, setup.incision, o.correction);
+  const rcm::AlignmentCheck alignment = rcm::check_alignment(final_out, setup.incision, correction);
   const auto truth = find_truth(session, o.recording);
   const double mean_us = 1e6 * replay.mean_update_s;
   const Eigen::Index T = rec.time.size();
@@ -156,8 +151,8 @@ void run(const Options& o) {
     j["motion_start_s"] = opt(replay.motion_start_s);
     j["onset_s"] = opt(replay.onset_s);
     j["settled_after_s"] = opt(replay.settled_after_s);
-    j["settle_band_m"] = o.settle_band_m;
-    j["alarm_force_n"] = o.alarm_force_n;
+    j["settle_band_m"] = replay_options.settle_band_m;
+    j["alarm_force_n"] = online.alarm_force_n;
     j["peak_force_n"] = replay.peak_force_n;
     nlohmann::json events = nlohmann::json::array();
     for (const auto& a : replay.alarms)
@@ -174,9 +169,9 @@ void run(const Options& o) {
                        {"distance_high_m", final_correction.distance_high_m},
                        {"advice", final_advice},
                        {"changes", correction_events},
-                       {"tolerance_m", o.correction.tolerance_m},
-                       {"compensate_limit_m", o.correction.compensate_limit_m},
-                       {"max_rate_m_per_s", o.correction.max_rate_m_per_s}};
+                       {"tolerance_m", correction.tolerance_m},
+                       {"compensate_limit_m", correction.compensate_limit_m},
+                       {"max_rate_m_per_s", correction.max_rate_m_per_s}};
     j["alignment"] = {{"aligned", alignment.aligned},
                       {"confident", alignment.confident},
                       {"within_m", alignment.within_m},
@@ -195,9 +190,9 @@ void run(const Options& o) {
                            replay.onset_s ? fmt::format("{:.3f} s", *replay.onset_s) : std::string("not detected"));
   if (replay.settled_after_s)
     std::cout << fmt::format("settled    within {:.0f} mm of the final estimate {:.1f} s after the first motion\n",
-                             o.settle_band_m * 1e3, *replay.settled_after_s);
+                             replay_options.settle_band_m * 1e3, *replay.settled_after_s);
   std::cout << fmt::format("alarms     {} (threshold {:.1f} N), peak model force {:.1f} N\n", replay.alarms.size(),
-                           o.alarm_force_n, replay.peak_force_n);
+                           online.alarm_force_n, replay.peak_force_n);
   std::cout << fmt::format("advice     {}\n", final_advice);
   std::cout << fmt::format("alignment  {}\n", alignment.message);
   std::cout << fmt::format("regime     {}\n", replay.regime.to_text());
@@ -212,23 +207,16 @@ const bool registered = rcm::cli::register_command({"monitor", 65, [](CLI::App& 
                  "onset of the misalignment and incision-force alarms");
   cmd->add_option("--session", o->session, "rcm-session/1 manifest (free-space data, q0, calibration)")->required();
   cmd->add_option("RECORDING", o->recording, "recording to replay (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
-  cmd->add_option("--model", o->free_space.model, "free-space model to fit: hybrid (default with LibTorch), lstm, mlp, linear");
-  cmd->add_option("--model-file", o->free_space.model_file,
-                  "use a saved free-space model (e.g. free_space_model.json of `rcm run`) instead of fitting one");
-  cmd->add_option("--seed", o->free_space.seed, "seed of the model fit");
-  cmd->add_option("--max-train-minutes", o->free_space.max_minutes, "wall-clock budget of the free-space fit (default 10)");
+  rcm::cli::add_free_space_flags(cmd, o->study);
   cmd->add_option("--print-every", o->print_every_s, "seconds of recording between printed estimates (default 1; 0: none)");
-  cmd->add_option("--alarm-force", o->alarm_force_n, "incision force that raises the alarm, N (default 10, paper V-E)");
-  cmd->add_option("--onset-threshold", o->onset_threshold, "CUSUM threshold of the onset test (default 10)");
-  cmd->add_option("--settle-band", o->settle_band_m, "band around the final estimate for the settling time, m (default 0.005)");
-  cmd->add_option("--tolerance", o->correction.tolerance_m,
-                  "correction: the RCM is aligned within this distance of the incision, m (default 0.002)");
-  cmd->add_option("--compensate-limit", o->correction.compensate_limit_m,
-                  "correction: software RCM shifts up to this, beyond it re-docking advice, m (default 0.010)");
-  cmd->add_option("--max-shift-rate", o->correction.max_rate_m_per_s,
-                  "correction: speed of the software RCM shift, m/s (default 0.005)");
+  o->online.add(cmd, "--alarm-force", {"alarm_force_n"});
+  o->online.add(cmd, "--onset-threshold", {"onset_threshold"});
+  o->replay.add(cmd, "--settle-band", {"settle_band_m"});
+  o->correction.add(cmd, "--tolerance", {"tolerance_m"});
+  o->correction.add(cmd, "--compensate-limit", {"compensate_limit_m"});
+  o->correction.add(cmd, "--max-shift-rate", {"max_rate_m_per_s"});
   cmd->add_option("--out", o->out, "write the running estimate and correction of every sample as CSV");
-  cmd->add_flag("--dedupe", o->free_space.dedupe, "drop repeated rows");
+  rcm::cli::add_options_file_flag(cmd, o->options_file);
   cmd->add_flag("--quiet", o->quiet, "print only events and the summary");
   cmd->add_flag("--json", o->json, "print one JSON object at the end");
   cmd->callback([o] { run(*o); });

@@ -12,31 +12,14 @@
 namespace {
 
 struct Options {
-  std::string session, out = "rcm-run", method = rcm::StudyOptions{}.method, export_problems;
-  std::string static_step = rcm::to_string(rcm::StudyOptions{}.static_step);
-  rcm::cli::FreeSpaceFlags free_space;
-  double D0 = std::numeric_limits<double>::quiet_NaN();
+  std::string session, out = "rcm-run", options_file;
+  rcm::cli::OptionFlags<rcm::StudyOptions> study;
   bool json = false;
 };
 
 void run(const Options& o) {
-  if (o.method != "three-step" && o.method != "joint")
-    throw rcm::InputError(rcm::cli::flag_location("--method"), "expected three-step or joint, got '" + o.method + "'");
+  rcm::StudyOptions options = rcm::cli::make_study_options(o.study, o.options_file);
   const rcm::Session session = rcm::load_session(o.session);
-  rcm::StudyOptions options = rcm::cli::make_study_options(o.free_space);
-  options.method = o.method;
-  try {
-    options.static_step = rcm::parse_static_step(o.static_step);
-  } catch (const std::invalid_argument& e) {
-    throw rcm::InputError(rcm::cli::flag_location("--static-step"), e.what());
-  }
-  if (!std::isnan(o.D0)) options.three_step.D_initial = o.D0;
-  if (!o.export_problems.empty()) options.export_problems_dir = o.export_problems;
-  try {
-    options.three_step.check();
-  } catch (const std::invalid_argument& e) {
-    throw rcm::InputError(rcm::cli::flag_location("--D0"), e.what());
-  }
   rcm::check_study_inputs(session, options);
   rcm::install_interrupt_handlers();
   const std::filesystem::path out(o.out);
@@ -87,21 +70,12 @@ const bool registered = rcm::cli::register_command({"run", 60, [](CLI::App& app)
                                             "writes results.json, report.md and figures/");
   cmd->add_option("SESSION", o->session, "rcm-session/1 manifest")->required();
   cmd->add_option("--out", o->out, "output folder (default rcm-run)");
-  cmd->add_option("--method", o->method,
-                  "joint (default: all offsets in torque space, with 95 % intervals; three-step beside it) or "
-                  "three-step (paper Algorithm 1 alone)");
-  cmd->add_option("--static-step", o->static_step,
-                  "how the three-step method reads the static file: balanced (default: every hold at q0, those "
-                  "approached from above and from below averaged apart, so hysteretic friction cancels) or "
-                  "last-hold (the paper's)");
-  cmd->add_option("--model", o->free_space.model, "free-space model to fit: hybrid (default with LibTorch), lstm, mlp, linear");
-  cmd->add_option("--model-file", o->free_space.model_file, "use a saved free-space model instead of fitting one");
-  cmd->add_option("--seed", o->free_space.seed, "seed of the model fit");
-  cmd->add_option("--D0", o->D0, "initial guess of D in m (default: middle of [-0.020, 0.070])");
-  cmd->add_option("--max-train-minutes", o->free_space.max_minutes, "wall-clock budget of the free-space fit (default 10)");
-  cmd->add_option("--export-problems", o->export_problems,
-                  "write every trial's coaxial least-squares problem as JSON into this folder (solver cross-checks)");
-  cmd->add_flag("--dedupe", o->free_space.dedupe, "drop repeated rows of every recording");
+  o->study.add(cmd, "--method", {"method"});
+  o->study.add(cmd, "--static-step", {"static_step"});
+  rcm::cli::add_free_space_flags(cmd, o->study);
+  o->study.add(cmd, "--D0", {"three_step.D_initial"}, "initial guess of D (unset: the middle of its bounds)");
+  o->study.add(cmd, "--export-problems", {"export_problems_dir"});
+  rcm::cli::add_options_file_flag(cmd, o->options_file);
   cmd->add_flag("--json", o->json, "print results.json on stdout");
   cmd->callback([o] { run(*o); });
 }});

@@ -37,7 +37,7 @@ struct SimulateOptions {
   bool exact_sensors = false;
   double free_space_s = -1, trial_s = -1, calibration_s = -1;
   int threads = 0;
-  rcm::cli::FreeSpaceFlags free_space;  // closed-loop: the estimator's free-space model
+  rcm::cli::OptionFlags<rcm::StudyOptions> free_space;  // closed-loop: the estimator's free-space model
 };
 
 std::string config_help() {
@@ -275,10 +275,10 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   cmd->add_option("--experiment", opts->experiment,
                   "session (default) | force-angle | closed-loop (the correction in the loop against a moving "
                   "incision, and the same runs open loop)");
-  cmd->add_option("--model", opts->free_space.model,
-                  "closed-loop: the estimator's free-space model, fitted on the session's free space (default: as "
-                  "rcm monitor)");
-  cmd->add_option("--model-file", opts->free_space.model_file, "closed-loop: a saved free-space model instead");
+  opts->free_space.add(cmd, "--model", {"model_kind"},
+                       "closed-loop: the estimator's free-space model, fitted on the session's free space (unset: "
+                       "as rcm monitor)");
+  opts->free_space.add(cmd, "--model-file", {"model_file"}, "closed-loop: a saved free-space model instead");
   cmd->add_option("--tissue", opts->tissue, "tissue preset: linear (default), stiffening, viscoelastic, sliding");
   cmd->add_option("--friction", opts->friction,
                   "joint friction preset: hysteretic (default: rate-independent, the real PSM's band), smooth");

@@ -18,6 +18,7 @@
 #include "rcm/io/session.hpp"
 #include "rcm/tissue/tissue_fit.hpp"
 #include "rcm/tissue/tissue_pairs.hpp"
+#include "study_cli.hpp"
 
 namespace {
 
@@ -25,11 +26,8 @@ struct Options {
   std::string pairs_file, session_file, model_file, force_source = "estimated";
   std::string out_law, write_pairs;
   std::optional<double> offset;
-  double delta = 0.003;
-  int sensitivity_steps = 3;
-  int max_complexity = rcm::TissueFitOptions{}.max_complexity;
-  std::size_t bins = 0;
-  double min_theta = rcm::TissuePairOptions{}.min_theta_rad;
+  // The tissue fields of the study's options: the same defaults as `rcm run`.
+  rcm::cli::OptionFlags<rcm::StudyOptions> study;
   bool json = false;
 };
 
@@ -63,23 +61,11 @@ void progress(const Options& o, const std::string& line) {
 }
 
 void run(const Options& o) {
-  rcm::TissueFitOptions fit_options;
-  fit_options.max_complexity = o.max_complexity;
-  fit_options.bins = o.bins;
-  try {
-    fit_options.check();
-  } catch (const std::invalid_argument& e) {
-    throw rcm::InputError(rcm::cli::flag_location("--max-complexity"), e.what());
-  }
-  if (!(o.delta >= 0.0 && std::isfinite(o.delta))) {
-    throw rcm::InputError(rcm::cli::flag_location("--delta"), "expected a finite value >= 0 (m)");
-  }
-  if (o.sensitivity_steps < 2) {
-    throw rcm::InputError(rcm::cli::flag_location("--sensitivity-steps"), "expected >= 2");
-  }
-  if (!(o.min_theta >= 0.0 && o.min_theta < 1.5)) {
-    throw rcm::InputError(rcm::cli::flag_location("--min-theta"), "expected radians in [0, 1.5)");
-  }
+  rcm::StudyOptions study;
+  o.study.apply(study);
+  const rcm::TissueFitOptions& fit_options = study.tissue;
+  const double delta = study.tissue_sensitivity_delta_m;
+  const double min_theta = study.tissue_pairs.min_theta_rad;
   if (o.offset && !(std::isfinite(*o.offset) && *o.offset != 0.0)) {
     throw rcm::InputError(rcm::cli::flag_location("--offset"), "expected a non-zero offset in m");
   }
@@ -110,8 +96,7 @@ void run(const Options& o) {
     *recording = rcm::load_recording(session.calibration->recording, rcm::get_read_options(session, {}));
     progress(o, fmt::format("calibration {}: {} samples, D* = {:.4f} m", recording->source,
                             recording->num_samples(), *D_star));
-    rcm::TissuePairOptions pair_options;
-    pair_options.min_theta_rad = o.min_theta;
+    const rcm::TissuePairOptions pair_options = study.tissue_pairs;
     const Eigen::Vector3d q0 = session.q0;
     if (o.force_source == "measured") {
       make_pairs = [recording, q0, pair_options](double d) {
@@ -148,7 +133,7 @@ void run(const Options& o) {
     }
     progress(o, fmt::format("pairs: {} kept of {} samples (theta < {:.4f} rad: {}, singular J_D: {}, "
                             "ill-conditioned J_D: {}, non-finite: {})",
-                            report->kept, report->samples, o.min_theta, report->dropped_small_theta,
+                            report->kept, report->samples, min_theta, report->dropped_small_theta,
                             report->dropped_singular, report->dropped_ill_conditioned,
                             report->dropped_non_finite));
     sensitivity_note = "pairs recomputed at each offset (x and J_D both change)";
@@ -160,10 +145,12 @@ void run(const Options& o) {
   progress(o, fit.summary.brief_report());
 
   std::optional<rcm::TissueSensitivity> sensitivity;
-  if (make_pairs && D_star && o.delta > 0.0) {
-    progress(o, fmt::format("sensitivity: refitting at D* +- {:.4f} m ({} offsets)", o.delta, o.sensitivity_steps));
-    sensitivity = rcm::fit_tissue_sensitivity(make_pairs, *D_star, o.delta, o.sensitivity_steps, fit_options);
-  } else if (o.delta > 0.0 && !o.pairs_file.empty()) {
+  if (make_pairs && D_star && delta > 0.0) {
+    progress(o, fmt::format("sensitivity: refitting at D* +- {:.4f} m ({} offsets)", delta,
+                            study.tissue_sensitivity_steps));
+    sensitivity =
+        rcm::fit_tissue_sensitivity(make_pairs, *D_star, delta, study.tissue_sensitivity_steps, fit_options);
+  } else if (delta > 0.0 && !o.pairs_file.empty()) {
     progress(o, "sensitivity skipped: give --offset D* (the offset the pairs were made with)");
   }
   if (!o.out_law.empty()) {
@@ -199,7 +186,7 @@ void run(const Options& o) {
                            {"complexity", e.best.complexity},
                            {"leading_coefficient", e.leading_coefficient}});
       }
-      out["sensitivity"] = {{"delta_m", o.delta},
+      out["sensitivity"] = {{"delta_m", delta},
                             {"leading_coefficient_min", sensitivity->leading_min},
                             {"leading_coefficient_max", sensitivity->leading_max},
                             {"same_family", sensitivity->same_family},
@@ -230,7 +217,7 @@ void run(const Options& o) {
   std::cout << "  monotone on the fitted range: " << rcm::to_string(g.monotonicity())
             << (g.monotonicity() == rcm::Monotonicity::not_monotone ? " (g^-1 unavailable)" : "") << '\n';
   if (sensitivity) {
-    std::cout << fmt::format("\nsensitivity, D* = {:.4f} m +- {:.4f} m ({}):\n", *D_star, o.delta, sensitivity_note);
+    std::cout << fmt::format("\nsensitivity, D* = {:.4f} m +- {:.4f} m ({}):\n", *D_star, delta, sensitivity_note);
     for (const auto& e : sensitivity->entries) {
       std::cout << fmt::format("  D = {:.4f} m   {}\n", e.offset_m,
                                rcm::format_expression(e.best.expression, rcm::ExpressionFormat::plain, 6));
@@ -263,13 +250,12 @@ const bool registered = rcm::cli::register_command({"tissue", 50, [](CLI::App& a
   fit->add_option("--offset", o->offset,
                   "D* in m: with --pairs, the offset the pairs were made with (enables the sensitivity); "
                   "with --session, overrides calibration.coaxial_offset_m");
-  fit->add_option("--delta", o->delta, "sensitivity: refit at D* +- delta m (default 0.003; 0 disables)");
-  fit->add_option("--sensitivity-steps", o->sensitivity_steps, "offsets in [D*-delta, D*+delta] (default 3)");
-  fit->add_option("--max-complexity", o->max_complexity,
-                  "largest PySR complexity enumerated (default 15: cubic polynomials, scaled sin/cos/exp)");
-  fit->add_option("--bins", o->bins, "equal-count bins along x before fitting (0 = off, default)");
-  fit->add_option("--min-theta", o->min_theta,
-                  "with --session: drop samples with theta below this (rad, default 0.0349 = 2 deg)");
+  o->study.add(fit, "--delta", {"tissue_sensitivity_delta_m"}, "sensitivity: refit at D* +- delta (0: none)");
+  o->study.add(fit, "--sensitivity-steps", {"tissue_sensitivity_steps"}, "sensitivity: offsets in [D*-delta, D*+delta]");
+  o->study.add(fit, "--max-complexity", {"tissue.max_complexity"});
+  o->study.add(fit, "--bins", {"tissue.bins"});
+  o->study.add(fit, "--min-theta", {"tissue_pairs.min_theta_rad"},
+               "with --session: drop samples with a pivot angle below this");
   fit->add_option("--out", o->out_law, "write the chosen law (rcm-tissue-law/1 JSON)");
   fit->add_option("--write-pairs", o->write_pairs, "write the pairs that were fitted (CSV x,y)");
   fit->add_flag("--json", o->json, "print one JSON object");

@@ -1,7 +1,7 @@
 #include "study_cli.hpp"
 
 #include "rcm/common/error.hpp"
-#include "rcm/dynamics/linear_model.hpp"
+#include "rcm/io/json_file.hpp"
 #if RCM_HAVE_TORCH
 #include "rcm/dynamics/training.hpp"
 #endif
@@ -9,41 +9,41 @@
 namespace rcm::cli {
 
 TorqueModelFitter get_torque_model_fitter() {
-  return [](dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings,
-            const dynamics::FitOptions& options) {
 #if RCM_HAVE_TORCH
-    return dynamics::fit_torque_model(kind, recordings, options);
+  return TorqueModelFitter(dynamics::fit_torque_model, true);
 #else
-    if (kind != dynamics::TorqueModelKind::linear) {
-      InputLocation where;
-      where.file = "--model";
-      throw InputError(where, "this build has no LibTorch (RCM_WITH_TORCH=OFF): only the linear model can be fitted");
-    }
-    return dynamics::fit_linear_torque_model(recordings, options);
-#endif
-  };
-}
-
-dynamics::TorqueModelKind get_default_model_kind() {
-#if RCM_HAVE_TORCH
-  // Linear-in-parameters dynamics with a friction state plus an LSTM on its
-  // residual (Yang et al. [19]): the most accurate free-space model on the
-  // simulated bench and a few minutes to fit; the pure LSTM of the paper is
-  // --model lstm.
-  return dynamics::TorqueModelKind::hybrid;
-#else
-  return dynamics::TorqueModelKind::linear;
+  return get_linear_torque_model_fitter(flag_location("--model"));
 #endif
 }
 
-StudyOptions make_study_options(const FreeSpaceFlags& f) {
+void add_free_space_flags(CLI::App* cmd, OptionFlags<StudyOptions>& flags, bool model_file) {
+  const dynamics::TorqueModelKind kind = get_torque_model_fitter().resolve_kind(std::nullopt);
+  flags.add(cmd, "--model", {"model_kind"},
+            "free-space model to fit: lstm, mlp, linear or hybrid (unset: " + dynamics::to_string(kind) +
+                ", the default of a build " + (kind == dynamics::TorqueModelKind::hybrid ? "with" : "without") +
+                " LibTorch)");
+  if (model_file)
+    flags.add(cmd, "--model-file", {"model_file"},
+              "use a saved free-space model (e.g. free_space_model.json of `rcm run`) instead of fitting one");
+  flags.add(cmd, "--seed", {"fit.seed", "joint.seed"}, "seed of the model fit and of the joint method's bootstrap");
+  flags.add(cmd, "--max-train-minutes", {"fit.max_minutes"}, "wall-clock budget of the free-space fit");
+  flags.add(cmd, "--dedupe", {"read.dedupe"}, "drop repeated rows of every recording");
+}
+
+void add_options_file_flag(CLI::App* cmd, std::string& path) {
+  cmd->add_option("--options", path,
+                  "JSON file of study options (any subset of the fields below; the flags override it)");
+  cmd->footer(describe_options_file<StudyOptions>(
+      "Study options (--options FILE: a JSON object; nested keys as below, any subset):"));
+}
+
+StudyOptions make_study_options(const OptionFlags<StudyOptions>& flags, const std::string& options_file) {
   StudyOptions options;
-  options.model_kind = f.model.empty() ? get_default_model_kind() : dynamics::parse_torque_model_kind(f.model, "--model");
-  if (!f.model_file.empty()) options.model_file = f.model_file;
-  options.fit.seed = f.seed;
-  options.fit.max_minutes = f.max_minutes;
-  options.joint.seed = f.seed;
-  options.read.dedupe = f.dedupe;
+  if (!options_file.empty()) {
+    apply_options_json(options, load_json_file(options_file), options_file);
+    check_options(options, options_file);
+  }
+  flags.apply(options);
   return options;
 }
 

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "common.hpp"
+#include "options.hpp"
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/rigid_body.hpp"
@@ -235,21 +236,11 @@ void bind_dynamics(py::module_& m, py::module_& d) {
   d.def("check_sample_period", &check_sample_period, py::arg("model"), py::arg("recording"),
         "A warning sentence when the recording's samples are over 4 training periods apart (recurrent kinds, whose network steps at its training rate on interpolated inputs); '' otherwise");
 
-  py::class_<FitOptions>(d, "FitOptions", "Options of every fit_* (defaults as the CLI)")
-      .def(py::init<>())
-      .def_readwrite("seed", &FitOptions::seed)
-      .def_readwrite("threads", &FitOptions::threads)
-      .def_readwrite("verbose", &FitOptions::verbose, "progress to stderr")
-      .def_readwrite("train_fraction", &FitOptions::train_fraction, "time-ordered split: train, validation, test")
-      .def_readwrite("validation_fraction", &FitOptions::validation_fraction)
-      .def_readwrite("num_outputs", &FitOptions::num_outputs, "joints to predict; 0 = every recorded joint")
-      .def_readwrite("max_minutes", &FitOptions::max_minutes, "wall-clock budget")
-      .def_readwrite("rigid_body", &FitOptions::rigid_body,
-                     "linear, hybrid: the rigid-body structure of joints 1-3 (default True; False: generic potential)")
-      .def_readwrite("remote_center", &FitOptions::remote_center,
-                     "linear, hybrid: the rigid-body inertia tied by the bodies of a remote-centre arm (default True; "
-                     "False: 19 free coefficients)")
+  def_options<FitOptions>(d, "FitOptions", "Options of every fit_* (the CLI's defaults: one table, FitOptions)")
       .def("check", &FitOptions::check, "rcm.InputError when a value is out of range");
+  d.def("get_default_model_kind", &get_default_model_kind, py::arg("can_train_networks"),
+        "The kind fitted when none is named: hybrid where the networks can be trained (the rcm CLI with\n"
+        "LibTorch), linear otherwise (this module: StudyOptions.model_kind None means linear here)");
   py::class_<JointTorqueError>(d, "JointTorqueError", "Table II: per-joint RMSE and NRMSE")
       .def_readonly("index", &JointTorqueError::index, "1-based joint number")
       .def_readonly("rmse", &JointTorqueError::rmse, "N m (N for joint 3)")
@@ -280,12 +271,9 @@ void bind_dynamics(py::module_& m, py::module_& d) {
         "Fit the linear model on free-space recordings (least squares; deterministic). The same fit as\n"
         "`rcm dynamics fit --model linear`. Returns FitResult(model, summary).");
   d.def("fit_torque_model", [](TorqueModelKind kind, const std::vector<Recording>& recordings, const FitOptions& options) {
-    if (kind != TorqueModelKind::linear)
-      throw InputError(argument_location("rcm.dynamics.fit_torque_model", "kind"),
-                       "the Python module has no LibTorch: only the linear model can be fitted here; fit " +
-                           to_string(kind) + " with `rcm dynamics fit` and load it with load_torque_model()");
     py::gil_scoped_release release;
-    return to_py(fit_linear_torque_model(recordings, options));
+    return to_py(fit_torque_model_without_networks(kind, recordings, options,
+                                                   argument_location("rcm.dynamics.fit_torque_model", "kind")));
   }, py::arg("kind"), py::arg("recordings"), py::arg("options") = FitOptions{},
         "fit_linear_torque_model for kind linear; other kinds need LibTorch (rcm.InputError)");
 

@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "common.hpp"
+#include "options.hpp"
 #include "rcm/estimation/joint.hpp"
 #include "rcm/estimation/three_step.hpp"
 
@@ -14,13 +15,7 @@ namespace rcm::python {
 
 void bind_estimation(py::module_& m) {
   // ---- static hold (steps 1 and 3b) ----
-  py::class_<RestDetectionOptions>(m, "RestDetectionOptions", "When a sample counts as at rest at q0")
-      .def(py::init<>())
-      .def_readwrite("max_angular_speed", &RestDetectionOptions::max_angular_speed, "rad/s, joints 1-2")
-      .def_readwrite("max_linear_speed", &RestDetectionOptions::max_linear_speed, "m/s, joint 3")
-      .def_readwrite("max_angle_from_q0", &RestDetectionOptions::max_angle_from_q0, "rad")
-      .def_readwrite("max_insertion_from_q0", &RestDetectionOptions::max_insertion_from_q0, "m")
-      .def_readwrite("min_duration_s", &RestDetectionOptions::min_duration_s);
+  def_options<RestDetectionOptions>(m, "RestDetectionOptions", "When a sample counts as at rest at q0");
   py::class_<RestSegment>(m, "RestSegment", "Samples [begin, end) at rest at q0")
       .def_readonly("begin", &RestSegment::begin)
       .def_readonly("end", &RestSegment::end)
@@ -80,17 +75,8 @@ void bind_estimation(py::module_& m) {
       .def_readonly("seconds", &SolverReport::seconds)
       .def("brief_report", &SolverReport::brief_report)
       .def("__repr__", [](const SolverReport& s) { return "<rcm.SolverReport " + s.brief_report() + ">"; });
-  py::class_<CoaxialProblemOptions>(m, "CoaxialProblemOptions")
-      .def(py::init<>())
-      .def_readwrite("max_theta_rad", &CoaxialProblemOptions::max_theta_rad);
-  py::class_<ThreeStepOptions>(m, "ThreeStepOptions")
-      .def(py::init<>())
-      .def_readwrite("D_min", &ThreeStepOptions::D_min, "m (paper Eq. 16)")
-      .def_readwrite("D_max", &ThreeStepOptions::D_max, "m")
-      .def_readwrite("D_initial", &ThreeStepOptions::D_initial, "m or None (middle of the bounds)")
-      .def_readwrite("function_tolerance", &ThreeStepOptions::function_tolerance)
-      .def_readwrite("max_iterations", &ThreeStepOptions::max_iterations)
-      .def_readwrite("coaxial", &ThreeStepOptions::coaxial)
+  def_options<CoaxialProblemOptions>(m, "CoaxialProblemOptions", "Which samples the coaxial problem (step 3c) uses");
+  def_options<ThreeStepOptions, CoaxialProblemOptions>(m, "ThreeStepOptions", "The three-step method (paper Algorithm 1)")
       .def("check", &ThreeStepOptions::check, "ValueError naming the first bad option");
   py::class_<ThreeStepResult>(m, "ThreeStepResult")
       .def_readonly("misalignment_m", &ThreeStepResult::misalignment_m, "[dr_x, dr_y, D], incision frame, m")
@@ -131,22 +117,7 @@ void bind_estimation(py::module_& m) {
     return make_joint_samples(inc, rec, tau, max_theta_rad);
   }, py::arg("incision"), py::arg("recording"), py::arg("tau_fs"), py::arg("max_theta_rad") = 80.0 * M_PI / 180.0,
         "Samples of a recording with their residual tau - tau_fs whose pivot stays below max_theta_rad");
-  py::class_<JointEstimatorOptions>(m, "JointEstimatorOptions")
-      .def(py::init<>())
-      .def_readwrite("D_min", &JointEstimatorOptions::D_min)
-      .def_readwrite("D_max", &JointEstimatorOptions::D_max)
-      .def_readwrite("radial_max", &JointEstimatorOptions::radial_max)
-      .def_readwrite("D_starts", &JointEstimatorOptions::D_starts)
-      .def_readwrite("torque_sigma", &JointEstimatorOptions::torque_sigma, "residual scale per joint (N m, N m, N)")
-      .def_readwrite("huber_scale", &JointEstimatorOptions::huber_scale)
-      .def_readwrite("bootstrap_replicates", &JointEstimatorOptions::bootstrap_replicates)
-      .def_readwrite("calibration_bootstrap_replicates", &JointEstimatorOptions::calibration_bootstrap_replicates)
-      .def_readwrite("bootstrap_block_s", &JointEstimatorOptions::bootstrap_block_s)
-      .def_readwrite("calibration_offset_sd_m", &JointEstimatorOptions::calibration_offset_sd_m)
-      .def_readwrite("torque_bias", &JointEstimatorOptions::torque_bias, "free-space model error off the trials (N m, N m, N)")
-      .def_readwrite("sample_period_s", &JointEstimatorOptions::sample_period_s)
-      .def_readwrite("seed", &JointEstimatorOptions::seed)
-      .def_readwrite("max_iterations", &JointEstimatorOptions::max_iterations)
+  def_options<JointEstimatorOptions>(m, "JointEstimatorOptions", "The joint torque-space estimator")
       .def("check", &JointEstimatorOptions::check);
   py::class_<JointTissueModel>(m, "JointTissueModel", "Tissue parameters [k1 N/m, k3 N/m^3, c N s/m, F N] identified in torque space")
       .def_readonly("parameters", &JointTissueModel::parameters)

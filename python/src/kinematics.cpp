@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "common.hpp"
+#include "options.hpp"
 #include "rcm/force/incision_force.hpp"
 #include "rcm/kinematics/incision.hpp"
 #include "rcm/kinematics/psm_model.hpp"
@@ -171,13 +172,7 @@ void bind_kinematics(py::module_& m) {
       .value("ok", JacobianStatus::ok)
       .value("ill_conditioned", JacobianStatus::ill_conditioned)
       .value("singular", JacobianStatus::singular);
-  py::class_<JacobianCheckOptions>(m, "JacobianCheckOptions")
-      .def(py::init<>())
-      .def(py::init([](double max_condition, double singular_condition) {
-             return JacobianCheckOptions{max_condition, singular_condition};
-           }), py::kw_only(), py::arg("max_condition") = 200.0, py::arg("singular_condition") = 1e8)
-      .def_readwrite("max_condition", &JacobianCheckOptions::max_condition, "flag ill_conditioned above this")
-      .def_readwrite("singular_condition", &JacobianCheckOptions::singular_condition, "treat as singular above this");
+  def_options<JacobianCheckOptions>(m, "JacobianCheckOptions", "When J_D counts as ill-conditioned or singular");
   py::class_<JacobianCondition>(m, "JacobianCondition")
       .def_readonly("condition", &JacobianCondition::condition, "sigma_max / sigma_min, inf when singular")
       .def_readonly("status", &JacobianCondition::status)

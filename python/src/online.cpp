@@ -3,6 +3,7 @@
 // from its running estimate.
 
 #include "common.hpp"
+#include "options.hpp"
 #include "rcm/estimation/correction.hpp"
 #include "rcm/estimation/online.hpp"
 
@@ -33,28 +34,7 @@ py::object optional_double(const std::optional<double>& v) { return v ? py::obje
 
 void bind_online(py::module_& m) {
   // ---- online ----
-  py::class_<OnlineEstimatorOptions>(m, "OnlineEstimatorOptions")
-      .def(py::init<>())
-      .def_readwrite("D_min", &OnlineEstimatorOptions::D_min)
-      .def_readwrite("D_max", &OnlineEstimatorOptions::D_max)
-      .def_readwrite("radial_max", &OnlineEstimatorOptions::radial_max)
-      .def_readwrite("D_starts", &OnlineEstimatorOptions::D_starts, "one filter each (at most 4)")
-      .def_readwrite("torque_sigma", &OnlineEstimatorOptions::torque_sigma)
-      .def_readwrite("correlation_time_s", &OnlineEstimatorOptions::correlation_time_s)
-      .def_readwrite("huber_scale", &OnlineEstimatorOptions::huber_scale)
-      .def_readwrite("initial_radial_sd_m", &OnlineEstimatorOptions::initial_radial_sd_m)
-      .def_readwrite("initial_D_sd_m", &OnlineEstimatorOptions::initial_D_sd_m)
-      .def_readwrite("drift_sd_m_per_sqrt_s", &OnlineEstimatorOptions::drift_sd_m_per_sqrt_s)
-      .def_readwrite("max_drift_gap_s", &OnlineEstimatorOptions::max_drift_gap_s)
-      .def_readwrite("hypothesis_memory_s", &OnlineEstimatorOptions::hypothesis_memory_s)
-      .def_readwrite("onset_threshold", &OnlineEstimatorOptions::onset_threshold)
-      .def_readwrite("alarm_force_n", &OnlineEstimatorOptions::alarm_force_n)
-      .def_readwrite("alarm_clear_fraction", &OnlineEstimatorOptions::alarm_clear_fraction)
-      .def_readwrite("max_theta_rad", &OnlineEstimatorOptions::max_theta_rad)
-      .def_readwrite("rest_angular_speed", &OnlineEstimatorOptions::rest_angular_speed)
-      .def_readwrite("rest_linear_speed", &OnlineEstimatorOptions::rest_linear_speed)
-      .def_readwrite("rest_sigma_factor", &OnlineEstimatorOptions::rest_sigma_factor)
-      .def_readwrite("min_dt_s", &OnlineEstimatorOptions::min_dt_s)
+  def_options<OnlineEstimatorOptions>(m, "OnlineEstimatorOptions", "The bank of EKFs, onset and alarm")
       .def("check", &OnlineEstimatorOptions::check);
   m.def("make_online_options", &make_online_options, py::arg("joint"),
         "Online options agreeing with a batch estimate's bounds and scales");
@@ -160,17 +140,7 @@ void bind_online(py::module_& m) {
       .value("model_mismatch", HoldReason::model_mismatch)
       .value("not_confident", HoldReason::not_confident)
       .value("within_tolerance", HoldReason::within_tolerance);
-  py::class_<CorrectionOptions>(m, "CorrectionOptions", "Gates and limits of the RCM correction (m, m/s)")
-      .def(py::init<>())
-      .def_readwrite("tolerance_m", &CorrectionOptions::tolerance_m, "within this, hold (default 0.002)")
-      .def_readwrite("compensate_limit_m", &CorrectionOptions::compensate_limit_m,
-                     "software shifts up to this in all, beyond: re-docking (default 0.010)")
-      .def_readwrite("max_rate_m_per_s", &CorrectionOptions::max_rate_m_per_s, "speed of the software shift (default 0.005)")
-      .def_readwrite("confidence_z", &CorrectionOptions::confidence_z, "1.96: the 95 % interval")
-      .def_readwrite("max_fit_cost", &CorrectionOptions::max_fit_cost,
-                     "hold above this OnlineOutput.fit_cost: the model does not explain the torques (default 10)")
-      .def_readwrite("release_fraction", &CorrectionOptions::release_fraction, "back to hold below this x tolerance")
-      .def_readwrite("max_step_dt_s", &CorrectionOptions::max_step_dt_s, "a step after a gap covers at most this long");
+  def_options<CorrectionOptions>(m, "CorrectionOptions", "Gates and limits of the RCM correction (m, m/s)");
   py::class_<CorrectionOutput>(m, "CorrectionOutput", "The action after a sample (estimation/correction.hpp)")
       .def_readonly("time", &CorrectionOutput::time)
       .def_readonly("action", &CorrectionOutput::action)
@@ -254,10 +224,7 @@ void bind_online(py::module_& m) {
       .def_readonly("raised_s", &OnlineAlarm::raised_s)
       .def_property_readonly("cleared_s", [](const OnlineAlarm& a) { return optional_double(a.cleared_s); })
       .def_readonly("peak_force_n", &OnlineAlarm::peak_force_n);
-  py::class_<OnlineReplayOptions>(m, "OnlineReplayOptions")
-      .def(py::init<>())
-      .def_readwrite("settle_band_m", &OnlineReplayOptions::settle_band_m)
-      .def_readwrite("motion_speed", &OnlineReplayOptions::motion_speed, "rad/s");
+  def_options<OnlineReplayOptions>(m, "OnlineReplayOptions", "What replay_online measures");
   py::class_<OnlineReplay>(m, "OnlineReplay", "A recording streamed through a pipeline (rcm monitor)")
       .def_readonly("samples", &OnlineReplay::samples)
       .def_readonly("final_output", &OnlineReplay::final_output)

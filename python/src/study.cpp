@@ -2,7 +2,7 @@
 // online monitor (fit_free_space_step, prepare_monitor) and its results.
 
 #include "common.hpp"
-#include "rcm/dynamics/linear_model.hpp"
+#include "options.hpp"
 #include "rcm/estimation/study.hpp"
 
 namespace rcm::python {
@@ -11,16 +11,10 @@ namespace {
 
 using dynamics::TorqueModel;
 
-// The study's free-space fitter in a build without LibTorch, as the CLI's
-// (apps/rcm/study_cli.cpp): linear only, a clear error for the others.
+// The study's free-space fitter: rcm::core's, as the module has no LibTorch
+// (linear only; its default kind is linear).
 TorqueModelFitter get_python_fitter() {
-  return [](dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings, const dynamics::FitOptions& options) {
-    if (kind != dynamics::TorqueModelKind::linear)
-      throw InputError(argument_location("StudyOptions", "model_kind"),
-                       "the Python module has no LibTorch: only the linear model can be fitted; fit " +
-                           dynamics::to_string(kind) + " with `rcm dynamics fit` and pass it as model_file");
-    return dynamics::fit_linear_torque_model(recordings, options);
-  };
+  return get_linear_torque_model_fitter(argument_location("rcm.StudyOptions", "model_kind"));
 }
 
 std::shared_ptr<TorqueModel> unconst(const std::shared_ptr<const TorqueModel>& model) {
@@ -33,35 +27,14 @@ std::shared_ptr<TorqueModel> unconst(const std::shared_ptr<const TorqueModel>& m
 
 void bind_study(py::module_& m) {
   // ---- the study on a session ----
-  py::class_<StudyOptions>(m, "StudyOptions",
-                           "Options of run_study / prepare_monitor. model_kind defaults to linear (the only kind the\n"
-                           "module fits: it has no LibTorch); set model_file to use a saved model of any kind.")
-      .def(py::init([] {
-        StudyOptions o;
-        o.model_kind = dynamics::TorqueModelKind::linear;  // as the CLI without LibTorch
-        return o;
-      }))
-      .def_readwrite("method", &StudyOptions::method, "'joint' (default; three-step beside it) or 'three-step'")
-      .def_readwrite("static_step", &StudyOptions::static_step, "StaticStep of the three-step method")
-      .def_readwrite("joint", &StudyOptions::joint, "JointEstimatorOptions")
-      .def_readwrite("model_kind", &StudyOptions::model_kind)
-      .def_readwrite("model_file", &StudyOptions::model_file, "path of a saved free-space model, or None (fit)")
-      .def_readwrite("fit", &StudyOptions::fit, "rcm.dynamics.FitOptions")
-      .def_readwrite("tissue", &StudyOptions::tissue, "TissueFitOptions")
-      .def_readwrite("tissue_pairs", &StudyOptions::tissue_pairs)
-      .def_readwrite("tissue_sensitivity_delta_m", &StudyOptions::tissue_sensitivity_delta_m, "0: skip the D* +- delta refits")
-      .def_readwrite("three_step", &StudyOptions::three_step)
-      .def_readwrite("rest", &StudyOptions::rest)
-      .def_readwrite("read", &StudyOptions::read, "RecordingReadOptions")
-      .def_readwrite("paper_settle_s", &StudyOptions::paper_settle_s)
-      .def_readwrite("hold_chatter_width_counts", &StudyOptions::hold_chatter_width_counts)
-      .def_readwrite("verbose", &StudyOptions::verbose, "progress to stderr");
-  py::class_<RecordingReadOptions>(m, "RecordingReadOptions")
-      .def(py::init<>())
-      .def_readwrite("dedupe", &RecordingReadOptions::dedupe)
-      .def_readwrite("assumed_rate_hz", &RecordingReadOptions::assumed_rate_hz)
-      .def_readwrite("min_joints", &RecordingReadOptions::min_joints);
-
+  def_options<RecordingReadOptions>(m, "RecordingReadOptions", "How recordings are read");
+  def_options<StudyOptions, JointEstimatorOptions, std::optional<dynamics::TorqueModelKind>, dynamics::FitOptions,
+              TissueFitOptions, TissuePairOptions, ThreeStepOptions, RestDetectionOptions, StaticStep,
+              RecordingReadOptions>(
+      m, "StudyOptions",
+      "Options of run_study / prepare_monitor. model_kind None: the kind this module fits, linear\n"
+      "(rcm.dynamics.get_default_model_kind(False): the module has no LibTorch); set model_file to use a\n"
+      "saved model of any kind.");
   py::class_<TrialOutcome>(m, "TrialOutcome", "Everything the study found on one trial")
       .def_readonly("name", &TrialOutcome::name)
       .def_readonly("truth_m", &TrialOutcome::truth_m)

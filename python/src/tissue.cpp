@@ -2,6 +2,7 @@
 // calibration pairs, the symbolic-regression fit and the identified law.
 
 #include "common.hpp"
+#include "options.hpp"
 #include "rcm/tissue/expression.hpp"
 #include "rcm/tissue/tissue_fit.hpp"
 #include "rcm/tissue/tissue_law.hpp"
@@ -112,11 +113,7 @@ void bind_tissue(py::module_& m) {
   m.def("save_tissue_pairs", &save_tissue_pairs, py::arg("path"), py::arg("pairs"));
   m.def("compute_binned_pairs", &compute_binned_pairs, py::arg("pairs"), py::arg("bins"));
 
-  py::class_<TissuePairOptions>(m, "TissuePairOptions")
-      .def(py::init<>())
-      .def_readwrite("min_theta_rad", &TissuePairOptions::min_theta_rad)
-      .def_readwrite("drop_ill_conditioned", &TissuePairOptions::drop_ill_conditioned)
-      .def_readwrite("jacobian", &TissuePairOptions::jacobian);
+  def_options<TissuePairOptions, JacobianCheckOptions>(m, "TissuePairOptions", "Which calibration samples make pairs");
   py::class_<TissuePairsReport>(m, "TissuePairsReport", "Samples kept and dropped (never silently)")
       .def_readonly("samples", &TissuePairsReport::samples)
       .def_readonly("kept", &TissuePairsReport::kept)
@@ -144,13 +141,8 @@ void bind_tissue(py::module_& m) {
   }, py::arg("recording"), py::arg("q0"), py::arg("D_star"), py::arg("options") = TissuePairOptions{},
         "Same pairs with y = |force| of the recording's force columns (a sensor, for reference)");
 
-  py::class_<TissueFitOptions>(m, "TissueFitOptions", "Symbolic regression options (docs/tissue.md)")
-      .def(py::init<>())
-      .def_readwrite("max_complexity", &TissueFitOptions::max_complexity)
-      .def_readwrite("terms", &TissueFitOptions::terms)
-      .def_readwrite("allow_intercept", &TissueFitOptions::allow_intercept)
-      .def_readwrite("bins", &TissueFitOptions::bins, "equal-count binning before fitting (0 = off)")
-      .def_readwrite("best_loss_factor", &TissueFitOptions::best_loss_factor)
+  def_options<TissueFitOptions, std::vector<TissueTermKind>>(m, "TissueFitOptions",
+                                                             "Symbolic regression options (docs/tissue.md)")
       .def("check", &TissueFitOptions::check);
   py::class_<TissueFrontEntry>(m, "TissueFrontEntry")
       .def_readonly("expression", &TissueFrontEntry::expression)

@@ -7,6 +7,8 @@
 #include <stdexcept>
 
 #include "rcm/common/error.hpp"
+#include "rcm/common/options.hpp"
+#include "rcm/dynamics/linear_model.hpp"
 
 namespace rcm::dynamics {
 
@@ -183,6 +185,86 @@ std::string FitSummary::brief_report() const {
     s += fmt::format("  test joint {}: RMSE {:.4g}, NRMSE {:.2f} %\n", e.index, e.rmse, e.nrmse_percent);
   for (const auto& w : warnings) s += "  warning: " + w + "\n";
   return s;
+}
+
+const OptionTable<FitOptions>& get_option_table(OptionTag<FitOptions>) {
+  const auto positive = OptionLimits::above(0), non_negative = OptionLimits::at_least(0);
+  static const auto table =
+      OptionTable<FitOptions>("FitOptions")
+          .add("seed", &FitOptions::seed, "random seed of the network initialization and batching")
+          .add("threads", &FitOptions::threads, "LibTorch intra-op threads", "", OptionLimits::at_least(1))
+          .add("verbose", &FitOptions::verbose, "progress to stderr")
+          .add("train_fraction", &FitOptions::train_fraction, "first share of the samples, in time order, fitted on",
+               "", OptionLimits::above_up_to(0, 1))
+          .add("validation_fraction", &FitOptions::validation_fraction,
+               "next share, for early stopping; the rest is the held-out test split", "",
+               OptionLimits::above_up_to(0, 1))
+          .add("num_outputs", &FitOptions::num_outputs, "joints to predict, 1..M (0: every recorded joint)", "",
+               non_negative)
+          .add("hidden_size", &FitOptions::hidden_size, "LSTM hidden size (0: 128, or 32 on < 5 min of data)", "",
+               non_negative)
+          .add("num_layers", &FitOptions::num_layers, "LSTM layers (0: 1)", "", non_negative)
+          .add("head_hidden", &FitOptions::head_hidden, "width of the LSTM's tanh head", "", OptionLimits::at_least(1))
+          .add("window", &FitOptions::window, "truncated-BPTT window (0: 100, or 50 on < 5 min of data)", "samples",
+               non_negative)
+          .add("streams", &FitOptions::streams, "contiguous streams per batch (0: 32)", "", non_negative)
+          .add("burn_in", &FitOptions::burn_in, "samples run before a validation stream is scored", "samples",
+               non_negative)
+          .add("mlp_hidden", &FitOptions::mlp_hidden, "hidden width of each joint's MLP", "", OptionLimits::at_least(1))
+          .add("max_epochs", &FitOptions::max_epochs, "epoch limit (early stopping usually ends sooner)", "",
+               OptionLimits::at_least(1))
+          .add("learning_rate", &FitOptions::learning_rate, "initial Adam learning rate", "", positive)
+          .add("weight_decay", &FitOptions::weight_decay, "Adam weight decay (0: chosen from the amount of data)", "",
+               non_negative)
+          .add("patience", &FitOptions::patience, "epochs without validation improvement before stopping", "",
+               OptionLimits::at_least(1))
+          .add("plateau_patience", &FitOptions::plateau_patience, "epochs before the learning rate is halved", "",
+               OptionLimits::at_least(1))
+          .add("min_learning_rate", &FitOptions::min_learning_rate, "the learning rate is not halved below this", "",
+               positive)
+          .add("max_minutes", &FitOptions::max_minutes, "wall-clock budget of one fit", "min", positive)
+          .add("velocity_tanh_scales", &FitOptions::velocity_tanh_scales,
+               "lstm, hybrid: direction features tanh(qdot / (s x velocity sd)), one per s (null: the kind's "
+               "default, get_default_velocity_tanh_scales)",
+               "", positive)
+          .add("acceleration_filters_s", &FitOptions::acceleration_filters_s,
+               "lstm, hybrid: acceleration features, qdot's difference low-passed with each time constant (null: "
+               "the kind's default)",
+               "s", positive)
+          .add("dahl_fractions", &FitOptions::dahl_fractions,
+               "lstm, hybrid: Dahl features with characteristic displacement f x each joint's range of motion, one "
+               "per f (null: the kind's default)",
+               "", positive)
+          .add("loss_balance", &FitOptions::loss_balance,
+               "lstm, hybrid: each joint's loss divided by its running mean to this power (null: the kind's "
+               "default)",
+               "", OptionLimits::within(0, 1))
+          .add("output_delay_s", &FitOptions::output_delay_s,
+               "lstm: how far the network's torque trails its input (null: the kind's default; 0: causal)", "s",
+               non_negative)
+          .add("prefer_cuda", &FitOptions::prefer_cuda, "train on a CUDA device when there is one")
+          .add("rigid_body", &FitOptions::rigid_body,
+               "linear, hybrid: the rigid-body structure of joints 1-3 (false: a free potential and constant "
+               "armature)")
+          .add("remote_center", &FitOptions::remote_center,
+               "linear, hybrid, with the rigid-body structure: its inertia tied by the bodies of a remote-centre "
+               "arm (false: 19 free coefficients)")
+          .add_check([](const FitOptions& o) { o.check(); });
+  return table;
+}
+
+TorqueModelKind get_default_model_kind(bool can_train_networks) {
+  return can_train_networks ? TorqueModelKind::hybrid : TorqueModelKind::linear;
+}
+
+FitResult fit_torque_model_without_networks(TorqueModelKind kind, const std::vector<Recording>& recordings,
+                                            const FitOptions& options, const InputLocation& where) {
+  if (kind != TorqueModelKind::linear)
+    throw InputError(where, "fitting " + to_string(kind) +
+                                " needs LibTorch (rcm::torch), which this program does not have; only the linear "
+                                "model is fitted here. Fit it with `rcm dynamics fit --model " + to_string(kind) +
+                                "` and use the model file");
+  return fit_linear_torque_model(recordings, options);
 }
 
 }  // namespace rcm::dynamics

@@ -8,6 +8,7 @@
 #include <cstring>
 
 #include "model_io.hpp"
+#include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
 
@@ -354,6 +355,14 @@ void save_torque_model(const std::filesystem::path& path, const TorqueModel& mod
 
 std::unique_ptr<TorqueModel> load_torque_model(const std::filesystem::path& path) {
   return torque_model_from_json(load_json_file(path), path.string());
+}
+
+const OptionChoices<TorqueModelKind>& get_option_choices(OptionTag<TorqueModelKind>) {
+  static const OptionChoices<TorqueModelKind> choices = {{"lstm", TorqueModelKind::lstm},
+                                                         {"mlp", TorqueModelKind::mlp},
+                                                         {"linear", TorqueModelKind::linear},
+                                                         {"hybrid", TorqueModelKind::hybrid}};
+  return choices;
 }
 
 }  // namespace rcm::dynamics

@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <utility>
 
+#include "rcm/common/options.hpp"
+
 namespace rcm {
 
 void CorrectionOptions::check() const {
@@ -252,6 +254,28 @@ AlignmentCheck check_alignment(const OnlineOutput& estimate, const IncisionFrame
                             format_mm(b.high), describe_rcm_move(estimate.misalignment_m, incision));
   }
   return c;
+}
+
+const OptionTable<CorrectionOptions>& get_option_table(OptionTag<CorrectionOptions>) {
+  static const auto table =
+      OptionTable<CorrectionOptions>("CorrectionOptions")
+          .add("tolerance_m", &CorrectionOptions::tolerance_m, "the RCM is aligned within this distance: hold", "m",
+               OptionLimits::above(0))
+          .add("compensate_limit_m", &CorrectionOptions::compensate_limit_m,
+               "software RCM shifts up to this in all, beyond it re-docking advice", "m", OptionLimits::above(0))
+          .add("max_rate_m_per_s", &CorrectionOptions::max_rate_m_per_s, "speed of the software RCM shift", "m/s",
+               OptionLimits::above(0))
+          .add("confidence_z", &CorrectionOptions::confidence_z, "the interval the gates read: 1.96 is 95 %", "",
+               OptionLimits::above(0))
+          .add("max_fit_cost", &CorrectionOptions::max_fit_cost,
+               "hold above this OnlineOutput::fit_cost: the model does not explain the torques (1.5: a perfect fit)",
+               "", OptionLimits::above(0))
+          .add("release_fraction", &CorrectionOptions::release_fraction,
+               "back to hold below this fraction of the tolerance", "", OptionLimits::above_up_to(0, 1))
+          .add("max_step_dt_s", &CorrectionOptions::max_step_dt_s,
+               "a sample after a gap moves the RCM by at most this long at max_rate", "s", OptionLimits::above(0))
+          .add_check([](const CorrectionOptions& o) { o.check(); });
+  return table;
 }
 
 }  // namespace rcm

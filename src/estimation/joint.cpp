@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "joint_model.hpp"
+#include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/common/interrupt.hpp"
 
@@ -408,6 +409,38 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
   out.ci_low = best.p - half;
   out.ci_high = best.p + half;
   return out;
+}
+
+const OptionTable<JointEstimatorOptions>& get_option_table(OptionTag<JointEstimatorOptions>) {
+  static const auto table =
+      OptionTable<JointEstimatorOptions>("JointEstimatorOptions")
+          .add("D_min", &JointEstimatorOptions::D_min, "lower bound of the coaxial offset D", "m")
+          .add("D_max", &JointEstimatorOptions::D_max, "upper bound of D", "m")
+          .add("radial_max", &JointEstimatorOptions::radial_max, "bound of |dr_x| and |dr_y|", "m",
+               OptionLimits::above(0))
+          .add("D_starts", &JointEstimatorOptions::D_starts, "starts of the multi-start solve, within the bounds", "m")
+          .add("torque_sigma", &JointEstimatorOptions::torque_sigma,
+               "scale of the torque residual per joint: the free-space model's error", "N m, N m, N",
+               OptionLimits::above(0))
+          .add("huber_scale", &JointEstimatorOptions::huber_scale, "residuals beyond this are down-weighted", "sigma",
+               OptionLimits::above(0))
+          .add("bootstrap_replicates", &JointEstimatorOptions::bootstrap_replicates,
+               "block-bootstrap replicates of a trial's interval", "", OptionLimits::at_least(0))
+          .add("calibration_bootstrap_replicates", &JointEstimatorOptions::calibration_bootstrap_replicates,
+               "bootstrap replicates of the tissue parameters on the calibration", "", OptionLimits::at_least(0))
+          .add("bootstrap_block_s", &JointEstimatorOptions::bootstrap_block_s,
+               "shortest bootstrap block (longer when the residuals' memory is)", "s", OptionLimits::above(0))
+          .add("calibration_offset_sd_m", &JointEstimatorOptions::calibration_offset_sd_m,
+               "how well the calibration's D* is known, one sd", "m", OptionLimits::at_least(0))
+          .add("sample_period_s", &JointEstimatorOptions::sample_period_s, "period of the samples", "s",
+               OptionLimits::above(0))
+          .add("torque_bias", &JointEstimatorOptions::torque_bias,
+               "the free-space model's torque error on the arm as it is now (0: not known)", "N m, N m, N")
+          .add("seed", &JointEstimatorOptions::seed, "seed of the bootstrap")
+          .add("max_iterations", &JointEstimatorOptions::max_iterations, "Ceres iteration limit", "",
+               OptionLimits::at_least(1))
+          .add_check([](const JointEstimatorOptions& o) { o.check(); });
+  return table;
 }
 
 }  // namespace rcm

@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "joint_model.hpp"
+#include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
 
 namespace rcm {
@@ -354,6 +355,59 @@ OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, c
     out.settled_after_s = std::max(0.0, settled_at - *out.motion_start_s);
   }
   return out;
+}
+
+const OptionTable<OnlineEstimatorOptions>& get_option_table(OptionTag<OnlineEstimatorOptions>) {
+  const auto positive = OptionLimits::above(0);
+  static const auto table =
+      OptionTable<OnlineEstimatorOptions>("OnlineEstimatorOptions")
+          .add("D_min", &OnlineEstimatorOptions::D_min, "lower bound of the coaxial offset D", "m")
+          .add("D_max", &OnlineEstimatorOptions::D_max, "upper bound of D", "m")
+          .add("radial_max", &OnlineEstimatorOptions::radial_max, "bound of |dr_x| and |dr_y|", "m", positive)
+          .add("D_starts", &OnlineEstimatorOptions::D_starts, "one filter per start, at most 4", "m")
+          .add("torque_sigma", &OnlineEstimatorOptions::torque_sigma, "the free-space model's error per joint",
+               "N m, N m, N", positive)
+          .add("correlation_time_s", &OnlineEstimatorOptions::correlation_time_s,
+               "correlation time of the free-space model's error", "s", positive)
+          .add("huber_scale", &OnlineEstimatorOptions::huber_scale, "innovations beyond this are down-weighted",
+               "sigma", positive)
+          .add("initial_radial_sd_m", &OnlineEstimatorOptions::initial_radial_sd_m, "prior sd of dr_x and dr_y", "m",
+               positive)
+          .add("initial_D_sd_m", &OnlineEstimatorOptions::initial_D_sd_m, "prior sd of D", "m", positive)
+          .add("drift_sd_m_per_sqrt_s", &OnlineEstimatorOptions::drift_sd_m_per_sqrt_s,
+               "random walk of the incision (patient motion)", "m/sqrt(s)", OptionLimits::at_least(0))
+          .add("max_drift_gap_s", &OnlineEstimatorOptions::max_drift_gap_s,
+               "a gap in the stream accrues the drift of at most this long", "s", positive)
+          .add("hypothesis_memory_s", &OnlineEstimatorOptions::hypothesis_memory_s,
+               "forgetting time of each filter's innovation cost", "s", positive)
+          .add("onset_threshold", &OnlineEstimatorOptions::onset_threshold, "CUSUM threshold of the onset test",
+               "nats per correlation time", positive)
+          .add("alarm_force_n", &OnlineEstimatorOptions::alarm_force_n, "incision force that raises the alarm (paper V-E)",
+               "N", positive)
+          .add("alarm_clear_fraction", &OnlineEstimatorOptions::alarm_clear_fraction,
+               "the alarm clears below this fraction of its force", "", OptionLimits::above_up_to(0, 1))
+          .add("max_theta_rad", &OnlineEstimatorOptions::max_theta_rad, "samples pivoting beyond this are not used",
+               "rad", positive)
+          .add("rest_angular_speed", &OnlineEstimatorOptions::rest_angular_speed,
+               "joints 1-2 slower than this count as at rest", "rad/s", OptionLimits::at_least(0))
+          .add("rest_linear_speed", &OnlineEstimatorOptions::rest_linear_speed,
+               "joint 3 slower than this counts as at rest", "m/s", OptionLimits::at_least(0))
+          .add("rest_sigma_factor", &OnlineEstimatorOptions::rest_sigma_factor,
+               "the free-space model's error at rest, in units of torque_sigma", "", OptionLimits::at_least(1))
+          .add("min_dt_s", &OnlineEstimatorOptions::min_dt_s, "samples closer in time count as this far apart", "s",
+               positive)
+          .add_check([](const OnlineEstimatorOptions& o) { o.check(); });
+  return table;
+}
+
+const OptionTable<OnlineReplayOptions>& get_option_table(OptionTag<OnlineReplayOptions>) {
+  static const auto table =
+      OptionTable<OnlineReplayOptions>("OnlineReplayOptions")
+          .add("settle_band_m", &OnlineReplayOptions::settle_band_m,
+               "band around the final estimate for the settling time", "m", OptionLimits::above(0))
+          .add("motion_speed", &OnlineReplayOptions::motion_speed, "joints 1-2 faster than this start the motion",
+               "rad/s", OptionLimits::above(0));
+  return table;
 }
 
 }  // namespace rcm

@@ -7,6 +7,7 @@
 
 #include "rcm/common/error.hpp"
 #include "rcm/common/interrupt.hpp"
+#include "rcm/common/options.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/force/incision_force.hpp"
@@ -25,15 +26,49 @@ void progress(bool verbose, const std::string& text) {
 
 }  // namespace
 
-TorqueModelFitter get_linear_torque_model_fitter() {
-  return [](dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings,
-            const dynamics::FitOptions& options) {
-    if (kind != dynamics::TorqueModelKind::linear)
-      throw InputError(InputLocation::plain("StudyOptions", "model_kind"),
-                       "rcm::core fits only the linear model; fit " + dynamics::to_string(kind) +
-                           " with rcm::torch (fit_torque_model) or `rcm dynamics fit` and pass it as model_file");
-    return dynamics::fit_linear_torque_model(recordings, options);
-  };
+TorqueModelFitter get_linear_torque_model_fitter(const InputLocation& where) {
+  return TorqueModelFitter(
+      [where](dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings,
+              const dynamics::FitOptions& options) {
+        return dynamics::fit_torque_model_without_networks(kind, recordings, options, where);
+      },
+      false);
+}
+
+const OptionTable<StudyOptions>& get_option_table(OptionTag<StudyOptions>) {
+  static const auto table =
+      OptionTable<StudyOptions>("StudyOptions")
+          .add("method", &StudyOptions::method,
+               "joint: all offsets in torque space with 95 % intervals, three-step beside it; three-step: paper "
+               "Algorithm 1 alone",
+               "", {}, {"joint", "three-step"})
+          .add_section("joint", &StudyOptions::joint, "the joint torque-space estimator")
+          .add("model_kind", &StudyOptions::model_kind,
+               "free-space model to fit (null: hybrid where the networks can be trained, linear otherwise)")
+          .add("model_file", &StudyOptions::model_file, "use this saved free-space model instead of fitting one")
+          .add_section("fit", &StudyOptions::fit, "the free-space model's fit")
+          .add_section("tissue", &StudyOptions::tissue, "the tissue law's symbolic regression")
+          .add_section("tissue_pairs", &StudyOptions::tissue_pairs, "the calibration's pairs x, |f_inc|")
+          .add("tissue_sensitivity_delta_m", &StudyOptions::tissue_sensitivity_delta_m,
+               "the tissue law refitted at D* +- this (paper V-D; 0: not refitted)", "m", OptionLimits::at_least(0))
+          .add("tissue_sensitivity_steps", &StudyOptions::tissue_sensitivity_steps,
+               "offsets refitted in [D* - delta, D* + delta]", "", OptionLimits::at_least(2))
+          .add_section("three_step", &StudyOptions::three_step, "the three-step method")
+          .add_section("rest", &StudyOptions::rest, "when a sample is at rest at q0 (steps 1 and 3b)")
+          .add("static_step", &StudyOptions::static_step,
+               "how step 3b reads the static file: balanced (holds approached from both sides averaged apart) or "
+               "last-hold (the paper's)")
+          .add_section("read", &StudyOptions::read, "how the session's recordings are read")
+          .add("paper_settle_s", &StudyOptions::paper_settle_s,
+               "the paper's f(q0, 0): the model stepped at rest from its reset state this long", "s",
+               OptionLimits::at_least(0))
+          .add("hold_chatter_width_counts", &StudyOptions::hold_chatter_width_counts,
+               "encoder chatter removed from a static file's positions, in encoder counts (0: none)", "counts",
+               OptionLimits::at_least(0))
+          .add("verbose", &StudyOptions::verbose, "progress to stderr")
+          .add("export_problems_dir", &StudyOptions::export_problems_dir,
+               "write every trial's coaxial problem as JSON into this folder (solver cross-checks)");
+  return table;
 }
 
 std::optional<double> TrialOutcome::get_error_m() const {
@@ -77,7 +112,7 @@ FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOption
                                        const TorqueModelFitter& fitter) {
   const auto start = std::chrono::steady_clock::now();
   FreeSpaceModelStep out;
-  out.kind = options.model_kind;
+  out.kind = fitter.resolve_kind(options.model_kind);
   std::vector<Recording> free_space;
   for (const auto& p : session.free_space) free_space.push_back(load_recording(p, get_read_options(session, options.read)));
   if (options.model_file) {
@@ -87,9 +122,9 @@ FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOption
     const dynamics::TimeSplit split = dynamics::split_in_time(free_space, 0.7, 0.2);
     out.errors = dynamics::evaluate_on_segments(*out.model, free_space, split.test);
   } else {
-    progress(options.verbose, "fitting the " + dynamics::to_string(options.model_kind) + " free-space model on " +
+    progress(options.verbose, "fitting the " + dynamics::to_string(out.kind) + " free-space model on " +
                                   std::to_string(free_space.size()) + " recording(s)");
-    dynamics::FitResult fit = fitter(options.model_kind, free_space, options.fit);
+    dynamics::FitResult fit = fitter(out.kind, free_space, options.fit);
     // A network whose training was cut short is not the model the study asked for.
     if (fit.summary.interrupted) throw Interrupted("interrupted while fitting the free-space model");
     out.fit = fit.summary;
@@ -150,12 +185,7 @@ void check_study_inputs(const Session& session, const StudyOptions& options) {
     manifest_where.field = "trials";
     throw InputError(manifest_where, "no trials to estimate");
   }
-  options.three_step.check();
-  if (options.method != "three-step" && options.method != "joint") {
-    InputLocation where;
-    where.file = "method";
-    throw InputError(where, "expected three-step or joint, got '" + options.method + "'");
-  }
+  check_options(options, "StudyOptions");
 }
 
 StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
@@ -163,84 +193,212 @@ StudyResult run_study(const Session& session, const StudyOptions& options, const
   return run_study(session, options, fit_free_space_step(session, options, fitter));
 }
 
-StudyResult run_study(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space_step) {
-  const auto start = std::chrono::steady_clock::now();
-  check_study_inputs(session, options);
+namespace {
+
+// The study's steps below share what the free-space model and the calibration
+// give every trial.
+struct StudyContext {
+  const Session& session;
+  const StudyOptions& options;
+  const dynamics::TorqueModel& model;
+  IncisionFrame incision;
+  // The joint method's options for this model (make_joint_options_for_model),
+  // its torque bias from the aligned baseline when there is one.
+  JointEstimatorOptions joint_options;
+  // The paper's f(q0, 0) for the paper-variant three-step estimate.
+  Eigen::Vector3d tau_fs_paper = Eigen::Vector3d::Zero();
+};
+
+// A recording of the session, read with the session's and the options' read options.
+Recording load_session_recording(const StudyContext& c, const std::filesystem::path& path) {
+  return load_recording(path, get_read_options(c.session, c.options.read));
+}
+
+// The calibration at the known coaxial offset D* and the model's torque over it.
+struct CalibrationData {
+  Recording recording;
+  Eigen::MatrixXd tau_fs;
+};
+
+// Step 0: the free-space model in the result (fitted or loaded by fit_free_space_step).
+StudyResult start_study_result(const Session& session, const StudyOptions& options,
+                               const FreeSpaceModelStep& free_space) {
   StudyResult result;
   result.method = options.method;
   result.session_manifest = session.manifest;
-  result.model_kind = options.model_kind;
-  const IncisionFrame incision = make_incision_frame(session.q0);
-
-  // Step 0: the free-space model.
-  result.model = free_space_step.model;
-  result.model_kind = free_space_step.kind;
-  result.fit = free_space_step.fit;
-  result.free_space_errors = free_space_step.errors;
-  const dynamics::TorqueModel& model = *result.model;
-
-  // Step 2: the tissue law from the calibration at D*.
-  const Recording calibration = load_recording(session.calibration->recording, get_read_options(session, options.read));
+  result.model = free_space.model;
+  result.model_kind = free_space.kind;
+  result.fit = free_space.fit;
+  result.free_space_errors = free_space.errors;
   result.calibration_offset_m = session.calibration->coaxial_offset_m;
-  progress(options.verbose, "identifying the tissue law on " + calibration.source);
-  throw_if_interrupted("identifying the tissue law");
-  const Eigen::MatrixXd tau_fs_cal = dynamics::predict_torque(model, calibration);
-  {
-    TissuePairsResult pairs = compute_tissue_pairs(calibration, tau_fs_cal, session.q0, result.calibration_offset_m,
-                                                   options.tissue_pairs);
-    result.tissue_pairs = pairs.pairs;
-    result.tissue_pairs_report = pairs.report;
-  }
+  return result;
+}
+
+// Step 2 (paper III-C, V-D): the pairs x = D* tan(theta), y = |f_inc| on the
+// calibration, the tissue law g by symbolic regression, and its sensitivity to
+// D* when options.tissue_sensitivity_delta_m > 0.
+void identify_tissue_law(const StudyContext& c, const CalibrationData& calibration, StudyResult& result) {
+  const StudyOptions& options = c.options;
+  TissuePairsResult pairs = compute_tissue_pairs(calibration.recording, calibration.tau_fs, c.session.q0,
+                                                 result.calibration_offset_m, options.tissue_pairs);
+  result.tissue_pairs = pairs.pairs;
+  result.tissue_pairs_report = pairs.report;
   result.tissue = fit_tissue_law(result.tissue_pairs, options.tissue);
   if (!result.tissue.law) {
     InputLocation where;
-    where.file = calibration.source;
+    where.file = calibration.recording.source;
     throw InputError(where, "the identified tissue law is unusable: " + result.tissue.summary.brief_report());
   }
-  const TissueLaw& g = *result.tissue.law;
-  progress(options.verbose, "tissue law g(x) = " + g.to_string(ExpressionFormat::plain, 6));
+  progress(options.verbose, "tissue law g(x) = " + result.tissue.law->to_string(ExpressionFormat::plain, 6));
   if (options.tissue_sensitivity_delta_m > 0) {
     auto make_pairs = [&](double D) {
-      return compute_tissue_pairs(calibration, tau_fs_cal, session.q0, D, options.tissue_pairs).pairs;
+      return compute_tissue_pairs(calibration.recording, calibration.tau_fs, c.session.q0, D, options.tissue_pairs)
+          .pairs;
     };
-    result.tissue_sensitivity = fit_tissue_sensitivity(make_pairs, result.calibration_offset_m,
-                                                       options.tissue_sensitivity_delta_m, 3, options.tissue);
+    result.tissue_sensitivity =
+        fit_tissue_sensitivity(make_pairs, result.calibration_offset_m, options.tissue_sensitivity_delta_m,
+                               options.tissue_sensitivity_steps, options.tissue);
   }
+}
 
-  // Joint method, step 2 in torque space: the tissue parameters at D*.
-  throw_if_interrupted("identifying the tissue law");
-  JointEstimatorOptions joint_options = options.joint;
-  if (options.method == "joint") {
-    joint_options = make_joint_options_for_model(options.joint, free_space_step);
-    if (session.baseline) {
-      const Recording baseline = load_recording(*session.baseline, get_read_options(session, options.read));
-      try {
-        result.baseline_hold = compute_model_hold(model, baseline, session.q0, options);
-        joint_options.torque_bias = result.baseline_hold->get_dtau();
-        result.baseline_message = "free-space model error at rest on the aligned baseline";
-      } catch (const InputError& e) {
-        result.baseline_message = std::string("not used: ") + e.what();
-      }
-    } else {
-      result.baseline_message = "no baseline in the session";
+// The joint method's step 2 in torque space: the model's error at rest on the
+// aligned baseline (the intervals' torque bias) and the tissue parameters at D*.
+void identify_joint_tissue(StudyContext& c, const FreeSpaceModelStep& free_space, const CalibrationData& calibration,
+                           StudyResult& result) {
+  const StudyOptions& options = c.options;
+  c.joint_options = make_joint_options_for_model(options.joint, free_space);
+  if (c.session.baseline) {
+    const Recording baseline = load_session_recording(c, *c.session.baseline);
+    try {
+      result.baseline_hold = compute_model_hold(c.model, baseline, c.session.q0, options);
+      c.joint_options.torque_bias = result.baseline_hold->get_dtau();
+      result.baseline_message = "free-space model error at rest on the aligned baseline";
+    } catch (const InputError& e) {
+      result.baseline_message = std::string("not used: ") + e.what();
     }
-    progress(options.verbose, "baseline: " + result.baseline_message +
-                                  (result.baseline_hold ? " [" + std::to_string(joint_options.torque_bias[0]) + ", " +
-                                                              std::to_string(joint_options.torque_bias[1]) + ", " +
-                                                              std::to_string(joint_options.torque_bias[2]) + "]"
-                                                        : std::string()));
-    progress(options.verbose, "joint method: identifying the tissue model in torque space");
-    result.joint_tissue = fit_joint_tissue_model(
-        incision, make_joint_samples(incision, calibration, tau_fs_cal, options.three_step.coaxial.max_theta_rad),
-        result.calibration_offset_m, joint_options);
+  } else {
+    result.baseline_message = "no baseline in the session";
   }
+  const Eigen::Vector3d& bias = c.joint_options.torque_bias;
+  progress(options.verbose, "baseline: " + result.baseline_message +
+                                (result.baseline_hold ? " [" + std::to_string(bias[0]) + ", " + std::to_string(bias[1]) +
+                                                            ", " + std::to_string(bias[2]) + "]"
+                                                      : std::string()));
+  progress(options.verbose, "joint method: identifying the tissue model in torque space");
+  result.joint_tissue = fit_joint_tissue_model(
+      c.incision,
+      make_joint_samples(c.incision, calibration.recording, calibration.tau_fs, options.three_step.coaxial.max_theta_rad),
+      result.calibration_offset_m, c.joint_options);
+}
 
-  // Step 3: every trial.
-  const Eigen::Vector3d tau_fs_paper = compute_settled_free_space_torque(model, session.q0, options.paper_settle_s);
-  const dynamics::RegimeMonitor regime(model.info().regime);
+// Step 3 on one trial: its static hold (step 3b), the joint estimate and the
+// trial streamed through the online estimator (joint method), and the
+// three-step estimate (steps 3c-3d, paper Algorithm 1) with the hold's torque
+// carried and with the paper's f(q0, 0).
+void estimate_trial(const StudyContext& c, const StudyResult& result, const Recording& trial,
+                    const Eigen::MatrixXd& tau_fs, const TrialSpec& spec, TrialOutcome& out,
+                    Eigen::Vector3d& dtau_radial) {
+  const StudyOptions& options = c.options;
+  const double max_theta = options.three_step.coaxial.max_theta_rad;
+  dtau_radial = Eigen::Vector3d::Zero();
+  std::vector<JointSample> joint_samples;
+  if (result.joint_tissue) joint_samples = make_joint_samples(c.incision, trial, tau_fs, max_theta);
+  if (spec.static_recording) {
+    const Recording hold_rec = load_session_recording(c, *spec.static_recording);
+    Eigen::MatrixXd tau_fs_hold;
+    out.hold = compute_model_hold(c.model, hold_rec, c.session.q0, options, &tau_fs_hold);
+    dtau_radial = out.hold->get_dtau();
+    if (result.joint_tissue) {
+      const auto hold_samples = make_joint_samples(c.incision, hold_rec, tau_fs_hold, max_theta);
+      joint_samples.insert(joint_samples.end(), hold_samples.begin(), hold_samples.end());
+    }
+  }
+  if (result.joint_tissue) {
+    out.joint = estimate_joint(c.incision, *result.joint_tissue, joint_samples, c.joint_options);
+    // The same trial streamed sample by sample, as `rcm monitor` would see it.
+    const OnlinePipeline pipeline(result.model, OnlineEstimator(c.incision, *result.joint_tissue,
+                                                                make_online_options(c.joint_options)));
+    out.online = replay_online(pipeline, trial);
+    // The stream's summary adds what the samples alone cannot show: a torque
+    // residual that no incision force explains (a payload change).
+    if (out.online->regime.flagged > out.regime.flagged && out.regime.flagged == 0)
+      progress(options.verbose, "  warning: " + out.online->regime.to_text());
+    out.regime = out.online->regime;
+  }
+  const TissueLaw& g = *result.tissue.law;
+  out.estimate = estimate_three_step(c.incision, g, trial, tau_fs, dtau_radial, options.three_step);
+  if (out.hold)
+    out.paper_variant = estimate_three_step(c.incision, g, trial, tau_fs, out.hold->tau_measured - c.tau_fs_paper,
+                                            options.three_step);
+}
+
+// With StudyOptions::export_problems_dir: the trial's coaxial problem as JSON,
+// with its optimum at the paper's tolerance and at 1e-15 and the median solve time.
+void export_trial_problem(const StudyContext& c, const TissueLaw& g, const Recording& trial,
+                          const Eigen::MatrixXd& tau_fs, const Eigen::Vector3d& dtau_radial, const TrialSpec& spec,
+                          const TrialOutcome& out) {
+  const StudyOptions& options = c.options;
+  std::filesystem::create_directories(*options.export_problems_dir);
+  const CoaxialProblem problem = make_coaxial_problem(c.incision, trial, tau_fs, dtau_radial, options.three_step.coaxial);
+  nlohmann::json j = coaxial_problem_to_json(problem, g, options.three_step);
+  ThreeStepOptions tight = options.three_step;
+  tight.function_tolerance = 1e-15;
+  j["D_paper_tolerance"] = out.estimate.misalignment_m[2];
+  j["D_tight"] = solve_coaxial_offset(problem, g, tight, nullptr);
+  std::vector<double> times;
+  for (int k = 0; k < 21; ++k) {
+    SolverReport report;
+    solve_coaxial_offset(problem, g, options.three_step, &report);
+    times.push_back(report.seconds);
+  }
+  std::nth_element(times.begin(), times.begin() + 10, times.end());
+  j["ceres_seconds_median"] = times[10];
+  j["trial"] = spec.name;
+  save_json_file(*options.export_problems_dir / (spec.name + ".json"), j);
+}
+
+// The forces of Table III and Fig. 4: Eq. 6 at the true D when known (the
+// paper's force estimation experiment), else at D~; the coaxial part with the
+// hold's radial force taken out; the RMSE per axis against the sensor columns.
+void score_trial_forces(const StudyContext& c, const Recording& trial, const Eigen::MatrixXd& tau_fs,
+                        const Eigen::Vector3d& dtau_radial, TrialOutcome& out) {
+  out.force_offset_used_m = out.truth_m ? (*out.truth_m)[2] : out.estimate.misalignment_m[2];
+  const IncisionForceSeries series = compute_incision_force_series(c.incision, trial, tau_fs, out.force_offset_used_m);
+  out.time = trial.time;
+  out.f_estimated = series.f_inc_base;
+  out.ill_conditioned_samples = series.num_ill_conditioned + series.num_singular;
+  const InverseDecomposition radial = compute_inverse_decomposition(c.incision, c.session.q0, dtau_radial);
+  out.f_coaxial_decoupled = out.f_estimated.rowwise() - radial.evaluate(out.force_offset_used_m).transpose();
+  if (trial.force) {
+    out.f_sensor = *trial.force;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    Eigen::Index n = 0;
+    for (Eigen::Index t = 0; t < out.f_estimated.rows(); ++t) {
+      if (!out.f_estimated.row(t).allFinite()) continue;
+      sum += (out.f_estimated.row(t) - out.f_sensor.row(t)).array().square().matrix().transpose();
+      ++n;
+    }
+    if (n > 0) out.force_rmse = (sum / static_cast<double>(n)).cwiseSqrt();
+  }
+}
+
+void report_trial(bool verbose, const TrialOutcome& out) {
+  if (!verbose) return;
+  const Eigen::Vector3d m = 1e3 * out.get_misalignment_m();
+  std::string line = "  estimate [" + std::to_string(m[0]).substr(0, 6) + ", " + std::to_string(m[1]).substr(0, 6) +
+                     ", " + std::to_string(m[2]).substr(0, 6) + "] mm";
+  if (auto e = out.get_error_m()) line += ", e = " + std::to_string(1e3 * *e).substr(0, 5) + " mm";
+  progress(true, line);
+}
+
+// Step 3 on every trial: load, estimate, score, report. An interrupt ends the
+// study between trials, or inside one (a Ceres solve aborted), whose partial
+// outcome is dropped: the finished trials are kept.
+void estimate_trials(const StudyContext& c, StudyResult& result) {
+  const StudyOptions& options = c.options;
+  const Session& session = c.session;
+  const dynamics::RegimeMonitor regime(c.model.info().regime);
   result.trials_planned = session.trials.size();
-  // An interrupt ends the study between trials, or inside one (a Ceres solve
-  // aborted), whose partial outcome is dropped: the finished trials are kept.
   try {
     for (std::size_t i = 0; i < session.trials.size(); ++i) {
       throw_if_interrupted("estimating the trials");
@@ -251,90 +409,17 @@ StudyResult run_study(const Session& session, const StudyOptions& options, FreeS
       TrialOutcome out;
       out.name = spec.name;
       out.truth_m = spec.truth_misalignment_m;
-      const Recording trial = load_recording(spec.recording, get_read_options(session, options.read));
-      const Eigen::MatrixXd tau_fs = dynamics::predict_torque(model, trial);
+      const Recording trial = load_session_recording(c, spec.recording);
+      const Eigen::MatrixXd tau_fs = dynamics::predict_torque(c.model, trial);
       out.regime = dynamics::compute_regime_summary(regime, trial);
       if (out.regime.flagged > 0) progress(options.verbose, "  warning: " + out.regime.to_text());
-      Eigen::Vector3d dtau_radial = Eigen::Vector3d::Zero();
-      std::vector<JointSample> joint_samples;
-      if (result.joint_tissue)
-        joint_samples = make_joint_samples(incision, trial, tau_fs, options.three_step.coaxial.max_theta_rad);
-      if (spec.static_recording) {
-        const Recording hold_rec = load_recording(*spec.static_recording, get_read_options(session, options.read));
-        Eigen::MatrixXd tau_fs_hold;
-        out.hold = compute_model_hold(model, hold_rec, session.q0, options, &tau_fs_hold);
-        dtau_radial = out.hold->get_dtau();
-        if (result.joint_tissue) {
-          const auto hold_samples = make_joint_samples(incision, hold_rec, tau_fs_hold, options.three_step.coaxial.max_theta_rad);
-          joint_samples.insert(joint_samples.end(), hold_samples.begin(), hold_samples.end());
-        }
-      }
-      if (result.joint_tissue) {
-        out.joint = estimate_joint(incision, *result.joint_tissue, joint_samples, joint_options);
-        // The same trial streamed sample by sample, as `rcm monitor` would see it.
-        const OnlinePipeline pipeline(result.model, OnlineEstimator(incision, *result.joint_tissue,
-                                                                    make_online_options(joint_options)));
-        out.online = replay_online(pipeline, trial);
-        // The stream's summary adds what the samples alone cannot show: a torque
-        // residual that no incision force explains (a payload change).
-        if (out.online->regime.flagged > out.regime.flagged && out.regime.flagged == 0)
-          progress(options.verbose, "  warning: " + out.online->regime.to_text());
-        out.regime = out.online->regime;
-      }
-      out.estimate = estimate_three_step(incision, g, trial, tau_fs, dtau_radial, options.three_step);
-      if (out.hold)
-        out.paper_variant = estimate_three_step(incision, g, trial, tau_fs, out.hold->tau_measured - tau_fs_paper,
-                                                options.three_step);
-
-      if (options.export_problems_dir) {
-        std::filesystem::create_directories(*options.export_problems_dir);
-        const CoaxialProblem problem = make_coaxial_problem(incision, trial, tau_fs, dtau_radial, options.three_step.coaxial);
-        nlohmann::json j = coaxial_problem_to_json(problem, g, options.three_step);
-        ThreeStepOptions tight = options.three_step;
-        tight.function_tolerance = 1e-15;
-        j["D_paper_tolerance"] = out.estimate.misalignment_m[2];
-        j["D_tight"] = solve_coaxial_offset(problem, g, tight, nullptr);
-        std::vector<double> times;
-        for (int k = 0; k < 21; ++k) {
-          SolverReport report;
-          solve_coaxial_offset(problem, g, options.three_step, &report);
-          times.push_back(report.seconds);
-        }
-        std::nth_element(times.begin(), times.begin() + 10, times.end());
-        j["ceres_seconds_median"] = times[10];
-        j["trial"] = spec.name;
-        save_json_file(*options.export_problems_dir / (spec.name + ".json"), j);
-      }
-
-      // Forces for Table III and Fig. 4: at the true D when known (the paper's
-      // force estimation experiment), else at D~.
-      out.force_offset_used_m = out.truth_m ? (*out.truth_m)[2] : out.estimate.misalignment_m[2];
-      const IncisionForceSeries series =
-          compute_incision_force_series(incision, trial, tau_fs, out.force_offset_used_m);
-      out.time = trial.time;
-      out.f_estimated = series.f_inc_base;
-      out.ill_conditioned_samples = series.num_ill_conditioned + series.num_singular;
-      const InverseDecomposition radial = compute_inverse_decomposition(incision, session.q0, dtau_radial);
-      out.f_coaxial_decoupled = out.f_estimated.rowwise() - radial.evaluate(out.force_offset_used_m).transpose();
-      if (trial.force) {
-        out.f_sensor = *trial.force;
-        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-        Eigen::Index n = 0;
-        for (Eigen::Index t = 0; t < out.f_estimated.rows(); ++t) {
-          if (!out.f_estimated.row(t).allFinite()) continue;
-          sum += (out.f_estimated.row(t) - out.f_sensor.row(t)).array().square().matrix().transpose();
-          ++n;
-        }
-        if (n > 0) out.force_rmse = (sum / static_cast<double>(n)).cwiseSqrt();
-      }
+      Eigen::Vector3d dtau_radial;
+      estimate_trial(c, result, trial, tau_fs, spec, out, dtau_radial);
+      if (options.export_problems_dir)
+        export_trial_problem(c, *result.tissue.law, trial, tau_fs, dtau_radial, spec, out);
+      score_trial_forces(c, trial, tau_fs, dtau_radial, out);
       out.seconds = seconds_since(trial_start);
-      if (options.verbose) {
-        const Eigen::Vector3d m = 1e3 * out.get_misalignment_m();
-        std::string line = "  estimate [" + std::to_string(m[0]).substr(0, 6) + ", " + std::to_string(m[1]).substr(0, 6) +
-                           ", " + std::to_string(m[2]).substr(0, 6) + "] mm";
-        if (auto e = out.get_error_m()) line += ", e = " + std::to_string(1e3 * *e).substr(0, 5) + " mm";
-        progress(true, line);
-      }
+      report_trial(options.verbose, out);
       result.trials.push_back(std::move(out));
     }
   } catch (const Interrupted&) {
@@ -343,6 +428,29 @@ StudyResult run_study(const Session& session, const StudyOptions& options, FreeS
     progress(options.verbose, "interrupted after " + std::to_string(result.trials.size()) + " of " +
                                   std::to_string(result.trials_planned) + " trials");
   }
+}
+
+}  // namespace
+
+StudyResult run_study(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space_step) {
+  const auto start = std::chrono::steady_clock::now();
+  check_study_inputs(session, options);
+  StudyResult result = start_study_result(session, options, free_space_step);
+  StudyContext context{session, options, *result.model, make_incision_frame(session.q0), options.joint, {}};
+
+  const CalibrationData calibration = [&] {
+    CalibrationData d{load_session_recording(context, session.calibration->recording), {}};
+    progress(options.verbose, "identifying the tissue law on " + d.recording.source);
+    throw_if_interrupted("identifying the tissue law");
+    d.tau_fs = dynamics::predict_torque(context.model, d.recording);
+    return d;
+  }();
+  identify_tissue_law(context, calibration, result);
+  throw_if_interrupted("identifying the tissue law");
+  if (options.method == "joint") identify_joint_tissue(context, free_space_step, calibration, result);
+
+  context.tau_fs_paper = compute_settled_free_space_torque(context.model, session.q0, options.paper_settle_s);
+  estimate_trials(context, result);
   result.seconds = seconds_since(start) + free_space_step.seconds;
   return result;
 }

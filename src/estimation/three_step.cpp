@@ -9,6 +9,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
 
 namespace rcm {
@@ -336,6 +337,51 @@ ThreeStepResult estimate_three_step(const IncisionFrame& incision, const TissueL
   }
   result.misalignment_m << radial[0], radial[1], D;
   return result;
+}
+
+const OptionTable<RestDetectionOptions>& get_option_table(OptionTag<RestDetectionOptions>) {
+  static const auto table =
+      OptionTable<RestDetectionOptions>("RestDetectionOptions")
+          .add("max_angular_speed", &RestDetectionOptions::max_angular_speed,
+               "joints 1-2 slower than this count as at rest", "rad/s", OptionLimits::at_least(0))
+          .add("max_linear_speed", &RestDetectionOptions::max_linear_speed,
+               "joint 3 slower than this counts as at rest", "m/s", OptionLimits::at_least(0))
+          .add("max_angle_from_q0", &RestDetectionOptions::max_angle_from_q0,
+               "joints 1-2 within this of q0 count as at q0", "rad", OptionLimits::at_least(0))
+          .add("max_insertion_from_q0", &RestDetectionOptions::max_insertion_from_q0,
+               "joint 3 within this of q0 counts as at q0", "m", OptionLimits::at_least(0))
+          .add("min_duration_s", &RestDetectionOptions::min_duration_s, "shortest hold at q0", "s",
+               OptionLimits::above(0));
+  return table;
+}
+
+const OptionChoices<StaticStep>& get_option_choices(OptionTag<StaticStep>) {
+  static const OptionChoices<StaticStep> choices = {{"balanced", StaticStep::balanced},
+                                                    {"last-hold", StaticStep::last_hold}};
+  return choices;
+}
+
+const OptionTable<CoaxialProblemOptions>& get_option_table(OptionTag<CoaxialProblemOptions>) {
+  static const auto table = OptionTable<CoaxialProblemOptions>("CoaxialProblemOptions")
+                                .add("max_theta_rad", &CoaxialProblemOptions::max_theta_rad,
+                                     "samples whose pivot angle exceeds this are left out (J_D amplifies noise)",
+                                     "rad", OptionLimits::above_up_to(0, M_PI / 2));
+  return table;
+}
+
+const OptionTable<ThreeStepOptions>& get_option_table(OptionTag<ThreeStepOptions>) {
+  static const auto table =
+      OptionTable<ThreeStepOptions>("ThreeStepOptions")
+          .add("D_min", &ThreeStepOptions::D_min, "lower bound of the coaxial offset D (paper Eq. 16)", "m")
+          .add("D_max", &ThreeStepOptions::D_max, "upper bound of D", "m")
+          .add("D_initial", &ThreeStepOptions::D_initial, "initial guess of D (null: the middle of the bounds)", "m")
+          .add("function_tolerance", &ThreeStepOptions::function_tolerance,
+               "relative change of the cost that ends the solve (paper IV-D)", "", OptionLimits::above(0))
+          .add("max_iterations", &ThreeStepOptions::max_iterations, "Ceres iteration limit", "",
+               OptionLimits::at_least(1))
+          .add_section("coaxial", &ThreeStepOptions::coaxial, "which samples the coaxial problem (step 3c) uses")
+          .add_check([](const ThreeStepOptions& o) { o.check(); });
+  return table;
 }
 
 }  // namespace rcm

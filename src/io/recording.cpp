@@ -8,6 +8,7 @@
 #include <mutex>
 #include <string_view>
 
+#include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/rosbag2.hpp"
@@ -445,6 +446,22 @@ RecordingSummary summarize_recording(const Recording& r) {
   s.effort = ranges(r.effort);
   if (r.force) s.force = ranges(*r.force);
   return s;
+}
+
+const OptionTable<RecordingReadOptions>& get_option_table(OptionTag<RecordingReadOptions>) {
+  static const auto table =
+      OptionTable<RecordingReadOptions>("RecordingReadOptions")
+          .add("dedupe", &RecordingReadOptions::dedupe, "drop rows whose joint data repeat the previous row's")
+          .add("assumed_rate_hz", &RecordingReadOptions::assumed_rate_hz,
+               "sampling rate of a file without a time column (null: such a file is an error)", "Hz",
+               OptionLimits::above(0))
+          .add("min_joints", &RecordingReadOptions::min_joints, "joints a recording must have at least", "",
+               OptionLimits::at_least(1))
+          .add("joint_topic", &RecordingReadOptions::joint_topic,
+               "bags: the JointState topic (empty: the reader's default or the session's)")
+          .add("force_topic", &RecordingReadOptions::force_topic,
+               "bags: the WrenchStamped force topic (empty: the reader's default or the session's)");
+  return table;
 }
 
 }  // namespace rcm

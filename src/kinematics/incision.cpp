@@ -3,6 +3,8 @@
 #include <cmath>
 #include <limits>
 
+#include "rcm/common/options.hpp"
+
 namespace rcm {
 
 IncisionFrame make_incision_frame(const Eigen::Vector3d& q0) {
@@ -79,6 +81,21 @@ JacobianCondition compute_incision_jacobian_condition(const Eigen::Vector3d& q, 
   else if (result.condition > options.max_condition)
     result.status = JacobianStatus::ill_conditioned;
   return result;
+}
+
+const OptionTable<JacobianCheckOptions>& get_option_table(OptionTag<JacobianCheckOptions>) {
+  static const auto table =
+      OptionTable<JacobianCheckOptions>("JacobianCheckOptions")
+          .add("max_condition", &JacobianCheckOptions::max_condition,
+               "2-norm condition number of J_D above which a force estimate is flagged ill-conditioned", "",
+               OptionLimits::at_least(1))
+          .add("singular_condition", &JacobianCheckOptions::singular_condition,
+               "condition number above which J_D is treated as singular", "", OptionLimits::at_least(1))
+          .add_check([](const JacobianCheckOptions& o) {
+            if (!(o.singular_condition >= o.max_condition))
+              throw std::invalid_argument("singular_condition must be >= max_condition");
+          });
+  return table;
 }
 
 }  // namespace rcm

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <string>
 
+#include "rcm/common/options.hpp"
+
 namespace rcm {
 
 const char* to_string(TissueTermKind kind) {
@@ -216,6 +218,18 @@ std::string TissueExpression::get_skeleton() const {
   }
   if (has_intercept) add("C");
   return out;
+}
+
+const OptionChoices<TissueTermKind>& get_option_choices(OptionTag<TissueTermKind>) {
+  static const OptionChoices<TissueTermKind> choices = [] {
+    OptionChoices<TissueTermKind> c;
+    for (int k = 0; k < kNumTissueTermKinds; ++k) {
+      const auto kind = static_cast<TissueTermKind>(k);
+      c.emplace_back(to_string(kind), kind);
+    }
+    return c;
+  }();
+  return choices;
 }
 
 }  // namespace rcm

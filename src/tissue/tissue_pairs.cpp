@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <numeric>
 
+#include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/force/incision_force.hpp"
 #include "rcm/io/json_file.hpp"
@@ -327,6 +328,18 @@ TissuePairs compute_rescaled_pairs(const TissuePairs& pairs, double D_from, doub
   TissuePairs out = pairs;
   out.x *= D_to / D_from;
   return out;
+}
+
+const OptionTable<TissuePairOptions>& get_option_table(OptionTag<TissuePairOptions>) {
+  static const auto table =
+      OptionTable<TissuePairOptions>("TissuePairOptions")
+          .add("min_theta_rad", &TissuePairOptions::min_theta_rad,
+               "samples with a pivot angle below this carry no information on g and are dropped", "rad",
+               OptionLimits::from_below(0, 1.5))
+          .add("drop_ill_conditioned", &TissuePairOptions::drop_ill_conditioned,
+               "drop samples whose J_D* is ill-conditioned too, not only singular ones")
+          .add_section("jacobian", &TissuePairOptions::jacobian, "when J_D* counts as ill-conditioned or singular");
+  return table;
 }
 
 }  // namespace rcm

@@ -9,6 +9,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "rcm/common/options.hpp"
 #include "rcm/tissue/tissue_fit.hpp"
 
 namespace rcm {
@@ -128,6 +129,47 @@ TissueSensitivity fit_tissue_sensitivity(const std::function<TissuePairs(double)
     if (e.skeleton != out.entries.front().skeleton) out.same_family = false;
   }
   return out;
+}
+
+const OptionTable<TissueFitOptions>& get_option_table(OptionTag<TissueFitOptions>) {
+  static const auto table =
+      OptionTable<TissueFitOptions>("TissueFitOptions")
+          .add("max_complexity", &TissueFitOptions::max_complexity,
+               "largest PySR complexity enumerated (15: cubic polynomials, scaled sin/cos/exp)", "",
+               OptionLimits::within(1, 40))
+          .add("terms", &TissueFitOptions::terms, "library terms that may appear in g")
+          .add("allow_intercept", &TissueFitOptions::allow_intercept, "g may have a constant term")
+          .add("grid_points", &TissueFitOptions::grid_points, "grid of an inner constant when there is one", "",
+               OptionLimits::at_least(2))
+          .add("grid_points_2d", &TissueFitOptions::grid_points_2d,
+               "grid of each inner constant when there are two or more", "", OptionLimits::at_least(2))
+          .add("grid_u_min", &TissueFitOptions::grid_u_min, "smallest inner constant times max|x|", "",
+               OptionLimits::above(0))
+          .add("grid_u_max", &TissueFitOptions::grid_u_max, "largest inner constant times max|x|", "",
+               OptionLimits::above(0))
+          .add("restarts", &TissueFitOptions::restarts, "best grid minima refined by Ceres", "",
+               OptionLimits::at_least(1))
+          .add("search_subsample", &TissueFitOptions::search_subsample,
+               "pairs the grid and the first refinement run on, at most", "", OptionLimits::at_least(8))
+          .add("max_iterations", &TissueFitOptions::max_iterations, "Ceres iterations per solve on the search subset",
+               "", OptionLimits::at_least(1))
+          .add("polish_iterations", &TissueFitOptions::polish_iterations, "Ceres iterations of the polish on all pairs",
+               "", OptionLimits::at_least(1))
+          .add("polish_margin", &TissueFitOptions::polish_margin,
+               "candidates within (1 + margin) of their complexity's best loss are polished", "",
+               OptionLimits::at_least(0))
+          .add("duplicate_tolerance", &TissueFitOptions::duplicate_tolerance,
+               "candidates closer than this fraction of the best RMS residual are one law", "",
+               OptionLimits::at_least(0))
+          .add("tie_relative_tolerance", &TissueFitOptions::tie_relative_tolerance,
+               "a front entry beats every simpler one by more than this relative margin", "",
+               OptionLimits::from_below(0, 1))
+          .add("best_loss_factor", &TissueFitOptions::best_loss_factor,
+               "best: highest score among front entries with loss <= factor x the least loss", "",
+               OptionLimits::at_least(1))
+          .add("bins", &TissueFitOptions::bins, "equal-count bins along x before fitting (0: none)")
+          .add_check([](const TissueFitOptions& o) { o.check(); });
+  return table;
 }
 
 }  // namespace rcm

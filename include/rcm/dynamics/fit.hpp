@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "rcm/common/error.hpp"
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/dynamics/torque_model.hpp"
 
@@ -83,6 +84,7 @@ struct FitOptions {
   // Throws InputError when a value is out of range.
   void check() const;
 };
+const OptionTable<FitOptions>& get_option_table(OptionTag<FitOptions>);
 
 struct FitSummary {
   TorqueModelKind kind = TorqueModelKind::linear;
@@ -109,6 +111,22 @@ struct FitResult {
   std::unique_ptr<TorqueModel> model;
   FitSummary summary;
 };
+
+// The free-space model kind fitted when none is named, in every program: by
+// `rcm dynamics fit`, `rcm run`, `rcm demo` and `rcm monitor` without --model,
+// and by run_study, prepare_monitor and fit_free_space_step when
+// StudyOptions::model_kind is unset (the Python module, the examples). Hybrid
+// when the program can train networks (it links rcm::torch: the rcm CLI built
+// with LibTorch), the most accurate kind on the simulated bench; linear
+// otherwise (rcm::core alone: the Python module, the live nodes, a CLI built
+// without LibTorch), the only kind rcm::core fits.
+TorqueModelKind get_default_model_kind(bool can_train_networks);
+
+// The fit of rcm::core alone: fit_linear_torque_model for kind linear; any
+// other kind is an InputError at `where` (the networks are fitted by
+// rcm::torch's fit_torque_model, `rcm dynamics fit` with LibTorch).
+FitResult fit_torque_model_without_networks(TorqueModelKind kind, const std::vector<Recording>& recordings,
+                                            const FitOptions& options, const InputLocation& where);
 
 // A contiguous run [begin, end) of samples of one recording.
 struct SampleSegment {

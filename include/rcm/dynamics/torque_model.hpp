@@ -28,6 +28,8 @@ enum class TorqueModelKind { lstm, mlp, linear, hybrid };
 std::string to_string(TorqueModelKind kind);
 // "lstm" | "mlp" | "linear" | "hybrid"; throws InputError naming `what` otherwise.
 TorqueModelKind parse_torque_model_kind(const std::string& text, const std::string& what = "--model");
+// The kinds' words, for options tables (rcm/common/options.hpp).
+const OptionChoices<TorqueModelKind>& get_option_choices(OptionTag<TorqueModelKind>);
 
 // What every model shares: which joints it reads and predicts and the sampling
 // period it was trained at (the networks step at that period, whatever the

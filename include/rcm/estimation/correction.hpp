@@ -59,6 +59,7 @@ struct CorrectionOptions {
   double max_step_dt_s = 0.1;
   void check() const;  // throws std::invalid_argument
 };
+const OptionTable<CorrectionOptions>& get_option_table(OptionTag<CorrectionOptions>);
 
 enum class CorrectionAction { hold, compensate, reposition };
 const char* to_string(CorrectionAction action);

@@ -93,6 +93,7 @@ struct JointEstimatorOptions {
   int max_iterations = 100;
   void check() const;
 };
+const OptionTable<JointEstimatorOptions>& get_option_table(OptionTag<JointEstimatorOptions>);
 
 // Step 2 in torque space: the tissue parameters on the calibration at the known
 // D* (radial offset 0). Both families are fitted; the stiffening one is chosen

@@ -78,6 +78,7 @@ struct OnlineEstimatorOptions {
   double min_dt_s = 1e-4;
   void check() const;
 };
+const OptionTable<OnlineEstimatorOptions>& get_option_table(OptionTag<OnlineEstimatorOptions>);
 
 // What the estimator says after a sample.
 struct OnlineOutput {
@@ -233,6 +234,7 @@ struct OnlineReplayOptions {
   double settle_band_m = 0.005;
   double motion_speed = 0.01;  // rad/s
 };
+const OptionTable<OnlineReplayOptions>& get_option_table(OptionTag<OnlineReplayOptions>);
 OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& recording,
                            const OnlineReplayOptions& options = {},
                            const std::function<void(const OnlineOutput&)>& on_sample = {});

@@ -9,6 +9,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -23,14 +24,44 @@
 
 namespace rcm {
 
-using TorqueModelFitter = std::function<dynamics::FitResult(
-    dynamics::TorqueModelKind, const std::vector<Recording>&, const dynamics::FitOptions&)>;
+// Fits a free-space model of a kind. It knows whether it trains the networks,
+// which decides the kind fitted when StudyOptions::model_kind is unset
+// (dynamics::get_default_model_kind).
+class TorqueModelFitter {
+ public:
+  using Function = std::function<dynamics::FitResult(dynamics::TorqueModelKind, const std::vector<Recording>&,
+                                                     const dynamics::FitOptions&)>;
+  TorqueModelFitter() = default;
+  // Any callable fit(kind, recordings, options) -> FitResult; `trains_networks`:
+  // it fits lstm, mlp and hybrid too (rcm::torch's fit_torque_model).
+  template <class F, class = std::enable_if_t<std::is_invocable_r_v<dynamics::FitResult, F&, dynamics::TorqueModelKind,
+                                                                    const std::vector<Recording>&,
+                                                                    const dynamics::FitOptions&>>>
+  TorqueModelFitter(F fit, bool trains_networks = false)  // NOLINT: implicit, as the std::function it wraps
+      : fit_(std::move(fit)), trains_networks_(trains_networks) {}
+
+  dynamics::FitResult operator()(dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings,
+                                 const dynamics::FitOptions& options) const {
+    return fit_(kind, recordings, options);
+  }
+  bool trains_networks() const { return trains_networks_; }
+  // `kind` when set, else dynamics::get_default_model_kind(trains_networks()).
+  dynamics::TorqueModelKind resolve_kind(const std::optional<dynamics::TorqueModelKind>& kind) const {
+    return kind ? *kind : dynamics::get_default_model_kind(trains_networks_);
+  }
+
+ private:
+  Function fit_;
+  bool trains_networks_ = false;
+};
 
 // The fitter of rcm::core alone: fit_linear_torque_model for the linear kind;
-// any other kind throws InputError naming StudyOptions::model_kind (networks
-// are fitted with rcm::torch's fit_torque_model or `rcm dynamics fit` and reach
-// the study as StudyOptions::model_file, which needs no fitter at all).
-TorqueModelFitter get_linear_torque_model_fitter();
+// any other kind throws InputError at `where` (networks are fitted with
+// rcm::torch's fit_torque_model or `rcm dynamics fit` and reach the study as
+// StudyOptions::model_file, which needs no fitter at all). Its default kind is
+// linear. The Python module, the examples and a CLI without LibTorch use it.
+TorqueModelFitter get_linear_torque_model_fitter(
+    const InputLocation& where = InputLocation::plain("StudyOptions", "model_kind"));
 
 struct StudyOptions {
   // "joint" (all offsets in torque space, with 95 % intervals; the three-step
@@ -40,12 +71,15 @@ struct StudyOptions {
   // rests on one hold.
   std::string method = "joint";
   JointEstimatorOptions joint;
-  dynamics::TorqueModelKind model_kind = dynamics::TorqueModelKind::lstm;
+  // The free-space model to fit; unset: the fitter's default, hybrid where the
+  // networks can be trained and linear otherwise (dynamics::get_default_model_kind).
+  std::optional<dynamics::TorqueModelKind> model_kind;
   std::optional<std::filesystem::path> model_file;  // use a saved model, skip fitting
   dynamics::FitOptions fit;
   TissueFitOptions tissue;
   TissuePairOptions tissue_pairs;
   double tissue_sensitivity_delta_m = 0.003;  // paper V-D: D* +- 3 mm
+  int tissue_sensitivity_steps = 3;           // offsets refitted in [D* - delta, D* + delta]
   ThreeStepOptions three_step;
   RestDetectionOptions rest;
   StaticStep static_step = StaticStep::balanced;  // how step 3b combines the static file's holds
@@ -65,6 +99,7 @@ struct StudyOptions {
   // (bench/scipy_crosscheck.py solves the same problems with scipy).
   std::optional<std::filesystem::path> export_problems_dir;
 };
+const OptionTable<StudyOptions>& get_option_table(OptionTag<StudyOptions>);
 
 struct TrialOutcome {
   std::string name;
@@ -95,7 +130,7 @@ struct TrialOutcome {
 struct StudyResult {
   std::filesystem::path session_manifest;
   std::string method = "joint";
-  dynamics::TorqueModelKind model_kind = dynamics::TorqueModelKind::lstm;
+  dynamics::TorqueModelKind model_kind = dynamics::TorqueModelKind::linear;  // the kind used
   std::shared_ptr<const dynamics::TorqueModel> model;
   std::optional<dynamics::FitSummary> fit;        // when fitted here
   std::vector<dynamics::JointTorqueError> free_space_errors;  // Table II (held-out test split)
@@ -149,7 +184,8 @@ struct MonitorSetup {
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter);
 
 // What run_study checks of a session and options before any work: a
-// calibration, at least one trial, a known method; throws InputError.
+// calibration, at least one trial, every option within its table's limits
+// (check_options); throws InputError.
 void check_study_inputs(const Session& session, const StudyOptions& options);
 
 // Throws InputError for any defect of the session's files; the study needs a

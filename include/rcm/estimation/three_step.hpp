@@ -41,6 +41,7 @@ struct RestDetectionOptions {
   double max_insertion_from_q0 = 0.002;  // m, joint 3
   double min_duration_s = 0.25;
 };
+const OptionTable<RestDetectionOptions>& get_option_table(OptionTag<RestDetectionOptions>);
 
 // A contiguous run of samples at rest at q0: [begin, end).
 struct RestSegment {
@@ -70,6 +71,7 @@ RestSegment find_rest_segment(const Recording& recording, const Eigen::Vector3d&
 enum class StaticStep { last_hold, balanced };
 std::string to_string(StaticStep step);
 StaticStep parse_static_step(const std::string& text);  // throws std::invalid_argument
+const OptionChoices<StaticStep>& get_option_choices(OptionTag<StaticStep>);
 
 // One hold of the static file: its samples and, per joint, the direction of the
 // motion that ended there (+1 up, -1 down, 0 when the joint did not come from
@@ -145,6 +147,7 @@ struct CoaxialProblemOptions {
   // bound (theta -> 90 deg); teleoperation stays far below.
   double max_theta_rad = 80.0 * M_PI / 180.0;
 };
+const OptionTable<CoaxialProblemOptions>& get_option_table(OptionTag<CoaxialProblemOptions>);
 
 CoaxialProblem make_coaxial_problem(const IncisionFrame& incision, const Recording& trial,
                                     const Eigen::MatrixXd& tau_fs, const Eigen::Vector3d& dtau_radial,
@@ -174,6 +177,7 @@ struct ThreeStepOptions {
   // Throws std::invalid_argument naming the first bad option.
   void check() const;
 };
+const OptionTable<ThreeStepOptions>& get_option_table(OptionTag<ThreeStepOptions>);
 
 // Step 3c alone: D~ = argmin 1/2 sum psi^2 within [D_min, D_max] from
 // options.D_initial (or the middle of the bounds).

@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include "rcm/common/options_fwd.hpp"
+
 namespace rcm {
 
 enum class RecordingLayout { rcm_csv, rostopic_csv, in_memory, rosbag, rosbag2 };
@@ -60,6 +62,8 @@ struct RecordingReadOptions {
   // command line names others. Empty: the reader's own (default or flags).
   std::string joint_topic, force_topic;
 };
+// The field table (rcm/common/options.hpp).
+const OptionTable<RecordingReadOptions>& get_option_table(OptionTag<RecordingReadOptions>);
 
 // Reads and validates a recording. Throws InputError naming file, line and
 // column for every defect: missing column, non-numeric cell, NaN/inf,

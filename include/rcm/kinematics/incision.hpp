@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 
+#include "rcm/common/options_fwd.hpp"
 #include "rcm/kinematics/psm_model.hpp"
 
 namespace rcm {
@@ -54,6 +55,7 @@ struct JacobianCheckOptions {
   // Above this (or when not finite) the Jacobian is treated as singular.
   double singular_condition = 1e8;
 };
+const OptionTable<JacobianCheckOptions>& get_option_table(OptionTag<JacobianCheckOptions>);
 
 struct JacobianCondition {
   double condition = 0.0;  // sigma_max / sigma_min, +inf when singular

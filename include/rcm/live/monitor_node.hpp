@@ -34,7 +34,7 @@ struct MonitorNodeParameters {
   std::string session, model_file;
   std::string arm = "PSM1";
   std::vector<std::string> joint_names;  // empty: the first message's order
-  double alarm_force_n = 10.0;
+  double alarm_force_n = OnlineEstimatorOptions{}.alarm_force_n;
   double onset_threshold = OnlineEstimatorOptions{}.onset_threshold;
   int publish_every = 1;
   int queue_size = 1000;

@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include "rcm/common/options_fwd.hpp"
+
 namespace rcm {
 
 // Canonical order of the terms in an expression is the order of this enum.
@@ -34,6 +36,8 @@ enum class TissueTermKind : int {
 inline constexpr int kNumTissueTermKinds = 9;
 
 const char* to_string(TissueTermKind kind);
+// The kinds' words (to_string), for options tables (rcm/common/options.hpp).
+const OptionChoices<TissueTermKind>& get_option_choices(OptionTag<TissueTermKind>);
 bool has_inner_constant(TissueTermKind kind);
 // Node count of phi_k alone (x: 1, square(x): 2, sin(b*x): 4).
 int get_basis_complexity(TissueTermKind kind);

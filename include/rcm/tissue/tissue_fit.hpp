@@ -63,6 +63,7 @@ struct TissueFitOptions {
   // Throws std::invalid_argument naming the first bad option.
   void check() const;
 };
+const OptionTable<TissueFitOptions>& get_option_table(OptionTag<TissueFitOptions>);
 
 struct TissueFrontEntry {
   TissueExpression expression;

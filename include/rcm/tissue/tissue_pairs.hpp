@@ -52,6 +52,7 @@ struct TissuePairOptions {
   bool drop_ill_conditioned = true;
   JacobianCheckOptions jacobian;
 };
+const OptionTable<TissuePairOptions>& get_option_table(OptionTag<TissuePairOptions>);
 
 struct TissuePairsReport {
   std::size_t samples = 0;               // in the recording
