@@ -184,16 +184,17 @@ TEST(OptionsTable, FlagSourcesNameTheFlag) {
   EXPECT_EQ(std::string(e.what()).rfind("command line: --alarm-force: ", 0), 0u) << e.what();
 }
 
-// The kind fitted when none is named: one rule, by whether the fitter trains networks.
-TEST(DefaultModelKind, HybridWithNetworksLinearWithout) {
-  EXPECT_EQ(rcm::dynamics::get_default_model_kind(true), rcm::dynamics::TorqueModelKind::hybrid);
-  EXPECT_EQ(rcm::dynamics::get_default_model_kind(false), rcm::dynamics::TorqueModelKind::linear);
+// The kind fitted when none is named: one rule, linear, whether or not the
+// program can train networks.
+TEST(DefaultModelKind, LinearInEveryProgram) {
+  EXPECT_EQ(rcm::dynamics::get_default_model_kind(), rcm::dynamics::TorqueModelKind::linear);
   EXPECT_FALSE(rcm::StudyOptions{}.model_kind.has_value());
   EXPECT_EQ(rcm::get_linear_torque_model_fitter().resolve_kind(std::nullopt), rcm::dynamics::TorqueModelKind::linear);
   EXPECT_EQ(rcm::get_linear_torque_model_fitter().resolve_kind(rcm::dynamics::TorqueModelKind::mlp),
             rcm::dynamics::TorqueModelKind::mlp);
 
-  // The study asks the fitter for its default kind when StudyOptions leaves it unset.
+  // The study fits the default kind when StudyOptions leaves it unset, with a
+  // fitter that trains networks or not.
   rcm::test::TempDir dir("rcm_test_options_");
   rcm::test::SyntheticArmOptions arm;
   arm.duration_s = 20.0;
@@ -216,7 +217,7 @@ TEST(DefaultModelKind, HybridWithNetworksLinearWithout) {
         networks);
     rcm::fit_free_space_step(session, options, fitter);
     ASSERT_TRUE(asked.has_value());
-    EXPECT_EQ(*asked, networks ? rcm::dynamics::TorqueModelKind::hybrid : rcm::dynamics::TorqueModelKind::linear);
+    EXPECT_EQ(*asked, rcm::dynamics::TorqueModelKind::linear);
   }
 }
 

@@ -94,9 +94,9 @@ const bool registered = rcm::cli::register_command({"demo", 5, [](CLI::App& app)
   cmd->add_option("--out", o->out, "output folder (default demo-out): bench/ (the session) and report/");
   cmd->add_flag("--quick", o->quick, "shorter recordings and training, for a smoke test");
   cmd->add_option("--seed", o->seed, "seed of the simulation and of the model fit");
-  const auto kind = rcm::cli::get_torque_model_fitter().resolve_kind(std::nullopt);
   o->study.add(cmd, "--model", {"model_kind"},
-               "free-space model: lstm, mlp, linear or hybrid (unset: " + rcm::dynamics::to_string(kind) + ")");
+               "free-space model: lstm, mlp, linear or hybrid (unset: " +
+                   rcm::dynamics::to_string(rcm::dynamics::get_default_model_kind()) + ")");
   o->study.add(cmd, "--method", {"method"});
   cmd->add_option("--max-train-minutes", o->max_minutes, "budget of the free-space fit (default 5, --quick 0.75)");
   cmd->add_flag("--json", o->json, "print results.json (plus demo_seconds) on stdout");

@@ -72,7 +72,7 @@ std::vector<rcm::Recording> load_all(const std::vector<std::string>& paths, bool
 void run_fit(const DynamicsArgs& a) {
   using namespace rcm::dynamics;
   const rcm::TorqueModelFitter fitter = rcm::cli::get_torque_model_fitter();
-  const auto kind = a.model_kind.empty() ? fitter.resolve_kind(std::nullopt)
+  const auto kind = a.model_kind.empty() ? rcm::dynamics::get_default_model_kind()
                                          : parse_torque_model_kind(a.model_kind, "--model");
   rcm::dynamics::FitOptions o;
   a.fit.apply(o);
@@ -231,7 +231,7 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   auto* fit = dyn->add_subcommand("fit", "Learn tau_fs from free-space recordings (70/20/10 split in time order)");
   fit->add_option("--model", args->model_kind,
                   fmt::format("lstm | mlp | linear | hybrid (default {}: the model rcm run and rcm monitor fit)",
-                              rcm::dynamics::to_string(rcm::cli::get_torque_model_fitter().resolve_kind(std::nullopt))));
+                              rcm::dynamics::to_string(rcm::dynamics::get_default_model_kind())));
   fit->add_option("--out", args->out, "model file to write (rcm-torque-model/1 JSON)")->required();
   fit->add_option("recordings", args->recordings, "free-space recordings (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   args->fit.add(fit, "--seed", {"seed"});

@@ -17,11 +17,12 @@ TorqueModelFitter get_torque_model_fitter() {
 }
 
 void add_free_space_flags(CLI::App* cmd, OptionFlags<StudyOptions>& flags, bool model_file) {
-  const dynamics::TorqueModelKind kind = get_torque_model_fitter().resolve_kind(std::nullopt);
   flags.add(cmd, "--model", {"model_kind"},
-            "free-space model to fit: lstm, mlp, linear or hybrid (unset: " + dynamics::to_string(kind) +
-                ", the default of a build " + (kind == dynamics::TorqueModelKind::hybrid ? "with" : "without") +
-                " LibTorch)");
+            "free-space model to fit: lstm, mlp, linear or hybrid (unset: " +
+                dynamics::to_string(dynamics::get_default_model_kind()) + (get_torque_model_fitter().trains_networks()
+                                                                                ? ")"
+                                                                                : "; this build, without LibTorch, "
+                                                                                  "fits no other)"));
   if (model_file)
     flags.add(cmd, "--model-file", {"model_file"},
               "use a saved free-space model (e.g. free_space_model.json of `rcm run`) instead of fitting one");

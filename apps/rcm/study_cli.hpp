@@ -8,8 +8,8 @@
 namespace rcm::cli {
 
 // fit_torque_model of rcm::torch when built with LibTorch (it trains the
-// networks: the default kind is hybrid); otherwise the fitter of rcm::core
-// alone (linear; the others are an error naming --model).
+// networks too); otherwise the fitter of rcm::core alone (linear; the others
+// are an error naming --model).
 TorqueModelFitter get_torque_model_fitter();
 
 // The free-space flags of the study's options that `rcm run`, `rcm demo` and

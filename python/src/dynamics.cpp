@@ -238,9 +238,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
 
   def_options<FitOptions>(d, "FitOptions", "Options of every fit_* (the CLI's defaults: one table, FitOptions)")
       .def("check", &FitOptions::check, "rcm.InputError when a value is out of range");
-  d.def("get_default_model_kind", &get_default_model_kind, py::arg("can_train_networks"),
-        "The kind fitted when none is named: hybrid where the networks can be trained (the rcm CLI with\n"
-        "LibTorch), linear otherwise (this module: StudyOptions.model_kind None means linear here)");
+  d.def("get_default_model_kind", &get_default_model_kind,
+        "The kind fitted when none is named, in every program: linear (StudyOptions.model_kind None)");
   py::class_<JointTorqueError>(d, "JointTorqueError", "Table II: per-joint RMSE and NRMSE")
       .def_readonly("index", &JointTorqueError::index, "1-based joint number")
       .def_readonly("rmse", &JointTorqueError::rmse, "N m (N for joint 3)")

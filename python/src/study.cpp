@@ -32,9 +32,9 @@ void bind_study(py::module_& m) {
               TissueFitOptions, TissuePairOptions, ThreeStepOptions, RestDetectionOptions, StaticStep,
               RecordingReadOptions>(
       m, "StudyOptions",
-      "Options of run_study / prepare_monitor. model_kind None: the kind this module fits, linear\n"
-      "(rcm.dynamics.get_default_model_kind(False): the module has no LibTorch); set model_file to use a\n"
-      "saved model of any kind.");
+      "Options of run_study / prepare_monitor. model_kind None: the default kind, linear\n"
+      "(rcm.dynamics.get_default_model_kind(); the only kind this module fits, without LibTorch); set\n"
+      "model_file to use a saved model of any kind.");
   py::class_<TrialOutcome>(m, "TrialOutcome", "Everything the study found on one trial")
       .def_readonly("name", &TrialOutcome::name)
       .def_readonly("truth_m", &TrialOutcome::truth_m)

@@ -73,8 +73,7 @@ class TestOptionsTables(unittest.TestCase):
 
     def test_model_kind_default_is_the_one_rule(self):
         self.assertIsNone(rcm.StudyOptions().model_kind)
-        self.assertEqual(rcm.dynamics.get_default_model_kind(False), rcm.dynamics.TorqueModelKind.linear)
-        self.assertEqual(rcm.dynamics.get_default_model_kind(True), rcm.dynamics.TorqueModelKind.hybrid)
+        self.assertEqual(rcm.dynamics.get_default_model_kind(), rcm.dynamics.TorqueModelKind.linear)
 
 
 if __name__ == "__main__":

@@ -253,9 +253,7 @@ const OptionTable<FitOptions>& get_option_table(OptionTag<FitOptions>) {
   return table;
 }
 
-TorqueModelKind get_default_model_kind(bool can_train_networks) {
-  return can_train_networks ? TorqueModelKind::hybrid : TorqueModelKind::linear;
-}
+TorqueModelKind get_default_model_kind() { return TorqueModelKind::linear; }
 
 FitResult fit_torque_model_without_networks(TorqueModelKind kind, const std::vector<Recording>& recordings,
                                             const FitOptions& options, const InputLocation& where) {

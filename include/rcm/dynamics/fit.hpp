@@ -115,12 +115,11 @@ struct FitResult {
 // The free-space model kind fitted when none is named, in every program: by
 // `rcm dynamics fit`, `rcm run`, `rcm demo` and `rcm monitor` without --model,
 // and by run_study, prepare_monitor and fit_free_space_step when
-// StudyOptions::model_kind is unset (the Python module, the examples). Hybrid
-// when the program can train networks (it links rcm::torch: the rcm CLI built
-// with LibTorch), the most accurate kind on the simulated bench; linear
-// otherwise (rcm::core alone: the Python module, the live nodes, a CLI built
-// without LibTorch), the only kind rcm::core fits.
-TorqueModelKind get_default_model_kind(bool can_train_networks);
+// StudyOptions::model_kind is unset (the Python module, the examples). Linear:
+// on a real arm it is the kind that holds across speed and payload (the
+// networks learn the one path they are shown; docs/dynamics.md), it fits in
+// seconds, and every program can fit it, with or without LibTorch.
+TorqueModelKind get_default_model_kind();
 
 // The fit of rcm::core alone: fit_linear_torque_model for kind linear; any
 // other kind is an InputError at `where` (the networks are fitted by

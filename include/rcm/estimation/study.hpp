@@ -24,9 +24,7 @@
 
 namespace rcm {
 
-// Fits a free-space model of a kind. It knows whether it trains the networks,
-// which decides the kind fitted when StudyOptions::model_kind is unset
-// (dynamics::get_default_model_kind).
+// Fits a free-space model of a kind; it knows whether it trains the networks.
 class TorqueModelFitter {
  public:
   using Function = std::function<dynamics::FitResult(dynamics::TorqueModelKind, const std::vector<Recording>&,
@@ -45,9 +43,9 @@ class TorqueModelFitter {
     return fit_(kind, recordings, options);
   }
   bool trains_networks() const { return trains_networks_; }
-  // `kind` when set, else dynamics::get_default_model_kind(trains_networks()).
-  dynamics::TorqueModelKind resolve_kind(const std::optional<dynamics::TorqueModelKind>& kind) const {
-    return kind ? *kind : dynamics::get_default_model_kind(trains_networks_);
+  // `kind` when set, else dynamics::get_default_model_kind().
+  static dynamics::TorqueModelKind resolve_kind(const std::optional<dynamics::TorqueModelKind>& kind) {
+    return kind ? *kind : dynamics::get_default_model_kind();
   }
 
  private:
@@ -58,8 +56,8 @@ class TorqueModelFitter {
 // The fitter of rcm::core alone: fit_linear_torque_model for the linear kind;
 // any other kind throws InputError at `where` (networks are fitted with
 // rcm::torch's fit_torque_model or `rcm dynamics fit` and reach the study as
-// StudyOptions::model_file, which needs no fitter at all). Its default kind is
-// linear. The Python module, the examples and a CLI without LibTorch use it.
+// StudyOptions::model_file, which needs no fitter at all). The Python module,
+// the examples and a CLI without LibTorch use it.
 TorqueModelFitter get_linear_torque_model_fitter(
     const InputLocation& where = InputLocation::plain("StudyOptions", "model_kind"));
 
@@ -71,8 +69,7 @@ struct StudyOptions {
   // rests on one hold.
   std::string method = "joint";
   JointEstimatorOptions joint;
-  // The free-space model to fit; unset: the fitter's default, hybrid where the
-  // networks can be trained and linear otherwise (dynamics::get_default_model_kind).
+  // The free-space model to fit; unset: dynamics::get_default_model_kind(), linear.
   std::optional<dynamics::TorqueModelKind> model_kind;
   std::optional<std::filesystem::path> model_file;  // use a saved model, skip fitting
   dynamics::FitOptions fit;
