@@ -15,7 +15,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
-.PHONY: deps build test test-sanitize demo bench coverage soak fuzz fuzz-deps clean
+.PHONY: deps build test test-sanitize demo bench coverage docs-figures soak fuzz fuzz-deps clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -72,6 +72,15 @@ bench: build
 # length (about 40 minutes on 2 cores); writes its table into docs/estimation.md.
 COVERAGE_SEEDS ?= 1,2
 coverage: build
+	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
+
+# The figures the README quotes, from runs on this machine, with the date and
+# machine: the demo's table and wall times (README, docs/benchmarks.md), the
+# coverage table (README, docs/estimation.md) and the closed-loop bench
+# (docs/simulator.md, docs/compensation.md). About 30 minutes on 2 cores.
+docs-figures: build
+	$(PYTHON) bench/demo_table.py --build $(BUILD)
+	$(PYTHON) bench/closed_loop_report.py --build $(BUILD)
 	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
 
 # The long reliability runs (about 25 minutes on 2 cores): the live stream soak,

@@ -35,4 +35,12 @@ class TempDir {
   std::filesystem::path path_;
 };
 
+// A directory of this test process's own, removed when the process exits:
+// tests of two checkouts, or two ctest runs, on one machine never write the
+// same file.
+inline const std::filesystem::path& get_process_temp_dir() {
+  static const TempDir dir("rcm_test_process_");
+  return dir.path();
+}
+
 }  // namespace rcm::test

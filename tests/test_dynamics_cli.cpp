@@ -14,6 +14,7 @@
 
 #include "rcm/io/recording.hpp"
 #include "test_dynamics_synthetic.hpp"
+#include "temp_dir.hpp"
 
 namespace {
 struct Run {
@@ -32,7 +33,7 @@ Run run(const std::string& args, bool with_stderr = false) {
 }  // namespace
 
 TEST(DynamicsCli, FitLinearThenEvalJson) {
-  const auto dir = std::filesystem::temp_directory_path() / "rcm_test_dynamics_cli";
+  const auto dir = rcm::test::get_process_temp_dir() / "rcm_test_dynamics_cli";
   std::filesystem::create_directories(dir);
   rcm::test::SyntheticArmOptions so;
   so.duration_s = 40;

@@ -19,6 +19,7 @@
 #include "rcm/dynamics/networks.hpp"
 #include "test_dynamics_networks.hpp"
 #include "test_dynamics_synthetic.hpp"
+#include "temp_dir.hpp"
 
 using namespace rcm::dynamics;
 using namespace rcm::test;
@@ -164,7 +165,7 @@ TEST(ModelFile, LinearRoundTripIsExact) {
   so.duration_s = 30;
   const auto rec = rcm::test::make_synthetic_free_space(so);
   const auto fit = fit_linear_torque_model({rec}, quiet());
-  const auto path = std::filesystem::temp_directory_path() / "rcm_test_linear_model.json";
+  const auto path = rcm::test::get_process_temp_dir() / "rcm_test_linear_model.json";
   save_torque_model(path, *fit.model);
   const auto loaded = load_torque_model(path);
   EXPECT_EQ(torque_model_to_json(*loaded), torque_model_to_json(*fit.model));

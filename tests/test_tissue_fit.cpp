@@ -15,6 +15,7 @@
 #include "rcm/tissue/tissue_fit.hpp"
 #include "rcm/tissue/tissue_law.hpp"
 #include "rcm/tissue/tissue_pairs.hpp"
+#include "temp_dir.hpp"
 
 namespace {
 
@@ -444,7 +445,7 @@ TEST(TissueLaw, JsonRoundTripIsExact) {
                                  term(TissueTermKind::exp_scaled, 1.0 / 3.0, 77.7)},
                                 true, -1e-7),
                            0.002, 0.031);
-  const auto path = std::filesystem::temp_directory_path() / "rcm_test_tissue_law.json";
+  const auto path = rcm::test::get_process_temp_dir() / "rcm_test_tissue_law.json";
   rcm::save_tissue_law(path, law);
   const rcm::TissueLaw back = rcm::load_tissue_law(path);
   std::filesystem::remove(path);

@@ -13,6 +13,7 @@
 #include "rcm/common/error.hpp"
 #include "rcm/dynamics/training.hpp"
 #include "test_dynamics_synthetic.hpp"
+#include "temp_dir.hpp"
 
 using namespace rcm::dynamics;
 
@@ -83,7 +84,7 @@ TEST(TorchScript, ExportThenImportGivesTheSameModel) {
     // One with an output delay, which the module carries as an attribute.
     const int delay = filters == 1 ? 4 : 0;
     LstmTorqueModel model(info, random_network(6 + 3 * (features + filters + dahl), 16, 2, 3, 8), norm, delay);
-    const auto path = std::filesystem::temp_directory_path() / "rcm_test_lstm.pt";
+    const auto path = rcm::test::get_process_temp_dir() / "rcm_test_lstm.pt";
     export_torchscript(model, path);
     const auto imported = import_torchscript(path);  // checks the module's forward internally
     EXPECT_EQ(imported->output_delay(), delay);
@@ -104,7 +105,7 @@ TEST(TorchScript, ExportThenImportGivesTheSameModel) {
       const int T = 400;
       // forward returns the network's output step for step, whatever the delay.
       const Eigen::MatrixXd raw = predict_torque(LstmTorqueModel(info, model.network(), norm), rec).topRows(T);
-      const auto csv = std::filesystem::temp_directory_path() / "rcm_test_lstm_io.csv";
+      const auto csv = rcm::test::get_process_temp_dir() / "rcm_test_lstm_io.csv";
       {
         std::ofstream out(csv);
         out.precision(17);
@@ -126,7 +127,7 @@ err = (torch.cat([y1, y2], 1)[0].double() - ref).abs().max().item()
 print('max difference', err)
 sys.exit(0 if z1.shape == (1, int(sys.argv[3])) and err <= 1e-4 else 1)
 )PY";
-      const auto check_path = std::filesystem::temp_directory_path() / "rcm_test_check_carry.py";
+      const auto check_path = rcm::test::get_process_temp_dir() / "rcm_test_check_carry.py";
       { std::ofstream(check_path) << check; }
       EXPECT_EQ(std::system(("/usr/bin/python3 " + check_path.string() + " " + path.string() + " " + csv.string() +
                              " " + std::to_string(z_size))
@@ -142,7 +143,7 @@ sys.exit(0 if z1.shape == (1, int(sys.argv[3])) and err <= 1e-4 else 1)
   TorqueModelInfo no_period = info;
   no_period.sample_period_s = 0.0;
   EXPECT_THROW(export_torchscript(LstmTorqueModel(no_period, random_network(6 + 3 + 6, 16, 2, 3, 8), norm),
-                                  std::filesystem::temp_directory_path() / "rcm_test_never.pt"),
+                                  rcm::test::get_process_temp_dir() / "rcm_test_never.pt"),
                std::invalid_argument);
   EXPECT_THROW(import_torchscript(std::filesystem::temp_directory_path() / "no_such_rcm_model.pt"), rcm::InputError);
 }
@@ -151,7 +152,7 @@ TEST(TorchScript, ImportsAModuleScriptedInPyTorch) {
   // The documented PyTorch layout, scripted by Debian's python3-torch.
   if (std::system("/usr/bin/python3 -c 'import torch' > /dev/null 2>&1") != 0)
     GTEST_SKIP() << "/usr/bin/python3 with torch not available";
-  const auto path = std::filesystem::temp_directory_path() / "rcm_test_pytorch_lstm.pt";
+  const auto path = rcm::test::get_process_temp_dir() / "rcm_test_pytorch_lstm.pt";
   const std::string script = R"PY(
 import sys, torch
 from typing import List, Optional
@@ -214,7 +215,7 @@ m = {"direction": TorqueLstmWithDirection, "": TorqueLstm}.get(kind, None)
 m = m() if m is not None else TorqueLstmWithAcceleration(kind == "acceleration")
 torch.jit.script(m).save(sys.argv[1])
 )PY";
-  const auto script_path = std::filesystem::temp_directory_path() / "rcm_test_make_pytorch_lstm.py";
+  const auto script_path = rcm::test::get_process_temp_dir() / "rcm_test_make_pytorch_lstm.py";
   { std::ofstream(script_path) << script; }
   ASSERT_EQ(std::system(("/usr/bin/python3 " + script_path.string() + " " + path.string()).c_str()), 0);
   const auto model = import_torchscript(path);  // throws if its forward disagrees with the kernel
