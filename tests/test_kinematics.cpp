@@ -99,6 +99,28 @@ TEST(Kinematics, ShaftDistanceIsDSecTheta) {
   }
 }
 
+// The one home of the shaft's closed forms: its axes are DH frame 3's and its
+// derivatives those of z3 (central differences, h = 1e-6: error < 1e-9).
+TEST(Kinematics, ShaftDirectionsAreFrame3AndTheDerivativesOfItsAxis) {
+  rcm::KinematicsData data;
+  const double h = 1e-6;
+  for (const auto& s : random_samples(200, 7)) {
+    const rcm::ShaftDirections d = rcm::compute_shaft_directions(s.q);
+    rcm::compute_forward_kinematics(model(), data, s.q);
+    const Eigen::Matrix3d R = rcm::get_frame_pose(data, 3).linear();
+    EXPECT_LT((R.col(0) - d.x3).norm(), 1e-12);
+    EXPECT_LT((R.col(1) - d.y3).norm(), 1e-12);
+    EXPECT_LT((R.col(2) - d.z3).norm(), 1e-12);
+    for (int j = 0; j < 2; ++j) {
+      const Eigen::Vector3d e = Eigen::Vector3d::Unit(j) * h;
+      const Eigen::Vector3d fd = (rcm::compute_z3_base(s.q + e) - rcm::compute_z3_base(s.q - e)) / (2 * h);
+      EXPECT_LT((fd - (j == 0 ? d.dz3_dq1 : d.get_dz3_dq2())).norm(), 1e-9) << "joint " << j + 1;
+    }
+    EXPECT_NEAR(d.dz3_dq1.norm(), std::abs(d.cos_q2), 1e-15);
+    EXPECT_DOUBLE_EQ(d.cos_q2, std::cos(s.q[1]));
+  }
+}
+
 TEST(IncisionJacobian, ClosedFormEqualsDhChainAndFiniteDifferences) {
   rcm::KinematicsData data;
   int n = 0;

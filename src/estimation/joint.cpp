@@ -11,6 +11,7 @@
 #include "joint_model.hpp"
 #include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/kinematics/psm_model.hpp"
 #include "rcm/common/interrupt.hpp"
 
 namespace rcm {
@@ -185,12 +186,12 @@ std::vector<JointSample> make_joint_samples(const IncisionFrame& incision, const
 
 bool compute_joint_sample(const IncisionFrame& incision, const Eigen::Vector3d& q, const Eigen::Vector3d& qd,
                           const Eigen::Vector3d& dtau, double max_theta_rad, JointSample& s) {
-  s.z3 = compute_z3_base(q);
+  const ShaftDirections d = compute_shaft_directions(q);
+  s.z3 = d.z3;
   s.cos_theta = incision.z_inc_base().dot(s.z3);
   if (!(std::atan2(incision.z_inc_base().cross(s.z3).norm(), s.cos_theta) <= max_theta_rad)) return false;
-  const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), s2 = std::sin(q[1]), c2 = std::cos(q[1]);
-  s.dz3_dq1 = Eigen::Vector3d(c1 * c2, 0.0, s1 * c2);
-  s.dz3_dq2 = Eigen::Vector3d(-s1 * s2, -c2, c1 * s2);
+  s.dz3_dq1 = d.dz3_dq1;
+  s.dz3_dq2 = d.get_dz3_dq2();
   s.z3_dot = s.dz3_dq1 * qd[0] + s.dz3_dq2 * qd[1];
   s.qd3 = qd[2];
   s.dtau = dtau;

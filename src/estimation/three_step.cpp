@@ -11,6 +11,7 @@
 
 #include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/kinematics/psm_model.hpp"
 
 namespace rcm {
 
@@ -157,14 +158,12 @@ Recording remove_position_chatter(const Recording& recording, const Eigen::Vecto
 
 InverseDecomposition compute_inverse_decomposition(const IncisionFrame& incision, const Eigen::Vector3d& q,
                                                    const Eigen::Vector3d& dtau) {
-  const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), s2 = std::sin(q[1]), c2 = std::cos(q[1]);
-  const Eigen::Vector3d a1(c1 * c2, 0.0, s1 * c2);    // dz3/dq1, norm c2
-  const Eigen::Vector3d a2(-s1 * s2, -c2, c1 * s2);   // dz3/dq2, norm 1
-  const Eigen::Vector3d z3(s1 * c2, -s2, -c1 * c2);
-  const double cos_theta = incision.z_inc_base().dot(z3);  // s = D / cos(theta)
+  const ShaftDirections d = compute_shaft_directions(q);
+  const double c2 = d.cos_q2;                                 // |dz3/dq1|; |dz3/dq2| = 1
+  const double cos_theta = incision.z_inc_base().dot(d.z3);  // s = D / cos(theta)
   InverseDecomposition out;
-  out.u = cos_theta * (a1 * (dtau[0] / (c2 * c2)) + a2 * dtau[1]);
-  out.w = z3 * dtau[2];
+  out.u = cos_theta * (d.dz3_dq1 * (dtau[0] / (c2 * c2)) + d.get_dz3_dq2() * dtau[1]);
+  out.w = d.z3 * dtau[2];
   return out;
 }
 

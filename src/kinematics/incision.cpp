@@ -28,12 +28,9 @@ double compute_shaft_distance(const IncisionFrame& incision, const Eigen::Vector
 }
 
 Eigen::Matrix3d compute_incision_jacobian(const Eigen::Vector3d& q, double s) {
-  const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), s2 = std::sin(q[1]), c2 = std::cos(q[1]);
+  const ShaftDirections d = compute_shaft_directions(q);
   Eigen::Matrix3d J;
-  // d z3/d q1 = [c1 c2, 0, s1 c2],  d z3/d q2 = [-s1 s2, -c2, c1 s2]
-  J << s * c1 * c2, -s * s1 * s2, s1 * c2,
-       0.0,         -s * c2,      -s2,
-       s * s1 * c2,  s * c1 * s2, -c1 * c2;
+  J << s * d.dz3_dq1, s * d.get_dz3_dq2(), d.z3;
   return J;
 }
 

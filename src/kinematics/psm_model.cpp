@@ -192,26 +192,27 @@ void compute_forward_kinematics(const PsmModel& model, KinematicsData& data,
   }
 }
 
-Eigen::Vector3d compute_z3_base(const Eigen::Vector3d& q) {
+ShaftDirections compute_shaft_directions(const Eigen::Vector3d& q) {
   const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), s2 = std::sin(q[1]), c2 = std::cos(q[1]);
-  return {s1 * c2, -s2, -c1 * c2};
+  ShaftDirections d;
+  d.x3 = Eigen::Vector3d(-s1 * s2, -c2, c1 * s2);
+  d.y3 = Eigen::Vector3d(-c1, 0.0, -s1);
+  d.z3 = Eigen::Vector3d(s1 * c2, -s2, -c1 * c2);
+  d.dz3_dq1 = Eigen::Vector3d(c1 * c2, 0.0, s1 * c2);
+  d.cos_q2 = c2;
+  return d;
 }
 
-Eigen::Vector3d compute_x3_base(const Eigen::Vector3d& q) {
-  const double s1 = std::sin(q[0]), c1 = std::cos(q[0]), s2 = std::sin(q[1]), c2 = std::cos(q[1]);
-  return {-s1 * s2, -c2, c1 * s2};
-}
+Eigen::Vector3d compute_z3_base(const Eigen::Vector3d& q) { return compute_shaft_directions(q).z3; }
 
-Eigen::Vector3d compute_y3_base(const Eigen::Vector3d& q) {
-  const double s1 = std::sin(q[0]), c1 = std::cos(q[0]);
-  return {-c1, 0.0, -s1};
-}
+Eigen::Vector3d compute_x3_base(const Eigen::Vector3d& q) { return compute_shaft_directions(q).x3; }
+
+Eigen::Vector3d compute_y3_base(const Eigen::Vector3d& q) { return compute_shaft_directions(q).y3; }
 
 Eigen::Matrix3d compute_R_base_3(const Eigen::Vector3d& q) {
+  const ShaftDirections d = compute_shaft_directions(q);
   Eigen::Matrix3d R;
-  R.col(0) = compute_x3_base(q);
-  R.col(1) = compute_y3_base(q);
-  R.col(2) = compute_z3_base(q);
+  R << d.x3, d.y3, d.z3;
   return R;
 }
 

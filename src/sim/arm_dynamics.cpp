@@ -7,17 +7,6 @@ namespace rcm::sim {
 
 Eigen::Vector3d get_yaw_axis_base() { return Eigen::Vector3d(0.0, -1.0, 0.0); }
 
-ShaftFrame compute_shaft_frame(const Eigen::Vector3d& q) {
-  const double s1 = std::sin(q[0]), c1 = std::cos(q[0]);
-  const double s2 = std::sin(q[1]), c2 = std::cos(q[1]);
-  ShaftFrame f;
-  f.z3 = Eigen::Vector3d(s1 * c2, -s2, -c1 * c2);
-  f.x3 = Eigen::Vector3d(-s1 * s2, -c2, c1 * s2);
-  f.y3 = Eigen::Vector3d(-c1, 0.0, -s1);
-  f.dz3_dq1 = Eigen::Vector3d(c1 * c2, 0.0, s1 * c2);
-  return f;
-}
-
 namespace {
 
 Eigen::Matrix3d diag_inertia(const Eigen::Vector3d& d) { return d.asDiagonal(); }

@@ -114,9 +114,7 @@ void validate_config(const SimConfig& c, const std::string& source) {
             fmt::format("protocol.baseline_start_offset[{}]", j), "start pose outside the joint range");
   }
   // The largest pivot angle of the teleoperation box is at one of its corners.
-  const auto z3 = [](double q1, double q2) {
-    return Eigen::Vector3d(std::sin(q1) * std::cos(q2), -std::sin(q2), -std::cos(q1) * std::cos(q2));
-  };
+  const auto z3 = [](double q1, double q2) { return compute_z3_base(Eigen::Vector3d(q1, q2, 0.0)); };
   const Eigen::Vector3d n = z3(P.q0[0], P.q0[1]);
   double min_cos = 1.0;
   for (int a = -1; a <= 1; a += 2)

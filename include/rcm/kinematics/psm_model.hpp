@@ -76,8 +76,20 @@ inline const Eigen::Isometry3d& get_frame_pose(const KinematicsData& data, int f
   return data.X_base_frame[static_cast<std::size_t>(frame)];
 }
 
-// Closed forms of the frames (docs/formats.md), valid for every robot that
-// loaded: columns of the rotation of DH frame 3 in the base frame.
+// The shaft's directions at q in the base frame, from one evaluation of the
+// trigonometry: the one home of the closed forms that J_D, the incision force,
+// the three-step and joint estimators and the simulator use. x3, y3, z3 are the
+// columns of the rotation of DH frame 3 (docs/formats.md); the insertion axis
+// z3 turns with dz3/dq1 = yaw axis x z3 (norm |cos q2|) and dz3/dq2 = x3.
+struct ShaftDirections {
+  Eigen::Vector3d x3 = Eigen::Vector3d::Zero(), y3 = Eigen::Vector3d::Zero(), z3 = Eigen::Vector3d::Zero();
+  Eigen::Vector3d dz3_dq1 = Eigen::Vector3d::Zero();
+  double cos_q2 = 1.0;  // dz3_dq1's norm, with its sign
+  const Eigen::Vector3d& get_dz3_dq2() const { return x3; }
+};
+ShaftDirections compute_shaft_directions(const Eigen::Vector3d& q);
+
+// Columns of the rotation of DH frame 3 in the base frame, one at a time.
 Eigen::Vector3d compute_z3_base(const Eigen::Vector3d& q);  // insertion axis
 Eigen::Vector3d compute_x3_base(const Eigen::Vector3d& q);
 Eigen::Vector3d compute_y3_base(const Eigen::Vector3d& q);

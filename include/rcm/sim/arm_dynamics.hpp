@@ -12,17 +12,17 @@
 #include <Eigen/Core>
 #include <array>
 
+#include "rcm/kinematics/psm_model.hpp"
 #include "rcm/sim/sim_config.hpp"
 
 namespace rcm::sim {
 
-// Closed forms of the frames (docs/formats.md), kept local to the simulator
-// so that its ground truth does not share code with the estimator under test.
-struct ShaftFrame {
-  Eigen::Vector3d x3, y3, z3;   // DH frame 3 axes in the base frame
-  Eigen::Vector3d dz3_dq1;      // = yaw_axis x z3;  dz3/dq2 = x3
-};
-ShaftFrame compute_shaft_frame(const Eigen::Vector3d& q);
+// DH frame 3's axes in the base frame and dz3/dq1 = yaw_axis x z3 (dz3/dq2 =
+// x3): the kinematics' closed forms, which the tests hold against the DH chain
+// of the robot file, so the simulator's truth and the estimators share them
+// without sharing a mistake.
+using ShaftFrame = ShaftDirections;
+inline ShaftFrame compute_shaft_frame(const Eigen::Vector3d& q) { return compute_shaft_directions(q); }
 // Yaw axis in the base frame (constant): dz3/dq1 = yaw_axis x z3.
 Eigen::Vector3d get_yaw_axis_base();
 
