@@ -243,8 +243,15 @@ TEST(SimConfig, TransmissionVelocityNoiseAndSpeedFieldsAreChecked) {
   c.speed.duration_s = 0.0;
   expect_error(c, "speed.duration_s");
   c = base;
-  c.speed.amplitude[1] = 3.0;
-  expect_error(c, "speed.amplitude[1]");
+  c.speed.amplitude[1] = 3.0;  // a session does not play the speed path; the experiment refuses it
+  EXPECT_EQ(error_of(c), "");
+  try {
+    validate_speed_experiment(c, "my.json");
+    ADD_FAILURE() << "no error";
+  } catch (const rcm::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("speed.amplitude[1]"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(run_speed_experiment(c), rcm::InputError);
   c = base;
   c.speed.falloff = -1.0;
   expect_error(c, "speed.falloff");

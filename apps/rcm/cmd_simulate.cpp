@@ -228,7 +228,9 @@ void run_simulate(const SimulateOptions& o) {
   if (o.no_truth) config.protocol.write_truth = false;
   if (o.no_plot) config.force_angle.plot = false;
   if (o.exact_sensors) config.sensors.noise = false;
-  validate_config(config, o.config_file.empty() ? "command line" : o.config_file);
+  const std::string source = o.config_file.empty() ? "command line" : o.config_file;
+  validate_config(config, source);
+  if (o.experiment == "speed") validate_speed_experiment(config, source);
 
   if (o.print_config) {
     rcm::cli::print_json(config_to_json(config));

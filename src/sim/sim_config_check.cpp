@@ -133,10 +133,6 @@ void validate_config(const SimConfig& c, const std::string& source) {
     require(P.q0[j] - T.amplitude[j] >= lim.q_min && P.q0[j] + T.amplitude[j] <= lim.q_max, field,
             fmt::format("q0 +- amplitude leaves the joint range [{}, {}] of {}", lim.q_min, lim.q_max,
                         lim.name));
-    require(P.q0[j] - c.speed.amplitude[j] >= lim.q_min && P.q0[j] + c.speed.amplitude[j] <= lim.q_max,
-            fmt::format("speed.amplitude[{}]", j),
-            fmt::format("q0 +- speed.amplitude leaves the joint range [{}, {}] of {}", lim.q_min, lim.q_max,
-                        lim.name));
     const double b = P.baseline_start_offset[j];
     require(P.q0[j] + b >= lim.q_min && P.q0[j] + b <= lim.q_max,
             fmt::format("protocol.baseline_start_offset[{}]", j), "start pose outside the joint range");
@@ -203,6 +199,19 @@ void validate_config(const SimConfig& c, const std::string& source) {
     require(F.offsets_m[i] >= -0.02 && F.offsets_m[i] <= 0.07 &&
                 std::abs(F.offsets_m[i]) / 0.5 < P.q0[2],  // cos(60 deg) = 0.5
             fmt::format("force_angle.offsets_m[{}]", i), "expected [-0.02, 0.07] m, within the insertion depth");
+}
+
+void validate_speed_experiment(const SimConfig& c, const std::string& source) {
+  validate_config(c, source);
+  const PsmModel robot = load_robot_model(c.robot, source + ": field robot");
+  for (int j = 0; j < 3; ++j) {
+    const auto& lim = robot.joints()[static_cast<std::size_t>(j)];
+    const double q0 = c.protocol.q0[j], a = c.speed.amplitude[j];
+    if (q0 - a < lim.q_min || q0 + a > lim.q_max)
+      detail::fail_config_field(source, fmt::format("speed.amplitude[{}]", j),
+                                fmt::format("q0 +- speed.amplitude leaves the joint range [{}, {}] of {}",
+                                            lim.q_min, lim.q_max, lim.name));
+  }
 }
 
 }  // namespace rcm::sim

@@ -43,7 +43,7 @@ SimulatedRecording record(const SimConfig& config, const std::string& name, int 
 }  // namespace
 
 SpeedExperimentResult run_speed_experiment(const SimConfig& config) {
-  validate_config(config);
+  validate_speed_experiment(config);
   SpeedExperimentResult r;
   std::vector<std::function<void()>> jobs;
   jobs.emplace_back([&] { r.slow = record(config, "slow", config.speed.slowdown); });

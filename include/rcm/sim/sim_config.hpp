@@ -236,6 +236,9 @@ void apply_arm_preset(SimConfig& config, const std::string& name);
 
 // Throws InputError naming `source` and the field for every inconsistent value.
 void validate_config(const SimConfig& config, const std::string& source = "config");
+// validate_config and what only the speed experiment needs: its path
+// (speed.amplitude around protocol.q0) within the joint limits.
+void validate_speed_experiment(const SimConfig& config, const std::string& source = "config");
 
 // Overrides fields of `config` from JSON. Unknown keys and wrong types throw
 // InputError naming `source` and the JSON path. `tissue.preset`, `arm.preset`
