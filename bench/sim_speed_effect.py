@@ -149,7 +149,7 @@ def main():
     lines = [f"Measured by `bench/sim_speed_effect.py` on {stamp}, {cpu_model()}, {os.cpu_count()} cores: "
              f"`rcm simulate --experiment speed --arm A --seed S` for seeds {args.seeds}, "
              "`rcm dynamics fit --model linear --seed 1` on one recording, `rcm dynamics eval` on the other. "
-             "Bench rows: the mean over the seeds, their range in brackets; in-sample is the fit's own held-out "
+             "Bench rows: the mean over the seeds and their range; in-sample is the fit's own held-out "
              "slice of the recording it was fitted on. Real rows: the real Classic PSM1 recordings of the same "
              "protocol, 105 g and 205 g on the instrument, fitted and scored the same way.",
              "",
