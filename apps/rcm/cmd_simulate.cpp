@@ -26,6 +26,7 @@ struct SimulateOptions {
   std::string experiment = "session";
   std::string tissue;
   std::string friction;
+  std::string arm;
   std::string config_file;
   std::uint64_t seed = 0;
   bool seed_given = false;
@@ -47,7 +48,7 @@ std::string config_help() {
       "unknown keys and wrong types are errors). Defaults:\n";
   for (const auto& f : rcm::sim::describe_config(defaults))
     text += fmt::format("  {:<46} {:<24} {}\n", f.path, f.value, f.help);
-  text += "\nOrder of precedence: defaults < --tissue, --friction < --config < command-line flags.\n";
+  text += "\nOrder of precedence: defaults < --tissue, --arm, --friction < --config < command-line flags.\n";
   return text;
 }
 
@@ -110,6 +111,74 @@ void run_closed_loop(const SimulateOptions& o, const rcm::sim::SimConfig& config
                            figures.size(), elapsed);
 }
 
+// The speed experiment: fast.csv and slow.csv (and their truth), the same
+// excitation path at full speed and slowed down.
+void run_speed(const SimulateOptions& o, const rcm::sim::SimConfig& config, const std::filesystem::path& out_dir) {
+  using namespace rcm::sim;
+  const auto start = std::chrono::steady_clock::now();
+  std::cerr << fmt::format("simulate: speed experiment, seed {}, {} arm, {} friction; excitation period {:g} s, "
+                           "{:g} s at full speed and x{} slower\n",
+                           config.seed, config.arm.preset, config.friction_preset, config.speed.period_s,
+                           config.speed.duration_s, config.speed.slowdown);
+  SpeedExperimentResult r;
+  try {
+    r = run_speed_experiment(config);
+  } catch (const rcm::Interrupted& e) {
+    throw rcm::Interrupted(std::string(e.what()) + "; nothing written");
+  }
+  std::filesystem::create_directories(out_dir);
+  rcm::save_json_file(out_dir / "sim_config.json", config_to_json(config));
+  nlohmann::json recs = nlohmann::json::array();
+  std::vector<std::vector<std::string>> rows;
+  for (const SimulatedRecording* rec : {&r.fast, &r.slow}) {
+    RecordingFileInfo info = summarize_simulated_recording(*rec);
+    info.file = out_dir / (rec->name + ".csv");
+    rcm::save_recording(info.file, rec->recording);
+    if (config.protocol.write_truth) {
+      info.truth_file = out_dir / (rec->name + "_truth.csv");
+      save_truth_csv(info.truth_file, *rec);
+    }
+    const Eigen::Vector3d velocity_rms =
+        (rec->recording.velocity.array().square().colwise().mean()).sqrt().transpose();
+    const double rate = info.duration_s > 0 ? static_cast<double>(info.samples - 1) / info.duration_s : 0.0;
+    recs.push_back({{"name", rec->name},
+                    {"file", info.file.string()},
+                    {"truth_file", info.truth_file.string()},
+                    {"samples", info.samples},
+                    {"duration_s", info.duration_s},
+                    {"rate_hz", rate},
+                    {"velocity_rms", vec_json(velocity_rms)},
+                    {"effort_min", vec_json(info.effort_min)},
+                    {"effort_max", vec_json(info.effort_max)},
+                    {"effort_noise_hf", vec_json(info.effort_noise_hf)}});
+    rows.push_back({rec->name, std::to_string(info.samples), fmt::format("{:.1f}", info.duration_s),
+                    fmt::format("{:.0f}", rate),
+                    fmt::format("{:.2f} / {:.2f} / {:.3f}", velocity_rms[0], velocity_rms[1], velocity_rms[2]),
+                    fmt::format("{:.2f}..{:.2f}", info.effort_min[0], info.effort_max[0]),
+                    fmt::format("{:.2f}..{:.2f}", info.effort_min[1], info.effort_max[1]),
+                    fmt::format("{:.2f}..{:.2f}", info.effort_min[2], info.effort_max[2])});
+  }
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const nlohmann::json summary = {{"experiment", "speed"},
+                                  {"seed", config.seed},
+                                  {"arm", config.arm.preset},
+                                  {"friction", config.friction_preset},
+                                  {"period_s", config.speed.period_s},
+                                  {"slowdown", config.speed.slowdown},
+                                  {"elapsed_s", elapsed},
+                                  {"recordings", recs}};
+  rcm::save_json_file(out_dir / "speed.json", summary);
+  if (o.json) {
+    rcm::cli::print_json(summary);
+    return;
+  }
+  std::cout << rcm::cli::format_table({"recording", "samples", "s", "Hz", "qd RMS (rad/s, rad/s, m/s)",
+                                       "effort_1 N m", "effort_2 N m", "effort_3 N"},
+                                      rows);
+  std::cout << fmt::format("\nwrote {} and {} in {:.1f} s\n", (out_dir / "fast.csv").string(),
+                           (out_dir / "slow.csv").string(), elapsed);
+}
+
 void run_simulate(const SimulateOptions& o) {
   using namespace rcm::sim;
   SimConfig config = make_default_config();
@@ -119,6 +188,18 @@ void run_simulate(const SimulateOptions& o) {
     } catch (const rcm::InputError& e) {
       rcm::InputLocation loc;
       loc.file = "--tissue";
+      throw rcm::InputError(loc, e.reason());
+    }
+  }
+  // The speed experiment puts the motors behind their cables unless told otherwise:
+  // its question is how the transmission's physics meets a rigid-body model.
+  const std::string arm = !o.arm.empty() ? o.arm : (o.experiment == "speed" ? "cable" : "");
+  if (!arm.empty()) {
+    try {
+      apply_arm_preset(config, arm);
+    } catch (const rcm::InputError& e) {
+      rcm::InputLocation loc;
+      loc.file = "--arm";
       throw rcm::InputError(loc, e.reason());
     }
   }
@@ -147,7 +228,9 @@ void run_simulate(const SimulateOptions& o) {
   if (o.no_truth) config.protocol.write_truth = false;
   if (o.no_plot) config.force_angle.plot = false;
   if (o.exact_sensors) config.sensors.noise = false;
-  validate_config(config, o.config_file.empty() ? "command line" : o.config_file);
+  const std::string source = o.config_file.empty() ? "command line" : o.config_file;
+  validate_config(config, source);
+  if (o.experiment == "speed") validate_speed_experiment(config, source);
 
   if (o.print_config) {
     rcm::cli::print_json(config_to_json(config));
@@ -256,10 +339,13 @@ void run_simulate(const SimulateOptions& o) {
     std::cout << fmt::format(" in {:.1f} s\n", elapsed);
   } else if (o.experiment == "closed-loop") {
     run_closed_loop(o, config, out_dir);
+  } else if (o.experiment == "speed") {
+    run_speed(o, config, out_dir);
   } else {
     rcm::InputLocation loc;
     loc.file = "--experiment";
-    throw rcm::InputError(loc, "unknown experiment '" + o.experiment + "'; known: session, force-angle, closed-loop");
+    throw rcm::InputError(loc,
+                          "unknown experiment '" + o.experiment + "'; known: session, force-angle, closed-loop, speed");
   }
 }
 
@@ -268,13 +354,17 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   auto* cmd = app.add_subcommand(
       "simulate",
       "Simulated phantom bench (closed-loop dVRK Classic PSM, hysteretic LuGre friction, tissue pad, "
-      "sensors): write a session (rcm-session/1, with ground truth) or the Fig. 3 sweep");
+      "sensors): write a session (rcm-session/1, with ground truth), the Fig. 3 sweep, the closed loop or the "
+      "speed pair");
   cmd->add_option("--out", opts->out, "output directory");
   cmd->add_option("--seed", opts->seed, "random seed (default 1, or the config's)")
       ->each([opts](const std::string&) { opts->seed_given = true; });
   cmd->add_option("--experiment", opts->experiment,
                   "session (default) | force-angle | closed-loop (the correction in the loop against a moving "
-                  "incision, and the same runs open loop)");
+                  "incision, and the same runs open loop) | speed (fast.csv, slow.csv, speed.json: one "
+                  "periodic excitation path in free space at full speed, logged at sensors.log_rate_hz, and "
+                  "slowed down by speed.slowdown, logged one row per command at log_rate_hz / slowdown; the "
+                  "cable arm unless --arm or the config say otherwise)");
   opts->free_space.add(cmd, "--model", {"model_kind"},
                        "closed-loop: the estimator's free-space model, fitted on the session's free space (unset: "
                        "as rcm monitor)");
@@ -282,6 +372,9 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   cmd->add_option("--tissue", opts->tissue, "tissue preset: linear (default), stiffening, viscoelastic, sliding");
   cmd->add_option("--friction", opts->friction,
                   "joint friction preset: hysteretic (default: rate-independent, the real PSM's band), smooth");
+  cmd->add_option("--arm", opts->arm,
+                  "arm preset: rigid (default; speed: cable), cable (motors drive the links through compliant "
+                  "cables, friction on both sides)");
   cmd->add_option("--config", opts->config_file, "JSON file overriding any parameter (keys below)");
   cmd->add_flag("--quick", opts->quick, "short session: 120 s free space, 30 s calibration and trials");
   cmd->add_option("--free-space-s", opts->free_space_s, "free-space duration, s (default 900)");

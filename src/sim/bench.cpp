@@ -24,6 +24,7 @@
 
 #include "rcm/common/interrupt.hpp"
 #include "rcm/sim/arm_dynamics.hpp"
+#include "rcm/sim/plant.hpp"
 
 namespace rcm::sim {
 
@@ -86,8 +87,8 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
   const SensorParams& S = config.sensors;
   const double dt = 1.0 / C.physics_rate_hz;
   const int decimation = static_cast<int>(std::lround(C.physics_rate_hz / S.log_rate_hz));
-  const ArmDynamics arm(config.arm);
-  const auto& friction_params = config.friction;
+  const Plant plant(config.arm, config.friction);
+  const ArmDynamics& arm = plant.arm;
 
   std::vector<SegmentBuffer> buffers(segments.size());
   std::size_t k_last = 0;
@@ -105,6 +106,8 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
   }
 
   std::mt19937_64 rng(noise_seed);
+  // Its own stream, so that the other sensors' noise does not depend on it.
+  std::mt19937_64 velocity_rng(splitmix64(noise_seed ^ 0x76656c6f63697479ULL));
   std::normal_distribution<double> normal(0.0, 1.0);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
 
@@ -114,9 +117,9 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
   const Eigen::Vector3d q0 = config.protocol.q0;
   const ShaftFrame f0 = compute_shaft_frame(q0);
 
-  Eigen::Vector3d q = reference.evaluate(step_begin * dt).q;
-  Eigen::Vector3d qd = Eigen::Vector3d::Zero();
-  Eigen::Vector3d z = Eigen::Vector3d::Zero();
+  PlantState state = make_plant_state_at_rest(plant, reference.evaluate(step_begin * dt).q);
+  const Eigen::Vector3d& q = state.q;
+  const Eigen::Vector3d& qd = state.qd;
   double axial_z = 0.0;
   auto measure_position = [&](const Eigen::Vector3d& x) {
     if (!S.noise) return x;
@@ -124,7 +127,8 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
     for (int j = 0; j < 3; ++j) m[j] = quantize(x[j], S.position_quantum[j]);
     return m;
   };
-  Eigen::Vector3d q_meas_prev = measure_position(q);
+  // The encoders sit on the motors.
+  Eigen::Vector3d q_meas_prev = measure_position(state.qm);
   // With a moving incision, the tissue's anchor is moved in a copy at every step.
   std::optional<TissueModel> moving;
   if (tissue && hooks && hooks->get_misalignment) moving.emplace(*tissue);
@@ -138,23 +142,23 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
       throw Interrupted("interrupted while simulating " + segments.front().name);
     const double t = static_cast<double>(step) / C.physics_rate_hz;
     // Sensors as the controller sees them.
-    const Eigen::Vector3d q_meas = measure_position(q);
+    const Eigen::Vector3d q_meas = measure_position(state.qm);
     Eigen::Vector3d v_meas;
     if (S.noise) {
       velocity_filtered += alpha * ((q_meas - q_meas_prev) / dt - velocity_filtered);
       v_meas = velocity_filtered;
     } else {
-      v_meas = qd;
+      v_meas = state.qmd;
     }
     q_meas_prev = q_meas;
 
     // Controller.
     const ReferenceSample ref = reference.evaluate(std::max(t, step_begin * dt));
     Eigen::Vector3d tau = C.kp.cwiseProduct(ref.q - q_meas) + C.kd.cwiseProduct(ref.qd - v_meas);
-    if (C.feedforward) tau += compute_inverse_dynamics(arm, ref.q, ref.qd, ref.qdd, true);
+    if (C.feedforward)
+      tau += compute_inverse_dynamics(arm, ref.q, ref.qd, ref.qdd, true) + plant.rotor_inertia.cwiseProduct(ref.qdd);
 
     // Plant.
-    const FrictionOutput fr = compute_friction(friction_params, z, qd);
     TissueOutput tis;
     if (moving) {
       moving->misalignment_m = hooks->get_misalignment(t);
@@ -168,18 +172,25 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
                                              segments.front().name, t, e.what()));
       }
     }
-    const Eigen::Vector3d h = compute_inverse_dynamics(arm, q, qd, Eigen::Vector3d::Zero(), true);
-    const Eigen::Matrix3d M = compute_mass_matrix(arm, q);
-    const Eigen::Vector3d qdd = M.llt().solve(tau - h - fr.tau - tis.tau);
+    const PlantAcceleration acc = compute_plant_acceleration(plant, state, tau, tis.tau);
 
     if (step >= 0 && step % decimation == 0) {
       const auto k = static_cast<std::size_t>(step / decimation);
+      // The published velocity: the dVRK's estimate from encoder timing is
+      // noisier than the controller's filtered difference (docs/simulator.md).
+      Eigen::Vector3d v_published = v_meas;
+      if (S.noise && S.velocity_noise.maxCoeff() > 0.0)
+        for (int j = 0; j < 3; ++j) {
+          const double fade = std::min(1.0, std::abs(state.qmd[j]) / S.velocity_noise_fade[j]);
+          v_published[j] += fade * S.velocity_noise[j] * normal(velocity_rng);
+        }
       // The loop reads the same noisy effort that the recording logs.
       std::optional<Eigen::Vector3d> sensed_effort;
       if (hooks && hooks->on_sample) {
         sensed_effort.emplace();
         for (int j = 0; j < 3; ++j) (*sensed_effort)[j] = tau[j] + (S.noise ? S.effort_noise[j] * normal(rng) : 0.0);
-        hooks->on_sample(static_cast<double>(k) / S.log_rate_hz, q_meas, v_meas, *sensed_effort, tis.f_inc_base);
+        hooks->on_sample(static_cast<double>(k) / S.log_rate_hz, q_meas, v_published, *sensed_effort,
+                         tis.f_inc_base);
       }
       while (buffer_index < buffers.size() &&
              (k < buffers[buffer_index].k_begin || k >= buffers[buffer_index].k_end)) {
@@ -203,7 +214,7 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
           rec.force->row(r) = rec.force->row(r - 1);
         } else {
           rec.position.row(r) = q_meas.transpose();
-          rec.velocity.row(r) = v_meas.transpose();
+          rec.velocity.row(r) = v_published.transpose();
           for (int j = 0; j < 3; ++j) {
             rec.effort(r, j) = sensed_effort ? (*sensed_effort)[j]
                                              : tau[j] + (S.noise ? S.effort_noise[j] * normal(rng) : 0.0);
@@ -214,10 +225,10 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
         have_previous_row = true;
         tr.q.row(r) = q.transpose();
         tr.qd.row(r) = qd.transpose();
-        tr.qdd.row(r) = qdd.transpose();
+        tr.qdd.row(r) = acc.qdd.transpose();
         tr.tau.row(r) = tau.transpose();
-        tr.friction.row(r) = fr.tau.transpose();
-        tr.tau_fs.row(r) = (M * qdd + h + fr.tau).transpose();
+        tr.friction.row(r) = (acc.friction_link + acc.friction_motor).transpose();
+        tr.tau_fs.row(r) = acc.tau_fs.transpose();
         tr.force.row(r) = tis.f_inc_base.transpose();
         const Eigen::Vector3d z3 = compute_shaft_frame(q).z3;
         tr.theta[r] = std::atan2(f0.z3.cross(z3).norm(), f0.z3.dot(z3));
@@ -225,10 +236,7 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
       }
     }
 
-    // Semi-implicit Euler; friction states by their exact exponential update.
-    qd += dt * qdd;
-    q += dt * qd;
-    z = advance_friction_state(friction_params, z, qd, dt);
+    advance_plant_state(plant, state, acc, dt);
     if (active_tissue) axial_z = advance_tissue_state(*active_tissue, axial_z, tis.axial_velocity, dt);
   }
 

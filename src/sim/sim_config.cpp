@@ -57,6 +57,18 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("arm.gravity_base_m_s2", &c.arm.gravity_base_m_s2, "gravity in the base frame, m/s^2");
   add("arm.insertion_counterbalance_n", &c.arm.insertion_counterbalance_n,
       "insertion counterbalance spring force along -z3, N");
+  add("arm.preset", &c.arm.preset, "rigid | cable: transmissions and effort noise (applied first)");
+  for (int j = 0; j < 3; ++j) {
+    JointTransmissionParams& t = c.arm.transmission[static_cast<std::size_t>(j)];
+    const std::string k = std::string("arm.transmission.") + kJointKeys[j];
+    const bool lin = j == 2;
+    add(k + ".rotor_inertia", &t.rotor_inertia,
+        std::string("motor and gearhead reflected to the joint, ") + (lin ? "kg" : "kg m^2"));
+    add(k + ".stiffness", &t.stiffness, std::string("cable, motor to link, ") + (lin ? "N/m" : "N m/rad") + "; 0: rigid");
+    add(k + ".damping", &t.damping, std::string("cable damping, ") + (lin ? "N s/m" : "N m s/rad"));
+    add(k + ".friction_link_share", &t.friction_link_share,
+        "share of the joint's friction on the link side of the cable, 0..1");
+  }
   add("friction.preset", &c.friction_preset, "hysteretic | smooth (applied first)");
   for (int j = 0; j < 3; ++j) {
     JointFrictionParams& p = c.friction[static_cast<std::size_t>(j)];
@@ -85,6 +97,9 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("sensors.log_rate_hz", &S.log_rate_hz, "logging rate, Hz (divides physics_rate_hz)");
   add("sensors.effort_noise", &S.effort_noise, "effort noise std, N m, N m, N");
   add("sensors.position_quantum", &S.position_quantum, "encoder resolution, rad, rad, m");
+  add("sensors.velocity_noise", &S.velocity_noise, "logged velocity noise std, rad/s, rad/s, m/s");
+  add("sensors.velocity_noise_fade", &S.velocity_noise_fade,
+      "motor speed below which the velocity noise fades to 0, rad/s, rad/s, m/s");
   add("sensors.force_noise_n", &S.force_noise_n, "ATI noise std per axis, N");
   add("sensors.repeat_row_probability", &S.repeat_row_probability,
       "probability that a logged row repeats the previous one");
@@ -104,6 +119,8 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("trajectory.excitation_period_s", &T.excitation_period_s, "excitation: fundamental period, s");
   add("trajectory.excitation_harmonics", &T.excitation_harmonics, "excitation: harmonics of the fundamental");
   add("trajectory.excitation_ramp_s", &T.excitation_ramp_s, "excitation: fade-in from rest at q0, s");
+  add("trajectory.excitation_falloff", &T.excitation_falloff,
+      "excitation: harmonic k's coefficients drawn with std k^-falloff");
   auto& X = c.tissue;
   add("tissue.preset", &X.preset, "linear | stiffening | viscoelastic | sliding (applied first)");
   add("tissue.stiffness_n_per_m", &X.stiffness_n_per_m, "k1 of g(x) = k1 x + k3 x^3, N/m");
@@ -142,6 +159,15 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("force_angle.hold_s", &F.hold_s, "hold at each angle, s");
   add("force_angle.average_s", &F.average_s, "averaged at the end of each hold, s");
   add("force_angle.plot", &F.plot, "draw force_angle.png/.svg with gnuplot");
+  auto& V = c.speed;
+  add("speed.duration_s", &V.duration_s, "speed experiment: full-speed recording after the fade-in, s");
+  add("speed.slowdown", &V.slowdown,
+      "speed experiment: the slow run's period and duration x this, its log rate / this");
+  add("speed.period_s", &V.period_s, "speed experiment: the path's fundamental period at full speed, s");
+  add("speed.harmonics", &V.harmonics, "speed experiment: harmonics of the fundamental");
+  add("speed.ramp_s", &V.ramp_s, "speed experiment: fade-in from rest at q0 at full speed, s");
+  add("speed.amplitude", &V.amplitude, "speed experiment: the path's bound around q0, rad, rad, m");
+  add("speed.falloff", &V.falloff, "speed experiment: harmonic k's coefficients drawn with std k^-falloff");
   return f;
 }
 
@@ -292,6 +318,15 @@ void apply_config_json(SimConfig& config, const nlohmann::json& json, const std:
       apply_tissue_preset(config.tissue, p.get<std::string>());
     } catch (const InputError& e) {
       fail(source, "tissue.preset", e.reason());
+    }
+  }
+  if (json.contains("arm") && json["arm"].is_object() && json["arm"].contains("preset")) {
+    const auto& p = json["arm"]["preset"];
+    if (!p.is_string()) fail(source, "arm.preset", "expected a string, got " + type_name(p));
+    try {
+      apply_arm_preset(config, p.get<std::string>());
+    } catch (const InputError& e) {
+      fail(source, "arm.preset", e.reason());
     }
   }
   if (json.contains("friction") && json["friction"].is_object() && json["friction"].contains("preset")) {

@@ -37,6 +37,27 @@ void validate_config(const SimConfig& c, const std::string& source) {
   require(c.arm.insertion_stage.mass_kg > 0, "arm.insertion_stage.mass_kg",
           "expected > 0 (the insertion axis needs inertia)");
   for (int j = 0; j < 3; ++j) {
+    const auto& t = c.arm.transmission[static_cast<std::size_t>(j)];
+    const std::string k = std::string("arm.transmission.") + kJointKeys[j];
+    require(std::isfinite(t.rotor_inertia) && t.rotor_inertia >= 0, k + ".rotor_inertia", "expected >= 0");
+    require(std::isfinite(t.stiffness) && t.stiffness >= 0, k + ".stiffness", "expected >= 0 (0: rigid)");
+    require(std::isfinite(t.damping) && t.damping >= 0, k + ".damping", "expected >= 0");
+    require(t.friction_link_share >= 0 && t.friction_link_share <= 1, k + ".friction_link_share",
+            "expected 0..1");
+    if (t.stiffness > 0) {
+      require(t.rotor_inertia > 0, k + ".rotor_inertia", "expected > 0 with a compliant cable (stiffness > 0)");
+      // Semi-implicit Euler resolves the motor against cable and controller
+      // only well below its stability limit dt * omega = 2.
+      const double omega = std::sqrt((t.stiffness + c.controller.kp[j]) / t.rotor_inertia);
+      const double damping_rate = (t.damping + c.controller.kd[j]) / t.rotor_inertia;
+      require(omega / c.controller.physics_rate_hz < 0.5 && damping_rate / c.controller.physics_rate_hz < 0.5,
+              k + ".stiffness",
+              fmt::format("the motor's fastest mode ({:.0f} rad/s, damping {:.0f} 1/s) is too fast for "
+                          "controller.physics_rate_hz = {}: raise the rate or the rotor inertia",
+                          omega, damping_rate, c.controller.physics_rate_hz));
+    }
+  }
+  for (int j = 0; j < 3; ++j) {
     const auto& p = c.friction[static_cast<std::size_t>(j)];
     const std::string k = std::string("friction.") + kJointKeys[j];
     require(p.coulomb_pos > 0, k + ".coulomb_pos", "expected > 0");
@@ -63,6 +84,8 @@ void validate_config(const SimConfig& c, const std::string& source) {
                       C.physics_rate_hz, S.log_rate_hz));
   positive3(S.effort_noise, "sensors.effort_noise", true);
   positive3(S.position_quantum, "sensors.position_quantum", true);
+  positive3(S.velocity_noise, "sensors.velocity_noise", true);
+  positive3(S.velocity_noise_fade, "sensors.velocity_noise_fade", false);
   require(S.force_noise_n >= 0, "sensors.force_noise_n", "expected >= 0");
   require(S.repeat_row_probability >= 0 && S.repeat_row_probability < 1,
           "sensors.repeat_row_probability", "expected 0 <= p < 1");
@@ -84,6 +107,7 @@ void validate_config(const SimConfig& c, const std::string& source) {
   require(T.excitation_harmonics >= 1 && T.excitation_harmonics <= 50, "trajectory.excitation_harmonics",
           "expected 1..50");
   require(T.excitation_ramp_s > 0, "trajectory.excitation_ramp_s", "expected > 0");
+  require(T.excitation_falloff >= 0 && T.excitation_falloff <= 4, "trajectory.excitation_falloff", "expected 0..4");
   const auto& X = c.tissue;
   require(X.stiffness_n_per_m >= 0, "tissue.stiffness_n_per_m", "expected >= 0");
   require(X.cubic_n_per_m3 >= 0, "tissue.cubic_n_per_m3", "expected >= 0");
@@ -148,6 +172,14 @@ void validate_config(const SimConfig& c, const std::string& source) {
   for (std::size_t i = 0; i < P.radial_offsets_m.size(); ++i)
     require(P.radial_offsets_m[i].norm() <= 0.045, fmt::format("protocol.radial_offsets_m[{}]", i),
             "expected a radial offset within the 9 x 9 cm pad (|r| <= 0.045 m)");
+  const auto& V = c.speed;
+  require(V.duration_s > 0, "speed.duration_s", "expected > 0");
+  require(V.slowdown >= 1 && V.slowdown <= 20, "speed.slowdown", "expected 1..20");
+  require(V.period_s > 0, "speed.period_s", "expected > 0");
+  require(V.harmonics >= 1 && V.harmonics <= 50, "speed.harmonics", "expected 1..50");
+  require(V.ramp_s > 0, "speed.ramp_s", "expected > 0");
+  positive3(V.amplitude, "speed.amplitude", false);
+  require(V.falloff >= 0 && V.falloff <= 4, "speed.falloff", "expected 0..4");
   const auto& F = c.force_angle;
   require(F.pivot_joint == 1 || F.pivot_joint == 2, "force_angle.pivot_joint", "expected 1 or 2");
   require(F.move_s > 0 && F.hold_s > 0, "force_angle.hold_s", "expected move_s, hold_s > 0");
@@ -165,6 +197,19 @@ void validate_config(const SimConfig& c, const std::string& source) {
     require(F.offsets_m[i] >= -0.02 && F.offsets_m[i] <= 0.07 &&
                 std::abs(F.offsets_m[i]) / 0.5 < P.q0[2],  // cos(60 deg) = 0.5
             fmt::format("force_angle.offsets_m[{}]", i), "expected [-0.02, 0.07] m, within the insertion depth");
+}
+
+void validate_speed_experiment(const SimConfig& c, const std::string& source) {
+  validate_config(c, source);
+  const PsmModel robot = load_robot_model(c.robot, source + ": field robot");
+  for (int j = 0; j < 3; ++j) {
+    const auto& lim = robot.joints()[static_cast<std::size_t>(j)];
+    const double q0 = c.protocol.q0[j], a = c.speed.amplitude[j];
+    if (q0 - a < lim.q_min || q0 + a > lim.q_max)
+      detail::fail_config_field(source, fmt::format("speed.amplitude[{}]", j),
+                                fmt::format("q0 +- speed.amplitude leaves the joint range [{}, {}] of {}",
+                                            lim.q_min, lim.q_max, lim.name));
+  }
 }
 
 }  // namespace rcm::sim

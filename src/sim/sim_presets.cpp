@@ -30,6 +30,7 @@ SimConfig make_default_config() {
   c.arm.insertion_stage = {0.85, Eigen::Vector3d(0.0, 0.0, -0.22), Eigen::Vector3d(0.020, 0.020, 0.001)};
   c.arm.gravity_base_m_s2 = Eigen::Vector3d(0.0, 0.0, -9.81);
   c.arm.insertion_counterbalance_n = 7.0;
+  apply_arm_preset(c, "rigid");
   apply_friction_preset(c, "hysteretic");
   apply_tissue_preset(c.tissue, "linear");
   return c;
@@ -57,6 +58,41 @@ void apply_friction_preset(SimConfig& c, const std::string& name) {
     throw_unknown_preset("friction", name, get_friction_preset_names());
   }
   c.friction_preset = name;
+}
+
+std::vector<std::string> get_arm_preset_names() { return {"rigid", "cable"}; }
+
+void apply_arm_preset(SimConfig& c, const std::string& name) {
+  if (name == "cable") {
+    // The Classic PSM's joints: brushed DC motors with encoders and current
+    // sensing drive the links through gearheads and steel cables
+    // (docs/simulator.md, "Cable transmission"). Rotors: a 40 mm motor and its
+    // gearhead (about 1.4e-5 kg m^2) behind a total reduction of about 80:1 on
+    // yaw and 65:1 on pitch reflect 0.09 and 0.06 kg m^2; 0.10 kg on the
+    // insertion. Stiffness: the link against a motor held still rings at 6 Hz
+    // on yaw and pitch and at 11.5 Hz on the insertion (4.5 Hz on yaw and pitch
+    // with the bench's servo), the few-to-15 Hz of a cable-driven arm of this
+    // size; damping 10 % of critical. Half the friction on each side of the cable.
+    c.arm.transmission[0] = {0.09, 227.4, 1.206, 0.5};
+    c.arm.transmission[1] = {0.06, 284.2, 1.508, 0.5};
+    c.arm.transmission[2] = {0.10, 4438.0, 12.28, 0.5};
+    // White effort noise and the published velocity's noise of the size seen
+    // on the real Classic PSM1 recordings (second differences at 100 and 200 Hz):
+    // the cables, not white noise, make the effort's high-frequency content.
+    c.sensors.effort_noise = Eigen::Vector3d(0.009, 0.007, 0.05);
+    c.sensors.velocity_noise = Eigen::Vector3d(0.010, 0.010, 0.002);
+  } else if (name == "rigid") {
+    // The links driven directly, in the model family of rcm's rigid-body fit.
+    // With no cables to make it, the effort's high-frequency content is white
+    // noise of the size measured on the real arm above 5 Hz, and the velocity
+    // is the controller's filtered encoder difference.
+    for (auto& t : c.arm.transmission) t = JointTransmissionParams{};
+    c.sensors.effort_noise = Eigen::Vector3d(0.007, 0.007, 0.195);
+    c.sensors.velocity_noise = Eigen::Vector3d::Zero();
+  } else {
+    throw_unknown_preset("arm", name, get_arm_preset_names());
+  }
+  c.arm.preset = name;
 }
 
 std::vector<std::string> get_tissue_preset_names() {

@@ -196,7 +196,8 @@ ExcitationPath::ExcitationPath(const TrajectoryParams& p, const Eigen::Vector3d&
     auto& c = coeff_[static_cast<std::size_t>(j)];
     double bound = 0.0;
     for (int k = 1; k <= p.excitation_harmonics; ++k) {
-      const double a = normal(rng) / k, b = normal(rng) / k;
+      const double scale = std::pow(static_cast<double>(k), p.excitation_falloff);
+      const double a = normal(rng) / scale, b = normal(rng) / scale;
       c.push_back({a, b});
       bound += std::abs(a) + 2.0 * std::abs(b);
     }

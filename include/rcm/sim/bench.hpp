@@ -127,6 +127,17 @@ SessionWriteSummary simulate_session(const SimConfig& config, const std::filesys
 void save_truth_csv(const std::filesystem::path& path, const SimulatedRecording& rec);
 RecordingFileInfo summarize_simulated_recording(const SimulatedRecording& rec);
 
+// The speed experiment: one periodic excitation path (SpeedExperimentParams)
+// at full speed, logged at sensors.log_rate_hz for speed.duration_s after its
+// fade-in ("fast"), and the same path slowed down by speed.slowdown, logged at
+// log_rate_hz / slowdown for slowdown times as long ("slow"): row k of both is
+// the same point of the path. A model fitted on one speed and scored on the
+// other, as on a dVRK's identification runs.
+struct SpeedExperimentResult {
+  SimulatedRecording fast, slow;
+};
+SpeedExperimentResult run_speed_experiment(const SimConfig& config);
+
 // Fig. 3: static force at the incision vs pivot angle for several coaxial offsets.
 struct ForceAnglePoint {
   double offset_m = 0.0;

@@ -27,7 +27,26 @@ struct RigidBodyParams {
   Eigen::Vector3d inertia_diag_kg_m2 = Eigen::Vector3d::Zero();
 };
 
+// How one motor drives its joint. The dVRK reads the motor's encoder and its
+// current, not the link: a cable of finite stiffness lets the link lag the
+// motor above a few hertz, and the effort is the rotor's inertia times the
+// motor's acceleration plus what the cable transmits. Units: kg m^2, N m/rad,
+// N m s/rad for the revolute joints; kg, N/m, N s/m for the insertion.
+struct JointTransmissionParams {
+  double rotor_inertia = 0.0;  // motor and gearhead, reflected to the joint
+  double stiffness = 0.0;      // cable between motor and link; 0: rigid (motor and link one body)
+  double damping = 0.0;        // cable damping
+  // Share of the joint's friction (every term of JointFrictionParams) that acts
+  // on the link, behind the cable; the rest acts on the motor and gearhead.
+  // With a rigid transmission both sides move together and only the sum matters.
+  double friction_link_share = 0.0;
+};
+
 struct ArmParams {
+  // "rigid" (default: the links driven directly, no rotor inertia) or "cable"
+  // (compliant transmissions, friction on both sides of the cable); the preset
+  // the transmissions started from.
+  std::string preset = "rigid";
   // Rotates with joint 1 only (yaw about the RCM). Frame: the base frame rotated
   // by q1 about the yaw axis.
   RigidBodyParams yaw_link;
@@ -40,6 +59,7 @@ struct ArmParams {
   Eigen::Vector3d gravity_base_m_s2 = Eigen::Vector3d(0.0, 0.0, -9.81);
   // Constant force of the insertion stage's counterbalance spring along -z3 (N).
   double insertion_counterbalance_n = 0.0;
+  std::array<JointTransmissionParams, 3> transmission{};  // yaw, pitch, insertion
 };
 
 // LuGre friction of one joint (Canudas de Wit et al. 1995), with direction-
@@ -71,6 +91,12 @@ struct SensorParams {
   double log_rate_hz = 200.0;
   Eigen::Vector3d effort_noise = Eigen::Vector3d(0.007, 0.007, 0.195);  // std, N m / N
   Eigen::Vector3d position_quantum = Eigen::Vector3d(2.0e-5, 2.0e-5, 2.0e-6);  // rad / m
+  // White noise on the logged velocity, std per sample (rad/s, rad/s, m/s),
+  // fading linearly to zero below velocity_noise_fade of motor speed: the
+  // dVRK's estimate comes from encoder edges, and a motor at rest makes none.
+  // The controller differentiates its encoders through its own filter.
+  Eigen::Vector3d velocity_noise = Eigen::Vector3d::Zero();
+  Eigen::Vector3d velocity_noise_fade = Eigen::Vector3d(0.03, 0.03, 0.005);
   double force_noise_n = 0.08;       // ATI std per axis, N
   double repeat_row_probability = 0.0;  // a logged row repeats the previous one
   bool noise = true;                 // false: every sensor exact (tests)
@@ -98,9 +124,13 @@ struct TrajectoryParams {
   // dynamics-identification runs play it: the same period over and over, never
   // at rest after its start. Trials and calibration are always teleoperation.
   std::string free_space_path = "teleoperation";
+  // Bounded by q0 +- amplitude, as the teleoperation.
   double excitation_period_s = 10.0;  // fundamental period
   int excitation_harmonics = 5;       // frequencies k / period, k = 1..harmonics
   double excitation_ramp_s = 2.0;     // C2 fade-in from rest at q0
+  // Random coefficients of harmonic k drawn with a standard deviation k^-falloff:
+  // 1 puts the motion in the low harmonics, 0 spreads it evenly.
+  double excitation_falloff = 1.0;
 };
 
 struct TissueParams {
@@ -151,6 +181,24 @@ struct ForceAngleParams {
   bool plot = true;
 };
 
+// The speed experiment (`rcm simulate --experiment speed`): one periodic
+// excitation path (as TrajectoryParams::excitation_*, with its own shape below)
+// recorded at full speed and slowed down, the same path points at a fraction of
+// the logging rate, as the dVRK's identification runs are logged. The shape's
+// defaults are those of a dVRK identification path: a fundamental of 0.155 Hz
+// and six harmonics of comparable amplitude, as far as the joints allow from q0.
+struct SpeedExperimentParams {
+  double duration_s = 30.0;  // of the full-speed recording, after the fade-in
+  int slowdown = 2;          // the slow run: period, fade-in and duration x slowdown, log rate / slowdown
+  double period_s = 6.45;    // the full-speed path's fundamental period
+  int harmonics = 6;
+  double ramp_s = 2.0;       // fade-in from rest at q0, at full speed
+  // Bound around q0 (rad, rad, m): free space has no pad, so only the joint
+  // limits bound it.
+  Eigen::Vector3d amplitude = Eigen::Vector3d(1.4, 0.9, 0.11);
+  double falloff = 0.0;      // as TrajectoryParams::excitation_falloff
+};
+
 struct SimConfig {
   std::uint64_t seed = 1;
   std::string robot = "dvrk-psm-classic";
@@ -164,6 +212,7 @@ struct SimConfig {
   TissueParams tissue;
   ProtocolParams protocol;
   ForceAngleParams force_angle;
+  SpeedExperimentParams speed;
 };
 
 // The defaults documented in docs/simulator.md (a Classic PSM on the phantom bench).
@@ -179,13 +228,22 @@ std::vector<std::string> get_friction_preset_names();
 // Sets every joint's friction to the named preset; throws InputError for an unknown name.
 void apply_friction_preset(SimConfig& config, const std::string& name);
 
+// Names accepted by --arm / arm.preset.
+std::vector<std::string> get_arm_preset_names();
+// Sets the transmissions (and the effort noise that goes with them, SensorParams)
+// to the named preset; throws InputError for an unknown name.
+void apply_arm_preset(SimConfig& config, const std::string& name);
+
 // Throws InputError naming `source` and the field for every inconsistent value.
 void validate_config(const SimConfig& config, const std::string& source = "config");
+// validate_config and what only the speed experiment needs: its path
+// (speed.amplitude around protocol.q0) within the joint limits.
+void validate_speed_experiment(const SimConfig& config, const std::string& source = "config");
 
 // Overrides fields of `config` from JSON. Unknown keys and wrong types throw
-// InputError naming `source` and the JSON path. `tissue.preset` and
-// `friction.preset`, when present, are applied first so that explicit fields
-// override the preset.
+// InputError naming `source` and the JSON path. `tissue.preset`, `arm.preset`
+// and `friction.preset`, when present, are applied first (in that order) so
+// that explicit fields override the presets.
 void apply_config_json(SimConfig& config, const nlohmann::json& json, const std::string& source);
 SimConfig load_config(const std::filesystem::path& path);  // defaults + file, validated
 nlohmann::json config_to_json(const SimConfig& config);
