@@ -17,12 +17,11 @@ TorqueModelFitter get_torque_model_fitter() {
 }
 
 void add_free_space_flags(CLI::App* cmd, OptionFlags<StudyOptions>& flags, bool model_file) {
+  const std::string only =
+      get_torque_model_fitter().trains_networks() ? "" : "; this build, without LibTorch, fits no other";
   flags.add(cmd, "--model", {"model_kind"},
             "free-space model to fit: lstm, mlp, linear or hybrid (unset: " +
-                dynamics::to_string(dynamics::get_default_model_kind()) + (get_torque_model_fitter().trains_networks()
-                                                                                ? ")"
-                                                                                : "; this build, without LibTorch, "
-                                                                                  "fits no other)"));
+                dynamics::to_string(dynamics::get_default_model_kind()) + only + ")");
   if (model_file)
     flags.add(cmd, "--model-file", {"model_file"},
               "use a saved free-space model (e.g. free_space_model.json of `rcm run`) instead of fitting one");
