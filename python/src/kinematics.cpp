@@ -140,6 +140,17 @@ void bind_kinematics(py::module_& m) {
   closed_form("compute_z3_base", &compute_z3_base, "Insertion axis z3(q) in the base frame (contract closed form)");
   closed_form("compute_x3_base", &compute_x3_base, "x3(q) in the base frame");
   closed_form("compute_y3_base", &compute_y3_base, "y3(q) in the base frame");
+  py::class_<ShaftDirections>(m, "ShaftDirections",
+                              "The shaft's axes at q in the base frame and the derivatives of its axis z3")
+      .def_readonly("x3", &ShaftDirections::x3)
+      .def_readonly("y3", &ShaftDirections::y3)
+      .def_readonly("z3", &ShaftDirections::z3)
+      .def_readonly("dz3_dq1", &ShaftDirections::dz3_dq1, "yaw axis x z3, norm |cos q2|")
+      .def_property_readonly("dz3_dq2", &ShaftDirections::get_dz3_dq2, "= x3")
+      .def_readonly("cos_q2", &ShaftDirections::cos_q2);
+  m.def("compute_shaft_directions", [](py::handle q) {
+    return compute_shaft_directions(to_vector3(q, argument_location("rcm.compute_shaft_directions", "q")));
+  }, py::arg("q"), "x3, y3, z3 and dz3/dq1, dz3/dq2 at q: the closed forms J_D and the estimators use");
   m.def("compute_R_base_3", [](py::handle q) {
     return compute_R_base_3(to_vector3(q, argument_location("rcm.compute_R_base_3", "q")));
   }, py::arg("q"), "Rotation of DH frame 3 in the base frame, columns [x3 y3 z3]");

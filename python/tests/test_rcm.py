@@ -267,6 +267,9 @@ class TestKinematics(unittest.TestCase):
                 dq[j] = h
                 fd = s * (rcm.compute_z3_base(q + dq) - rcm.compute_z3_base(q - dq)) / (2 * h)
                 np.testing.assert_allclose(J[:, j], fd, atol=1e-8)
+            d = rcm.compute_shaft_directions(q)
+            np.testing.assert_allclose(np.column_stack([d.x3, d.y3, d.z3]), X[:3, :3], atol=1e-12)
+            np.testing.assert_allclose(np.column_stack([s * d.dz3_dq1, s * d.dz3_dq2, d.z3]), J, atol=1e-12)
 
     def test_bad_input(self):
         with self.assertRaises(rcm.InputError) as cm:
