@@ -33,6 +33,7 @@ import tempfile
 import numpy as np
 
 from doc_tables import cpu_model, run, write_block
+from recording_arrays import load, zero_phase_acceleration
 
 
 import rcm  # build/python on PYTHONPATH
@@ -43,29 +44,6 @@ FIGURE = os.path.join(ROOT, "docs", "figures", "real_arm_residual_velocity.png")
 BEGIN, END = "<!-- real-arm:begin -->", "<!-- real-arm:end -->"
 JOINTS = ("yaw", "pitch", "insertion")
 UNITS = ("N m", "N m", "N")
-
-
-def load(path):
-    d = np.genfromtxt(path, delimiter=",", names=True)
-    col = lambda name: np.stack([d[f"{name}_{j}"] for j in (1, 2, 3)], 1)
-    return {"t": d["time"], "q": col("position"), "qd": col("velocity"), "tau": col("effort")}
-
-
-def zero_phase_acceleration(t, qd, window=0.1):
-    """Slope of a least-squares quadratic through +- window/2 (as rcm's offline estimate)."""
-    out = np.zeros_like(qd)
-    lo = hi = 0
-    n = len(t)
-    for i in range(n):
-        while t[lo] < t[i] - window / 2:
-            lo += 1
-        hi = max(hi, i + 1)
-        while hi < n and t[hi] <= t[i] + window / 2:
-            hi += 1
-        s = t[lo:hi] - t[i]
-        A = np.stack([np.ones_like(s), s, s * s], 1)
-        out[i] = np.linalg.lstsq(A, qd[lo:hi], rcond=None)[0][1]
-    return out
 
 
 # ------------------------------------------------------------------ regressors

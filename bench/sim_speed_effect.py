@@ -28,6 +28,7 @@ import tempfile
 import numpy as np
 
 from doc_tables import cpu_model, run, write_block
+from recording_arrays import load, zero_phase_acceleration
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOCS = [os.path.join(ROOT, "docs", "simulator.md")]
@@ -39,29 +40,6 @@ JOINTS = ("yaw", "pitch", "insertion")
 # insertion (N).
 REAL = {"105 g": {"full -> half": (0.037, 0.056, 0.138), "half -> full": (0.096, 0.099, 0.234)},
         "205 g": {"full -> half": (0.036, 0.061, 0.134), "half -> full": (0.124, 0.100, 0.222)}}
-
-
-def load(path):
-    d = np.genfromtxt(path, delimiter=",", names=True)
-    col = lambda name: np.stack([d[f"{name}_{j}"] for j in (1, 2, 3)], 1)
-    return {"t": d["time"], "q": col("position"), "qd": col("velocity"), "tau": col("effort")}
-
-
-def zero_phase_acceleration(t, qd, window=0.1):
-    """Slope of a least-squares quadratic through +- window/2 of each sample."""
-    out = np.zeros_like(qd)
-    lo = hi = 0
-    n = len(t)
-    for i in range(n):
-        while t[lo] < t[i] - window / 2:
-            lo += 1
-        hi = max(hi, i + 1)
-        while hi < n and t[hi] <= t[i] + window / 2:
-            hi += 1
-        s = t[lo:hi] - t[i]
-        A = np.stack([np.ones_like(s), s, s * s], 1)
-        out[i] = np.linalg.lstsq(A, qd[lo:hi], rcond=None)[0][1]
-    return out
 
 
 def residual_traits(test, predictions):
