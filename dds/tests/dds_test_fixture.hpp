@@ -29,4 +29,14 @@ inline CliResult run_cli(const std::string& args) {
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
 }
 
+// The node logs this line once its subscription has matched a writer of the
+// joint states. A writer's own "matched" status says only that it has found the
+// node's reader: discovery runs both ways on its own, and until the node has
+// found the writer, the reliable reader drops what the writer sends (seconds
+// of samples on an instrumented build). Publish only once both sides have
+// matched.
+inline bool node_matched_joint_states(const std::string& node_log) {
+  return node_log.find("1 publisher(s) matched on rt/PSM1/measured_js") != std::string::npos;
+}
+
 }  // namespace rcm::test

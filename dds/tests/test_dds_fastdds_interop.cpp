@@ -365,7 +365,8 @@ TEST(DdsFastDdsInterop, FastDdsPublisherAndSubscribersAgreeWithRcmMonitor) {
         drain();
         fdds::PublicationMatchedStatus pm;
         return !node.alive() || (writer->get_publication_matched_status(pm) == ReturnCode::RETCODE_OK &&
-                                 pm.current_count > 0 && matched(estimate_reader) && matched(sd_reader) &&
+                                 pm.current_count > 0 && rcm::test::node_matched_joint_states(node.log()) &&
+                                 matched(estimate_reader) && matched(sd_reader) &&
                                  matched(force_reader) && !onset.empty() && !alarm.empty() && !regime.empty() &&
                                  rejected_messages > 0);
       },

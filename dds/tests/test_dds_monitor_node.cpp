@@ -261,11 +261,8 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
       [&] {
         drain();
         dds_publication_matched_status_t pm;
-        // Both sides matched: the node logs when its subscription matches this writer, and
-        // only then are the samples written delivered.
         return !node.alive() || (dds_get_publication_matched_status(writer, &pm) == DDS_RETCODE_OK &&
-                                 pm.current_count > 0 &&
-                                 node.log().find("1 publisher(s) matched on rt/PSM1/measured_js") != std::string::npos &&
+                                 pm.current_count > 0 && rcm::test::node_matched_joint_states(node.log()) &&
                                  matched(estimate_reader) && matched(sd_reader) &&
                                  matched(force_reader) && matched(correction_reader) && !advice.empty() &&
                                  !onset.empty() && !alarm.empty() && !regime.empty() &&
