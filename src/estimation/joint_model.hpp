@@ -1,6 +1,8 @@
 #pragma once
-// The joint torque-space model of joint.hpp as a template, shared by the batch
-// (Ceres autodiff) and the online (Jet-differentiated EKF) estimators.
+// The joint torque-space model of joint.hpp: as a template, for the online
+// (Jet-differentiated EKF) estimator and every plain evaluation, and with its
+// Jacobians in closed form for the batch estimator's cost, which evaluates
+// them for every sample at every iteration of every bootstrap solve.
 
 #include <ceres/jet.h>
 
@@ -36,5 +38,12 @@ void predict_joint_torque(const JointSample& d, const Eigen::Matrix3d& R_base_in
   tau[2] = z3.dot(f);
   if (f_out) *f_out = f;
 }
+
+// tau_pred = J_D(q; s)^T f as predict_joint_torque<double> gives it, with
+// d tau / d p (row j: joint j) and d tau / d tissue in closed form (checked
+// against central differences in tests/test_joint_model.cpp).
+void compute_joint_torque_jacobians(const JointSample& d, const Eigen::Matrix3d& R_base_inc, double v0, const double* p,
+                                    const double* tissue, Eigen::Vector3d& tau, Eigen::Matrix3d& dtau_dp,
+                                    Eigen::Matrix<double, 3, 4>& dtau_dtissue);
 
 }  // namespace rcm::detail
