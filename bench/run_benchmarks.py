@@ -25,6 +25,8 @@ import shutil
 import subprocess
 import sys
 
+from doc_tables import cpu_model
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "benchmarks.md")
 BEGIN, END = "<!-- gbench:begin -->", "<!-- gbench:end -->"
@@ -121,7 +123,7 @@ def main():
             rows.append((prog, b["name"], b["real_time"], b["cpu_time"], b["time_unit"], b.get("iterations", 0),
                          counters_text(b)))
     load = os.getloadavg()
-    lines = [f"Run {datetime.date.today().isoformat()} by `make bench` on {os.cpu_count()} cores, "
+    lines = [f"Run {datetime.date.today().isoformat()} by `make bench` on {os.cpu_count()} cores of {cpu_model()}, "
              f"load average {load[0]:.1f} at the end of the run.", "",
              "| program | benchmark | wall | CPU | iterations | counters |", "|---|---|---|---|---|---|"]
     for prog, name, real, cpu, unit, it, counters in rows:
