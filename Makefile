@@ -65,6 +65,9 @@ test-sanitize: deps
 demo: build
 	$(BUILD)/bin/rcm demo --out demo-out
 
+# Every Google Benchmark program, the rosbag2 anchors (sqlite3, zstd), the live
+# nodes' end-to-end tests (their per-sample timings), PyTorch beside LibTorch and
+# the scipy cross-check; writes their tables into docs/benchmarks.md.
 bench: build
 	$(PYTHON) bench/run_benchmarks.py --build $(BUILD)
 
