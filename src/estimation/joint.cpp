@@ -13,6 +13,7 @@
 #include "rcm/common/error.hpp"
 #include "rcm/kinematics/psm_model.hpp"
 #include "rcm/common/interrupt.hpp"
+#include "rcm/dynamics/torque_residual.hpp"
 
 namespace rcm {
 namespace {
@@ -189,18 +190,13 @@ void JointEstimatorOptions::check() const {
 
 std::vector<JointSample> make_joint_samples(const IncisionFrame& incision, const Recording& r,
                                             const Eigen::MatrixXd& tau_fs, double max_theta_rad) {
-  if (tau_fs.rows() != r.time.size() || tau_fs.cols() < 3) {
-    InputLocation where;
-    where.file = r.source;
-    throw InputError(where, "free-space torque prediction does not match the recording's samples");
-  }
+  const TorqueResidual dtau = compute_torque_residual(r, tau_fs);
   std::vector<JointSample> out;
   out.reserve(static_cast<std::size_t>(r.time.size()));
   JointSample s;
   for (Eigen::Index t = 0; t < r.time.size(); ++t) {
-    const Eigen::Vector3d dtau = (r.effort.row(t).head<3>() - tau_fs.row(t).head<3>()).transpose();
     if (compute_joint_sample(incision, r.position.row(t).head<3>().transpose(), r.velocity.row(t).head<3>().transpose(),
-                             dtau, max_theta_rad, s))
+                             dtau.row(t).transpose(), max_theta_rad, s))
       out.push_back(s);
   }
   return out;

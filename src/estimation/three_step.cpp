@@ -11,6 +11,7 @@
 
 #include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/dynamics/torque_residual.hpp"
 #include "rcm/kinematics/psm_model.hpp"
 
 namespace rcm {
@@ -77,11 +78,7 @@ StaticStep parse_static_step(const std::string& text) {
 
 StaticHold compute_static_hold(const Recording& r, const Eigen::MatrixXd& tau_fs, const Eigen::Vector3d& q0,
                                const RestDetectionOptions& o, StaticStep step) {
-  if (tau_fs.rows() != r.time.size() || tau_fs.cols() < 3) {
-    InputLocation where;
-    where.file = r.source;
-    throw InputError(where, "free-space torque prediction does not match the recording's samples");
-  }
+  check_torque_prediction(r, tau_fs);
   StaticHold hold;
   hold.step = step;
   const Eigen::Vector3d tolerance(o.max_angle_from_q0, o.max_angle_from_q0, o.max_insertion_from_q0);
@@ -171,19 +168,14 @@ CoaxialProblem make_coaxial_problem(const IncisionFrame& incision, const Recordi
                                     const Eigen::MatrixXd& tau_fs, const Eigen::Vector3d& dtau_radial,
                                     const CoaxialProblemOptions& options) {
   const Eigen::Index T = trial.time.size();
-  if (tau_fs.rows() != T || tau_fs.cols() < 3) {
-    InputLocation where;
-    where.file = trial.source;
-    throw InputError(where, "free-space torque prediction does not match the recording's samples");
-  }
+  const TorqueResidual dtau = compute_torque_residual(trial, tau_fs);
   CoaxialProblem p;
   p.radial = compute_inverse_decomposition(incision, incision.q0, dtau_radial);
   for (Eigen::Index t = 0; t < T; ++t) {
     const Eigen::Vector3d q = trial.position.row(t).head<3>().transpose();
     const double theta = compute_pivot_angle(incision, q);
     if (!(theta <= options.max_theta_rad)) continue;
-    const Eigen::Vector3d dtau = (trial.effort.row(t).head<3>() - tau_fs.row(t).head<3>()).transpose();
-    p.total.push_back(compute_inverse_decomposition(incision, q, dtau));
+    p.total.push_back(compute_inverse_decomposition(incision, q, dtau.row(t).transpose()));
     p.tan_theta.push_back(std::tan(theta));
     p.sample_index.push_back(t);
   }

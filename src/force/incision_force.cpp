@@ -4,6 +4,7 @@
 #include <limits>
 
 #include "rcm/common/error.hpp"
+#include "rcm/dynamics/torque_residual.hpp"
 
 namespace rcm {
 
@@ -34,13 +35,7 @@ IncisionForceSeries compute_incision_force_series(const IncisionFrame& incision,
                                                   const Eigen::MatrixXd& tau_fs, double D,
                                                   const JacobianCheckOptions& options) {
   const Eigen::Index T = recording.time.size();
-  if (recording.num_joints() < 3 || tau_fs.rows() != T || tau_fs.cols() < 3) {
-    InputLocation where;
-    where.file = recording.source;
-    throw InputError(where, "free-space torque has " + std::to_string(tau_fs.rows()) + " x " +
-                                std::to_string(tau_fs.cols()) + " values, expected " +
-                                std::to_string(T) + " x 3 for this recording");
-  }
+  const TorqueResidual dtau = compute_torque_residual(recording, tau_fs);
   IncisionForceSeries series;
   series.f_inc_base.resize(T, 3);
   series.theta.resize(T);
@@ -48,9 +43,7 @@ IncisionForceSeries compute_incision_force_series(const IncisionFrame& incision,
   series.status.resize(static_cast<std::size_t>(T));
   for (Eigen::Index t = 0; t < T; ++t) {
     const Eigen::Vector3d q = recording.position.row(t).head<3>().transpose();
-    const Eigen::Vector3d dtau =
-        (recording.effort.row(t).head<3>() - tau_fs.row(t).head<3>()).transpose();
-    const IncisionForceSample sample = compute_incision_force(incision, q, D, dtau, options);
+    const IncisionForceSample sample = compute_incision_force(incision, q, D, dtau.row(t).transpose(), options);
     series.f_inc_base.row(t) = sample.f_inc_base.transpose();
     series.theta[t] = sample.theta;
     series.condition[t] = sample.condition.condition;

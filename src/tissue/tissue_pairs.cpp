@@ -204,25 +204,8 @@ TissuePairsResult compute_tissue_pairs(const Recording& recording, const Eigen::
                                        const TissuePairOptions& options) {
   check_offset(D_star, recording.source);
   const auto T = static_cast<Eigen::Index>(recording.num_samples());
-  if (tau_fs.rows() != T || tau_fs.cols() < 3) {
-    throw InputError({recording.source, 0, 0, "tau_fs"},
-                     fmt::format("free-space torque prediction is {} x {}, expected {} x (>= 3), one "
-                                 "row per sample",
-                                 tau_fs.rows(), tau_fs.cols(), T));
-  }
-  if (recording.position.cols() < 3 || recording.effort.cols() < 3) {
-    throw InputError({recording.source, 0, 0, ""}, "recording needs at least 3 joints");
-  }
-  for (Eigen::Index t = 0; t < T; ++t) {
-    for (Eigen::Index j = 0; j < 3; ++j) {
-      if (!std::isfinite(tau_fs(t, j))) {
-        throw InputError({recording.source, origin_of(recording, static_cast<std::size_t>(t)), 0,
-                          fmt::format("tau_fs_{}", j + 1)},
-                         "free-space torque prediction is not finite");
-      }
-    }
-  }
   const IncisionFrame incision = make_incision_frame(q0);
+  // Checks tau_fs (rcm/dynamics/torque_residual.hpp) before anything is computed.
   const IncisionForceSeries series =
       compute_incision_force_series(incision, recording, tau_fs, D_star, options.jacobian);
 
