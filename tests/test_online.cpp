@@ -355,3 +355,59 @@ TEST(OnlinePipeline, FlagsATorqueResidualNoIncisionForceExplains) {
   EXPECT_NE(rcm::dynamics::describe_regime_flags(rcm::dynamics::get_residual_regime_flag()).find("payload"),
             std::string::npos);
 }
+
+TEST(OnlineEstimator, AJumpOfTheIncisionRestartsTheFiltersAndTheyReconverge) {
+  // A settled estimate, then the incision jumps 10 mm: the change-point test
+  // fires within seconds and the bank, restarted from the prior, is back within
+  // 1 mm soon after. The same stream without the jump (moving, then at rest)
+  // never fires.
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const auto tissue = linear_tissue();
+  const rcm::OnlineEstimator estimator(incision, tissue, default_options());
+  const Eigen::Vector3d before(0.002, -0.001, 0.012), after = before + Eigen::Vector3d(0.006, 0.0, 0.008);
+  const double t_jump = 30.0, rate = 200.0;
+  for (const bool jump : {true, false}) {
+    SCOPED_TRACE(jump ? "jump" : "no jump");
+    auto ws = estimator.create_workspace();
+    std::mt19937 rng(9);
+    double back_within_1mm = NAN;
+    for (int k = 0; k < 60 * rate; ++k) {
+      PathSample s = path(k / rate);
+      if (!jump && s.t > 45.0) {  // at rest for the last 15 s
+        s = path(45.0);
+        s.t = k / rate;
+        s.qd.setZero();
+      }
+      const Eigen::Vector3d truth = jump && s.t >= t_jump ? after : before;
+      const auto& out = estimator.compute_update(
+          ws, s.t, s.q, s.qd, make_dtau(incision, tissue, s, truth, Eigen::Vector3d(0.02, 0.02, 0.1), rng));
+      if (jump && s.t >= t_jump && out.jumps > 0 && std::isnan(back_within_1mm) &&
+          (out.misalignment_m - truth).norm() < 0.001)
+        back_within_1mm = s.t;
+    }
+    const rcm::OnlineOutput& out = rcm::get_online_output(ws);
+    if (!jump) {
+      EXPECT_EQ(out.jumps, 0) << "a restart at " << out.jump_time << " s";
+      EXPECT_LT((out.misalignment_m - before).norm(), 0.001);
+      continue;
+    }
+    ASSERT_EQ(out.jumps, 1);
+    EXPECT_GT(out.jump_time, t_jump);
+    EXPECT_LT(out.jump_time, t_jump + 3.0);
+    EXPECT_LT(back_within_1mm, out.jump_time + 3.0) << "restart at " << out.jump_time << " s";
+    EXPECT_LT((out.misalignment_m - after).norm(), 0.001);
+  }
+  // Off, the settled filter follows the jump by its random walk only.
+  rcm::OnlineEstimatorOptions o = default_options();
+  o.jump_threshold = 0.0;
+  const rcm::OnlineEstimator without(incision, tissue, o);
+  auto ws = without.create_workspace();
+  std::mt19937 rng(9);
+  for (int k = 0; k < 35 * rate; ++k) {
+    const PathSample s = path(k / rate);
+    without.compute_update(ws, s.t, s.q, s.qd,
+                           make_dtau(incision, tissue, s, s.t >= t_jump ? after : before,
+                                     Eigen::Vector3d(0.02, 0.02, 0.1), rng));
+  }
+  EXPECT_EQ(rcm::get_online_output(ws).jumps, 0);
+}

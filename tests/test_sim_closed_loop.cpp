@@ -209,6 +209,38 @@ TEST(ClosedLoopSafety, AnArmAtRestHolds) {
   for (auto a : r[0].closed.action) EXPECT_EQ(a, rcm::CorrectionAction::hold);
 }
 
+// A sudden 10 mm step of the incision: the change-point test restarts the
+// estimator's filters, the correction acts within seconds and the force on the
+// body wall falls below 2 N; without the test the settled filter follows by its
+// random walk and the force stays up for tens of seconds. What remains is the
+// corrector's tolerance (2 mm, its lower-bound rule): about 2 mm of
+// misalignment, whose force hovers between 1 and 2 N.
+TEST(ClosedLoopStep, TheForceFallsBelow2NWithinSecondsOfAStep) {
+  const PreparedBench& bench = get_linear_bench();
+  const auto step = make_step(Eigen::Vector3d(0.006, 0.0, 0.008));
+  const auto r = rcm::sim::run_closed_loop_experiment(bench.config, *bench.pipeline, {step}, short_options());
+  const auto& open = r[0].open;
+  const auto& closed = r[0].closed;
+  double first_below = -1.0, max_after = 0.0;
+  for (std::size_t i = 0; i < closed.time_s.size(); ++i) {
+    const double t = closed.time_s[i] - step.onset_s;
+    if (t < 0) continue;
+    if (first_below < 0 && closed.force_n[i] < 2.0) first_below = t;
+    if (first_below >= 0) max_after = std::max(max_after, closed.force_n[i]);
+  }
+  std::cout << "[ step     ] open peak " << open.peak_force_n << " N; closed: below 2 N " << first_below
+            << " s after the step, at most " << max_after << " N from then, RMS after settling "
+            << closed.rms_force_after_settle_n << " N, residual " << 1e3 * closed.residual_misalignment_m << " mm\n";
+  EXPECT_GT(open.peak_force_n, 10.0);
+  EXPECT_FALSE(open.time_to_below_s.has_value());
+  ASSERT_GE(first_below, 0.0);
+  EXPECT_LT(first_below, 5.0);
+  EXPECT_LT(max_after, 2.5);
+  EXPECT_LT(closed.rms_force_after_settle_n, 2.0);
+  EXPECT_LT(closed.residual_misalignment_m, 0.0025);
+  EXPECT_EQ(closed.wrong_direction_moves, 0);
+}
+
 // After a manual re-docking: a short motion about the new RCM, and the check
 // says how far the RCM still is from the incision, within 1.5 mm of the truth.
 TEST(ClosedLoopRedocking, TheResidualIsReportedWithin1p5MmOfTheTruth) {

@@ -30,6 +30,9 @@ void OnlineEstimatorOptions::check() const {
   if (!(max_drift_gap_s > 0)) fail("max_drift_gap_s must be > 0");
   if (!(hypothesis_memory_s > 0)) fail("hypothesis_memory_s must be > 0");
   if (!(onset_threshold > 0)) fail("onset_threshold must be > 0");
+  if (!(jump_threshold >= 0)) fail("jump_threshold must be >= 0 (0: off)");
+  if (!(jump_allowance >= 0)) fail("jump_allowance must be >= 0");
+  if (!(jump_holdoff_s >= 0)) fail("jump_holdoff_s must be >= 0");
   if (!(alarm_force_n > 0)) fail("alarm_force_n must be > 0");
   if (!(alarm_clear_fraction > 0 && alarm_clear_fraction <= 1)) fail("alarm_clear_fraction must be in (0, 1]");
   if (!(max_theta_rad > 0)) fail("max_theta_rad must be > 0");
@@ -62,21 +65,29 @@ OnlineEstimator::Workspace OnlineEstimator::create_workspace() const {
   return ws;
 }
 
-void OnlineEstimator::reset(Workspace& ws) const {
+// Every filter back to its start and the prior covariance. Each takes `cost`
+// as its own: the fit cost then stays the forgotten mean of the whole stream,
+// and the bank chooses among the restarted filters by what they explain next.
+void OnlineEstimator::restart_hypotheses(Workspace& ws, double cost) const {
   ws.num_hypotheses = static_cast<int>(options_.D_starts.size());
   const Eigen::Vector3d sd(options_.initial_radial_sd_m, options_.initial_radial_sd_m, options_.initial_D_sd_m);
   for (int h = 0; h < ws.num_hypotheses; ++h) {
     Hypothesis& hyp = ws.hypotheses[static_cast<std::size_t>(h)];
     hyp.p = Eigen::Vector3d(0.0, 0.0, options_.D_starts[static_cast<std::size_t>(h)]);
     hyp.P = sd.array().square().matrix().asDiagonal();
-    hyp.cost = 0.0;
+    hyp.cost = cost;
   }
-  ws.started = false;
+}
+
+void OnlineEstimator::reset(Workspace& ws) const {
+  restart_hypotheses(ws, 0.0);
   ws.cost_weight = 0.0;
+  ws.jump_armed_at = 0.0;
+  ws.started = false;
   ws.last_time = 0.0;
   ws.output = OnlineOutput{};
   ws.output.misalignment_m = ws.hypotheses[0].p;
-  ws.output.sd_m = sd;
+  ws.output.sd_m = ws.hypotheses[0].P.diagonal().cwiseSqrt();
 }
 
 void OnlineEstimator::apply_rcm_shift(Workspace& ws, const Eigen::Vector3d& shift_base) const {
@@ -104,6 +115,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
   // whole gap's worth of data (its variance, its onset evidence and its share of
   // the hypothesis costs).
   const double dt_info = std::min(dt, o.correlation_time_s);
+  if (!ws.started) ws.jump_armed_at = time + o.jump_holdoff_s;
   ws.started = true;
   ws.last_time = time;
   OnlineOutput& out = ws.output;
@@ -135,6 +147,9 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     const double c = o.huber_scale * std::sqrt(3.0);
     auto rho = [c](double r) { return r <= c ? 0.5 * r * r : c * r - 0.5 * c * c; };
     double prior_cost_sample = 0.0;
+    // The reported filter's level before this sample: what the change-point test compares with.
+    const double prior_level =
+        ws.cost_weight > 0 ? ws.hypotheses[static_cast<std::size_t>(prior_best)].cost / ws.cost_weight : 0.0;
     ws.cost_weight = forget * ws.cost_weight + (1.0 - forget);
     for (int h = 0; h < ws.num_hypotheses; ++h) {
       Hypothesis& hyp = ws.hypotheses[static_cast<std::size_t>(h)];
@@ -166,6 +181,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
       const Eigen::Matrix3d IKH = Eigen::Matrix3d::Identity() - K * H;
       hyp.P = IKH * hyp.P * IKH.transpose() + K * (R / w).asDiagonal() * K.transpose();
       hyp.P = 0.5 * (hyp.P + hyp.P.transpose()).eval();
+
       // The offsets' bounds hold by projection (a constrained filter's standard move).
       hyp.p[0] = std::clamp(hyp.p[0], -o.radial_max, o.radial_max);
       hyp.p[1] = std::clamp(hyp.p[1], -o.radial_max, o.radial_max);
@@ -185,6 +201,20 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     if (!out.onset && out.cusum > o.onset_threshold) {
       out.onset = true;
       out.onset_time = time;
+    }
+    // Change point: the reported filter's prediction costs more than its own
+    // level (its fit cost before this sample) by more than the allowance, for
+    // long enough. Scored as the onset test, per correlation time.
+    if (o.jump_threshold > 0 && !out.at_rest && time >= ws.jump_armed_at) {
+      const double excess = (prior_cost_sample - prior_level - o.jump_allowance) * (dt_info / o.correlation_time_s);
+      out.jump_cusum = std::max(0.0, out.jump_cusum + excess);
+      if (out.jump_cusum > o.jump_threshold) {
+        restart_hypotheses(ws, ws.hypotheses[static_cast<std::size_t>(prior_best)].cost);
+        out.jump_cusum = 0.0;
+        ++out.jumps;
+        out.jump_time = time;
+        ws.jump_armed_at = time + o.jump_holdoff_s;
+      }
     }
   }
 
@@ -382,6 +412,14 @@ const OptionTable<OnlineEstimatorOptions>& get_option_table(OptionTag<OnlineEsti
                "forgetting time of each filter's innovation cost", "s", positive)
           .add("onset_threshold", &OnlineEstimatorOptions::onset_threshold, "CUSUM threshold of the onset test",
                "nats per correlation time", positive)
+          .add("jump_threshold", &OnlineEstimatorOptions::jump_threshold,
+               "CUSUM threshold of the change-point test that restarts the filters (0: off)",
+               "nats per correlation time", OptionLimits::at_least(0))
+          .add("jump_allowance", &OnlineEstimatorOptions::jump_allowance,
+               "the change-point test counts the innovation cost above the fit cost plus this", "nats per sample",
+               OptionLimits::at_least(0))
+          .add("jump_holdoff_s", &OnlineEstimatorOptions::jump_holdoff_s,
+               "the change-point test waits this long after a reset or a restart", "s", OptionLimits::at_least(0))
           .add("alarm_force_n", &OnlineEstimatorOptions::alarm_force_n, "incision force that raises the alarm (paper V-E)",
                "N", positive)
           .add("alarm_clear_fraction", &OnlineEstimatorOptions::alarm_clear_fraction,

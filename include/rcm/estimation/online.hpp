@@ -22,6 +22,17 @@
 //   one-step prediction against "no misalignment" (p = 0: no stretch, but the
 //   shaft's sliding friction in the tissue remains). The prediction uses the
 //   state before the sample, so the statistic is not fitted to what it tests.
+// - Jumps: the random walk follows a slow drift, but a patient or table that
+//   moves shifts the incision at once. A settled filter, its covariance small
+//   and near p = 0 blind to first order (the torque about the RCM is the
+//   force times the coaxial offset, both proportional to p), would follow in
+//   tens of seconds. A CUSUM watches the reported filter's robust innovation
+//   cost against its own recent level (the fit cost): a sustained excess, in
+//   nats per correlation time, means the offsets the filter holds no longer
+//   explain the torques. The bank then restarts from the prior (D_starts,
+//   initial_*_sd_m), as after reset, and re-converges from the data in a few
+//   seconds of motion. A residual the model never explained (an unseen
+//   payload) keeps its level and does not feed it; rest samples do not either.
 // - At rest the free-space model's error is the stiction band, a constant torque
 //   that a radial offset would explain just as well (friction memory): rest
 //   samples weigh less (sigma times rest_sigma_factor) and do not feed the onset
@@ -67,6 +78,20 @@ struct OnlineEstimatorOptions {
   double max_drift_gap_s = 10.0;
   double hypothesis_memory_s = 10.0;     // forgetting time of each filter's innovation cost
   double onset_threshold = 10.0;         // CUSUM threshold, nats per correlation time
+  // The change-point test (0: off): CUSUM threshold on the reported filter's
+  // robust innovation cost above its fit cost plus jump_allowance, in nats per
+  // correlation time. A needless restart costs a second or two of "not
+  // confident" (the bank re-converges to where it was); a missed jump costs
+  // tens of seconds of force. 4 nats passes a 10 mm step within a few seconds
+  // of motion on the bench and never fires at rest, moving aligned, or on the
+  // bench's drift.
+  double jump_threshold = 4.0;
+  // Nats per sample above the fit cost that count. A matched model's sample
+  // cost scatters about its level by about one (a chi-square of 3, halved).
+  double jump_allowance = 1.0;
+  // After a reset or a restart the test waits this long: a converging bank's
+  // costs are not yet a level to compare with.
+  double jump_holdoff_s = 10.0;
   double alarm_force_n = 10.0;           // paper V-E
   double alarm_clear_fraction = 0.9;     // the alarm clears below this fraction of the threshold
   double max_theta_rad = 80.0 * M_PI / 180.0;
@@ -91,6 +116,11 @@ struct OnlineOutput {
   Eigen::Vector3d f_inc_base = Eigen::Vector3d::Zero();      // the model's force now, base frame
   double force_norm_n = 0.0;
   double cusum = 0.0;
+  // The change-point test: its CUSUM (nats per correlation time), how many
+  // restarts it has made since reset, and when the last one was.
+  double jump_cusum = 0.0;
+  int jumps = 0;
+  double jump_time = 0.0;
   // How well the reported filter explains the residual: the forgotten mean of
   // its robust loss rho(|nu / sigma|) per sample (normalized for the samples
   // seen). About 1.5 (half a chi-square of 3) when the model and the free-space
@@ -124,6 +154,7 @@ class OnlineEstimator {
   struct Workspace {
     std::array<Hypothesis, kMaxHypotheses> hypotheses;
     int num_hypotheses = 0;
+    double jump_armed_at = 0.0;  // the change-point test runs from this time on
     double cost_weight = 0.0;  // the forgotten weight of the samples in the costs
     bool started = false;
     double last_time = 0.0;
@@ -149,6 +180,8 @@ class OnlineEstimator {
   const OnlineEstimatorOptions& options() const { return options_; }
 
  private:
+  void restart_hypotheses(Workspace& workspace, double cost) const;
+
   IncisionFrame incision_;
   JointTissueModel tissue_;
   OnlineEstimatorOptions options_;
