@@ -14,17 +14,11 @@ Eigen::VectorXd compute_zero_phase_acceleration(const Eigen::VectorXd& time, con
     while (time(lo) < time(i) - h * (1.0 + 1e-9)) ++lo;
     if (hi < i + 1) hi = i + 1;
     while (hi < T && time(hi) <= time(i) + h * (1.0 + 1e-9)) ++hi;
-    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-    Eigen::Vector3d b = Eigen::Vector3d::Zero();
-    for (Eigen::Index k = lo; k < hi; ++k) {
-      const double s = (time(k) - time(i)) / h;
-      const Eigen::Vector3d phi(1.0, s, s * s);
-      A.noalias() += phi * phi.transpose();
-      b.noalias() += velocity(k) * phi;
-    }
+    QuadraticMoments m;
+    for (Eigen::Index k = lo; k < hi; ++k) m.add((time(k) - time(i)) / h, velocity(k));
     const double n = static_cast<double>(hi - lo);
-    if (hi - lo >= 3 && A.determinant() > 1e-9 * n * n * n) {
-      out(i) = A.ldlt().solve(b)(1) / h;
+    if (hi - lo >= 3 && m.get_normal_matrix().determinant() > 1e-9 * n * n * n) {
+      out(i) = m.get_slope() / h;
     } else if (time(hi - 1) > time(lo)) {
       out(i) = (velocity(hi - 1) - velocity(lo)) / (time(hi - 1) - time(lo));
     }

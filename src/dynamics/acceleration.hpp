@@ -28,6 +28,32 @@ inline Eigen::Index window_capacity(double window_s, double sample_period_s) {
   return static_cast<Eigen::Index>(std::clamp(n, 3.0, static_cast<double>(kMaxWindowSamples)));
 }
 
+// The normal equations of a least-squares quadratic v = c0 + c1 s + c2 s^2,
+// summed as moments: scalar sums rather than a 3x3 rank-one update per sample,
+// several times cheaper over windows of hundreds of samples.
+struct QuadraticMoments {
+  double s0 = 0, s1 = 0, s2 = 0, s3 = 0, s4 = 0;  // sums of s^k
+  double v0 = 0, v1 = 0, v2 = 0;                  // sums of v s^k
+  void add(double s, double v) {
+    const double ss = s * s;
+    s0 += 1.0;
+    s1 += s;
+    s2 += ss;
+    s3 += ss * s;
+    s4 += ss * ss;
+    v0 += v;
+    v1 += v * s;
+    v2 += v * ss;
+  }
+  Eigen::Matrix3d get_normal_matrix() const {
+    Eigen::Matrix3d A;
+    A << s0, s1, s2, s1, s2, s3, s2, s3, s4;
+    return A;
+  }
+  // c1: the slope at s = 0.
+  double get_slope() const { return get_normal_matrix().ldlt().solve(Eigen::Vector3d(v0, v1, v2))(1); }
+};
+
 // Causal qddot of one joint from its measured qdot (velocity is itself a filtered
 // difference of quantized encoders, so differentiating it again is mostly noise
 // at 200 Hz). A first-order low-pass of the backward difference (window 0) lags
@@ -73,19 +99,16 @@ class AccelerationEstimator {
   // samples no older than the window (s = (t_k - t) / window in [-1, 0]).
   double fitted_slope() const {
     const double t = t_[head_];
-    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    QuadraticMoments m;
     Eigen::Index n = 0;
     for (Eigen::Index k = 0; k < count_; ++k) {
       const double s = (previous_time(k) - t) / window_;
       if (s < -1.0 - 1e-9) break;
-      const Eigen::Vector3d phi(1.0, s, s * s);
-      A.noalias() += phi * phi.transpose();
-      b.noalias() += previous(k) * phi;
+      m.add(s, previous(k));
       ++n;
     }
     if (n < 3) return (previous(0) - previous(1)) / (t - previous_time(1));
-    return A.ldlt().solve(b)(1) / window_;
+    return m.get_slope() / window_;
   }
 
   double window_, filter_;

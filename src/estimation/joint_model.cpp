@@ -19,36 +19,31 @@ void compute_joint_torque_jacobians(const JointSample& d, const Eigen::Matrix3d&
   const double s_dot = D * dsdot_dD;
 
   const Eigen::Vector3d u = s * d.z3 - R_base_inc * Eigen::Vector3d(p[0], p[1], p[2]);
-  Eigen::Matrix3d du_dp = -R_base_inc;
-  du_dp.col(2) += ds_dD * d.z3;
   const double x2 = u.squaredNorm() + 1e-12;
   const double h = k1 + k3 * x2;
-  Eigen::Vector3d f = h * u;
-  Eigen::Matrix3d df_dp = h * du_dp + (2.0 * k3) * u * (u.transpose() * du_dp);
-  Eigen::Matrix<double, 3, 4> df_dtissue;
-  df_dtissue.col(0) = u;
-  df_dtissue.col(1) = x2 * u;
-
   const Eigen::Vector3d w = s_dot * d.z3 + s * d.z3_dot;
-  f += c * w;
-  df_dtissue.col(2) = w;
-  Eigen::Vector3d df_dD = c * (dsdot_dD * d.z3 + ds_dD * d.z3_dot);
-
   const double th = std::tanh((d.qd3 - s_dot) / v0);
-  f += (F * th) * d.z3;
-  df_dtissue.col(3) = th * d.z3;
-  df_dD += (F * (1.0 - th * th) * (-dsdot_dD / v0)) * d.z3;
-  df_dp.col(2) += df_dD;
+  const Eigen::Vector3d f = h * u + c * w + (F * th) * d.z3;
+  // df/dD beyond the stretch's own dependence on D.
+  const Eigen::Vector3d df_dD = c * (dsdot_dD * d.z3 + ds_dD * d.z3_dot) + (F * (1.0 - th * th) * (-dsdot_dD / v0)) * d.z3;
+  // du/dp = -R + z3 ds/dD e3^T, so (du/dp)^T u and (du/dp)^T a for any a:
+  Eigen::Vector3d du_dp_T_u = -R_base_inc.transpose() * u;
+  du_dp_T_u[2] += ds_dD * u.dot(d.z3);
 
-  tau << s * d.dz3_dq1.dot(f), s * d.dz3_dq2.dot(f), d.z3.dot(f);
-  dtau_dp.row(0) = s * d.dz3_dq1.transpose() * df_dp;
-  dtau_dp.row(1) = s * d.dz3_dq2.transpose() * df_dp;
-  dtau_dp.row(2) = d.z3.transpose() * df_dp;
-  dtau_dp(0, 2) += ds_dD * d.dz3_dq1.dot(f);
-  dtau_dp(1, 2) += ds_dD * d.dz3_dq2.dot(f);
-  dtau_dtissue.row(0) = s * d.dz3_dq1.transpose() * df_dtissue;
-  dtau_dtissue.row(1) = s * d.dz3_dq2.transpose() * df_dtissue;
-  dtau_dtissue.row(2) = d.z3.transpose() * df_dtissue;
+  // tau_j = scale_j a_j . f with a = (dz3/dq1, dz3/dq2, z3), scale = (s, s, 1):
+  // projections on each a_j, vectors of three rather than 3 x 4 products.
+  const Eigen::Vector3d* axes[3] = {&d.dz3_dq1, &d.dz3_dq2, &d.z3};
+  for (int j = 0; j < 3; ++j) {
+    const Eigen::Vector3d& a = *axes[j];
+    const double scale = j < 2 ? s : 1.0;
+    const double a_u = a.dot(u), a_z3 = a.dot(d.z3), a_f = a.dot(f);
+    Eigen::Vector3d grad = -h * (R_base_inc.transpose() * a) + (2.0 * k3 * a_u) * du_dp_T_u;
+    grad[2] += h * a_z3 * ds_dD + a.dot(df_dD);
+    tau[j] = scale * a_f;
+    dtau_dp.row(j) = scale * grad.transpose();
+    if (j < 2) dtau_dp(j, 2) += ds_dD * a_f;
+    dtau_dtissue.row(j) << scale * a_u, scale * x2 * a_u, scale * a.dot(w), scale * th * a_z3;
+  }
 }
 
 }  // namespace rcm::detail
