@@ -27,7 +27,12 @@ void compute_joint_torque_jacobians(const JointSample& d, const Eigen::Matrix3d&
   // df/dD beyond the stretch's own dependence on D.
   const Eigen::Vector3d df_dD = c * (dsdot_dD * d.z3 + ds_dD * d.z3_dot) + (F * (1.0 - th * th) * (-dsdot_dD / v0)) * d.z3;
   // du/dp = -R + z3 ds/dD e3^T, so (du/dp)^T u and (du/dp)^T a for any a:
-  Eigen::Vector3d du_dp_T_u = -R_base_inc.transpose() * u;
+  // R^T v as three dot products: a fixed-size product expression costs more here
+  // in an instrumented build than the arithmetic it does.
+  auto R_T = [&R_base_inc](const Eigen::Vector3d& v) {
+    return Eigen::Vector3d(R_base_inc.col(0).dot(v), R_base_inc.col(1).dot(v), R_base_inc.col(2).dot(v));
+  };
+  Eigen::Vector3d du_dp_T_u = -R_T(u);
   du_dp_T_u[2] += ds_dD * u.dot(d.z3);
 
   // tau_j = scale_j a_j . f with a = (dz3/dq1, dz3/dq2, z3), scale = (s, s, 1):
@@ -37,7 +42,7 @@ void compute_joint_torque_jacobians(const JointSample& d, const Eigen::Matrix3d&
     const Eigen::Vector3d& a = *axes[j];
     const double scale = j < 2 ? s : 1.0;
     const double a_u = a.dot(u), a_z3 = a.dot(d.z3), a_f = a.dot(f);
-    Eigen::Vector3d grad = -h * (R_base_inc.transpose() * a) + (2.0 * k3 * a_u) * du_dp_T_u;
+    Eigen::Vector3d grad = -h * R_T(a) + (2.0 * k3 * a_u) * du_dp_T_u;
     grad[2] += h * a_z3 * ds_dD + a.dot(df_dD);
     tau[j] = scale * a_f;
     dtau_dp.row(j) = scale * grad.transpose();
