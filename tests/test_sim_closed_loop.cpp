@@ -128,7 +128,7 @@ PreparedBench prepare_bench(const std::string& tissue, const rcm::test::TempDir&
   const rcm::MonitorSetup setup = rcm::prepare_monitor(rcm::load_session(written.manifest), options, fitter);
   b.pipeline = std::make_unique<rcm::OnlinePipeline>(
       setup.free_space.model,
-      rcm::OnlineEstimator(setup.incision, setup.tissue, rcm::make_online_options(setup.joint_options)));
+      rcm::OnlineEstimator(setup.incision, setup.tissue, rcm::sim::make_closed_loop_online_options(setup.joint_options)));
   return b;
 }
 

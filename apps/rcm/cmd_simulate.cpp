@@ -73,7 +73,7 @@ void run_closed_loop(const SimulateOptions& o, const rcm::sim::SimConfig& config
   const rcm::MonitorSetup setup = rcm::prepare_monitor(session, study, rcm::cli::get_torque_model_fitter());
   const rcm::OnlinePipeline pipeline(
       setup.free_space.model,
-      rcm::OnlineEstimator(setup.incision, setup.tissue, rcm::make_online_options(setup.joint_options)));
+      rcm::OnlineEstimator(setup.incision, setup.tissue, make_closed_loop_online_options(setup.joint_options)));
 
   ClosedLoopOptions options;
   const std::vector<IncisionMotion> motions = make_default_incision_motions();

@@ -44,7 +44,7 @@ const OptionTable<StudyOptions>& get_option_table(OptionTag<StudyOptions>) {
                "", {}, {"joint", "three-step"})
           .add_section("joint", &StudyOptions::joint, "the joint torque-space estimator")
           .add("model_kind", &StudyOptions::model_kind,
-               "free-space model to fit (null: hybrid where the networks can be trained, linear otherwise)")
+               "free-space model to fit (null: the default kind, linear)")
           .add("model_file", &StudyOptions::model_file, "use this saved free-space model instead of fitting one")
           .add_section("fit", &StudyOptions::fit, "the free-space model's fit")
           .add_section("tissue", &StudyOptions::tissue, "the tissue law's symbolic regression")

@@ -122,6 +122,12 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
 
 }  // namespace
 
+OnlineEstimatorOptions make_closed_loop_online_options(const JointEstimatorOptions& joint) {
+  OnlineEstimatorOptions o = make_online_options(joint);
+  o.jump_threshold = 4.0;
+  return o;
+}
+
 std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& config, const OnlinePipeline& pipeline,
                                                            const std::vector<IncisionMotion>& motions,
                                                            const ClosedLoopOptions& options) {
