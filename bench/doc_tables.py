@@ -36,3 +36,12 @@ def write_block(path, begin, end, block):
     with open(path + ".tmp", "w") as f:
         f.write(text)
     os.replace(path + ".tmp", path)
+
+
+def publish_block(path, begin, end, block, write=True):
+    """Print `block`; with `write`, also put it between the markers of `path`
+    (write_block) and say so on stderr."""
+    print(block)
+    if write:
+        write_block(path, begin, end, block)
+        print(f"wrote {path}", file=sys.stderr)

@@ -30,7 +30,7 @@ import re
 import subprocess
 import sys
 
-from doc_tables import cpu_model, write_block
+from doc_tables import cpu_model, publish_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "benchmarks.md")
@@ -142,11 +142,7 @@ def main():
         "|---|---|---|---|---|---|",
     ]
     lines += [row(*r) for r in results]
-    table = "\n".join(lines)
-    print(table)
-    if not args.no_doc:
-        write_block(DOC, *MARKERS, table)
-        print(f"wrote {DOC}", file=sys.stderr)
+    publish_block(DOC, *MARKERS, "\n".join(lines), write=not args.no_doc)
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ import subprocess
 import sys
 import time
 
-from doc_tables import cpu_model, write_block
+from doc_tables import cpu_model, publish_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "benchmarks.md")
@@ -89,11 +89,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-doc", action="store_true", help="print the table only")
     args = ap.parse_args()
-    table = measure(args.dir, args.repeat)
-    print(table)
-    if not args.no_doc:
-        write_block(DOC, *MARKERS, table)
-        print(f"wrote {DOC}", file=sys.stderr)
+    publish_block(DOC, *MARKERS, measure(args.dir, args.repeat), write=not args.no_doc)
 
 
 if __name__ == "__main__":
