@@ -15,7 +15,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
-.PHONY: deps build test test-sanitize demo bench coverage docs-figures soak fuzz fuzz-deps clean
+.PHONY: deps build test build-sanitize test-sanitize demo bench coverage docs-figures soak fuzz fuzz-deps clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -52,13 +52,16 @@ test: build
 SANITIZE_BUILD ?= build-sanitize
 SANITIZE_FLAGS := -O2 -g1 -DNDEBUG -fsanitize=address,undefined -fno-sanitize-recover=all \
   -fno-sanitize-address-use-after-scope -fno-omit-frame-pointer
-test-sanitize: deps
+build-sanitize: deps
 	cmake -S . -B $(SANITIZE_BUILD) -DCMAKE_BUILD_TYPE=Sanitize \
 	  -DCMAKE_CXX_FLAGS_SANITIZE="$(SANITIZE_FLAGS)" -DCMAKE_C_FLAGS_SANITIZE="$(SANITIZE_FLAGS)" \
 	  -DCMAKE_EXE_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
 	  -DCMAKE_SHARED_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
+	  -DCMAKE_MODULE_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
 	  -DRCM_BUILD_BENCH=OFF -DRCM_WITH_PYTHON=OFF -DPython3_EXECUTABLE=$(PYTHON) $(CMAKE_FLAGS)
 	cmake --build $(SANITIZE_BUILD) -j $(JOBS)
+
+test-sanitize: build-sanitize
 	cd $(SANITIZE_BUILD) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
 	  RCM_PROPERTY_SESSIONS=1 RCM_PROPERTY_TRIALS=2 ctest --output-on-failure -j $(JOBS)
 

@@ -45,7 +45,9 @@ def main():
     # test-sanitize = configure + build + ctest, here one phase at a time.
     rows.append(("build (`make build`, fresh)", *timed("build", ["make", "build", f"BUILD={build}"], env)))
     rows.append(("tests (`make test`'s ctest)", *timed("test", ["make", "test", f"BUILD={build}"], env)))
-    rows.append(("instrumented build and tests (`make test-sanitize`, fresh)",
+    rows.append(("instrumented build (`make build-sanitize`, fresh)",
+                 *timed("build-sanitize", ["make", "build-sanitize", f"SANITIZE_BUILD={sanitize}"], env)))
+    rows.append(("instrumented tests (`make test-sanitize`'s ctest)",
                  *timed("test-sanitize", ["make", "test-sanitize", f"SANITIZE_BUILD={sanitize}"], env)))
     total = sum(r[1] for r in rows)
     ok = all(r[2] == 0 for r in rows)

@@ -21,14 +21,18 @@ struct Run {
   int status;
   std::string out;
 };
-Run run(const std::string& args, bool with_stderr = false) {
-  const std::string cmd = std::string(RCM_CLI_PATH) + " " + args + (with_stderr ? " 2>&1" : " 2>/dev/null");
+Run run_shell(const std::string& cmd) {
   FILE* p = popen(cmd.c_str(), "r");
   std::string out;
   std::array<char, 4096> buf;
   while (std::fgets(buf.data(), buf.size(), p)) out += buf.data();
   const int status = pclose(p);
   return {status, out};
+}
+// `environment`: VAR=value assignments put before the command.
+Run run(const std::string& args, bool with_stderr = false, const std::string& environment = "") {
+  return run_shell(environment + " " + std::string(RCM_CLI_PATH) + " " + args +
+                   (with_stderr ? " 2>&1" : " 2>/dev/null"));
 }
 }  // namespace
 
@@ -106,3 +110,49 @@ TEST(DynamicsCli, FitLinearThenEvalJson) {
   }
   std::filesystem::remove_all(dir);
 }
+
+#if defined(RCM_CLI_TRAINS_NETWORKS)
+// The CLI does not link LibTorch: it opens the training module to train a
+// network (and for TorchScript), and a linear fit never opens it.
+TEST(DynamicsCli, TrainsANetworkThroughTheTrainingModuleOnly) {
+  const auto linked = run_shell(std::string("ldd ") + RCM_CLI_PATH);
+  ASSERT_EQ(linked.status, 0);
+  EXPECT_EQ(linked.out.find("libtorch"), std::string::npos) << linked.out;
+  EXPECT_EQ(linked.out.find("libc10"), std::string::npos) << linked.out;
+
+  const auto dir = rcm::test::get_process_temp_dir() / "rcm_test_dynamics_cli_module";
+  std::filesystem::create_directories(dir);
+  rcm::test::SyntheticArmOptions so;
+  so.duration_s = 20;
+  const auto free_csv = (dir / "free.csv").string();
+  rcm::save_recording(free_csv, rcm::test::make_synthetic_free_space(so));
+  const auto model = (dir / "lstm.json").string(), script = (dir / "lstm.pt").string(),
+             imported = (dir / "imported.json").string();
+
+  const auto fit = run("dynamics fit --model lstm --hidden 8 --max-epochs 2 --threads 1 --out " + model +
+                       " --torchscript " + script + " --json " + free_csv);
+  ASSERT_EQ(fit.status, 0) << fit.out;
+  const auto summary = nlohmann::json::parse(fit.out);
+  EXPECT_EQ(summary["kind"], "lstm");
+  // LibTorch loaded late still binds its sgemm_ to OpenBLAS (the fit warns otherwise).
+  for (const auto& w : summary["warnings"]) EXPECT_EQ(w.get<std::string>().find("BLAS"), std::string::npos) << w;
+  const auto im = run("dynamics import " + script + " --out " + imported, true);
+  ASSERT_EQ(im.status, 0) << im.out;
+  const auto a = nlohmann::json::parse(run("dynamics eval " + model + " " + free_csv + " --json").out);
+  const auto b = nlohmann::json::parse(run("dynamics eval " + imported + " " + free_csv + " --json").out);
+  for (int k = 0; k < 3; ++k)
+    EXPECT_NEAR(a["joints"][k]["rmse"].get<double>(), b["joints"][k]["rmse"].get<double>(),
+                1e-4 * a["joints"][k]["rmse"].get<double>());
+
+  // Without the module: the network fit names it; the linear fit does not need it.
+  const std::string missing = "RCM_TRAINING_MODULE=" + (dir / "missing.so").string();
+  const auto refused = run("dynamics fit --model lstm --out " + model + " " + free_csv, true, missing);
+  EXPECT_NE(refused.status, 0);
+  EXPECT_NE(refused.out.find("training module"), std::string::npos) << refused.out;
+  EXPECT_NE(refused.out.find("missing.so"), std::string::npos) << refused.out;
+  const auto linear = run("dynamics fit --model linear --out " + (dir / "linear.json").string() + " " + free_csv,
+                          true, missing);
+  EXPECT_EQ(linear.status, 0) << linear.out;
+  std::filesystem::remove_all(dir);
+}
+#endif

@@ -21,7 +21,7 @@
 #include "rcm/dynamics/torque_model.hpp"
 #include "rcm/io/json_file.hpp"
 #if defined(RCM_HAVE_TORCH)
-#include "rcm/dynamics/training.hpp"
+#include "training_loader.hpp"
 #endif
 
 namespace {
@@ -128,7 +128,8 @@ void run_fit(const DynamicsArgs& a) {
   }
 #if defined(RCM_HAVE_TORCH)
   if (!a.torchscript_out.empty()) {
-    export_torchscript(static_cast<const LstmTorqueModel&>(*fit.model), a.torchscript_out);
+    rcm::cli::get_training_functions().export_torchscript(static_cast<const LstmTorqueModel&>(*fit.model),
+                                                          a.torchscript_out);
   }
 #endif
   save_torque_model(a.out, *fit.model);
@@ -217,7 +218,7 @@ void run_eval(const DynamicsArgs& a) {
 
 #if defined(RCM_HAVE_TORCH)
 void run_import(const DynamicsArgs& a) {
-  auto model = rcm::dynamics::import_torchscript(a.torchscript_in);
+  auto model = rcm::cli::get_training_functions().import_torchscript(a.torchscript_in);
   rcm::dynamics::save_torque_model(a.out, *model);
   std::cerr << "imported " << a.torchscript_in << " -> " << a.out << "\n";
 }

@@ -3,14 +3,21 @@
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
 #if RCM_HAVE_TORCH
-#include "rcm/dynamics/training.hpp"
+#include "training_loader.hpp"
 #endif
 
 namespace rcm::cli {
 
 TorqueModelFitter get_torque_model_fitter() {
 #if RCM_HAVE_TORCH
-  return TorqueModelFitter(dynamics::fit_torque_model, true);
+  // A linear fit does not open the training module.
+  return TorqueModelFitter(
+      [](dynamics::TorqueModelKind kind, const std::vector<Recording>& recordings, const dynamics::FitOptions& options) {
+        if (kind == dynamics::TorqueModelKind::linear)
+          return dynamics::fit_torque_model_without_networks(kind, recordings, options, flag_location("--model"));
+        return get_training_functions().fit_torque_model(kind, recordings, options);
+      },
+      true);
 #else
   return get_linear_torque_model_fitter(flag_location("--model"));
 #endif
