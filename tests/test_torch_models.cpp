@@ -333,9 +333,11 @@ TEST(FitWarnings, ShortDataSaysTooFewToTrust) {
 }
 
 // Training speed rests on which BLAS LibTorch's sgemm_ binds to in a program
-// linked like the rcm CLI (Ceres, SuiteSparse and LibTorch together): OpenBLAS,
-// not ATLAS's or the reference single-threaded one (cmake/rcm_blas.cmake).
-TEST(LibTorchBlas, IsOpenBlasInAProgramLinkedLikeTheCli) {
+// that links Ceres, SuiteSparse and LibTorch together (as rcm::torch's users
+// do): OpenBLAS, not ATLAS's or the reference single-threaded one
+// (cmake/rcm_blas.cmake). The rcm program, which opens LibTorch after Ceres's
+// BLAS is loaded, is checked by DynamicsCli.TrainsANetworkThroughTheTrainingModuleOnly.
+TEST(LibTorchBlas, IsOpenBlasInAProgramLinkingCeresAndLibTorch) {
   const std::string blas = get_libtorch_blas_library();
   ASSERT_FALSE(blas.empty());
   EXPECT_NE(blas.find("openblas"), std::string::npos) << blas;
