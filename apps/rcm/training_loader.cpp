@@ -26,8 +26,8 @@ const dynamics::TrainingFunctions& open_training_module() {
   // Never closed: the models it creates keep pointers into its code.
   void* handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
   if (handle == nullptr) {
-    throw std::runtime_error(fmt::format("cannot open the training module {} (LibTorch), which lstm, mlp and hybrid "
-                                         "models and TorchScript need: {}",
+    throw std::runtime_error(fmt::format("cannot open the training module {} (LibTorch), which fitting lstm, mlp and "
+                                         "hybrid models and TorchScript need: {}",
                                          path.string(), dlerror()));
   }
   using Entry = const dynamics::TrainingFunctions* (*)(std::uint64_t);
