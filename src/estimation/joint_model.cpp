@@ -25,7 +25,8 @@ void compute_joint_torque_jacobians(const JointSample& d, const Eigen::Matrix3d&
   const double th = std::tanh((d.qd3 - s_dot) / v0);
   const Eigen::Vector3d f = h * u + c * w + (F * th) * d.z3;
   // df/dD beyond the stretch's own dependence on D.
-  const Eigen::Vector3d df_dD = c * (dsdot_dD * d.z3 + ds_dD * d.z3_dot) + (F * (1.0 - th * th) * (-dsdot_dD / v0)) * d.z3;
+  const Eigen::Vector3d df_dD =
+      c * (dsdot_dD * d.z3 + ds_dD * d.z3_dot) + (F * (1.0 - th * th) * (-dsdot_dD / v0)) * d.z3;
   // du/dp = -R + z3 ds/dD e3^T, so (du/dp)^T u and (du/dp)^T a for any a:
   // R^T v as three dot products: a fixed-size product expression costs more here
   // in an instrumented build than the arithmetic it does.

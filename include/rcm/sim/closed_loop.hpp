@@ -82,12 +82,12 @@ struct ClosedLoopScenario {
   ClosedLoopRun open, closed;
 };
 
-// Runs every motion open and closed loop with `pipeline` (prepared on this
-// config's session: free-space model, incision frame at q0, tissue model).
 // The online estimator's options on the closed-loop bench: the study's, with
 // the change-point test on (a threshold of 4), since the incision jumps there.
 OnlineEstimatorOptions make_closed_loop_online_options(const JointEstimatorOptions& joint);
 
+// Runs every motion open and closed loop with `pipeline` (prepared on this
+// config's session: free-space model, incision frame at q0, tissue model).
 std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& config, const OnlinePipeline& pipeline,
                                                            const std::vector<IncisionMotion>& motions,
                                                            const ClosedLoopOptions& options);
