@@ -48,9 +48,14 @@ test: build
 # off: it poisons and unpoisons every temporary of Ceres's automatic
 # differentiation and made the instrumented Jet arithmetic 6 times slower
 # (heap, stack and global overflows, use after free and leaks are still caught).
+# UBSan's null, alignment and pointer-overflow checks are off: on Eigen's
+# pointer arithmetic they lengthen the instrumented build most (the compile
+# column of docs/reliability.md's table); a null dereference still faults and
+# ASan reports it with its stack, as it does an access out of bounds.
 # The random-session property test runs one session of two trials instrumented.
 SANITIZE_BUILD ?= build-sanitize
 SANITIZE_FLAGS := -O2 -g1 -DNDEBUG -fsanitize=address,undefined -fno-sanitize-recover=all \
+  -fno-sanitize=null,alignment,pointer-overflow \
   -fno-sanitize-address-use-after-scope -fno-omit-frame-pointer
 build-sanitize: deps
 	cmake -S . -B $(SANITIZE_BUILD) -DCMAKE_BUILD_TYPE=Sanitize \
