@@ -21,10 +21,10 @@ namespace rcm::dynamics {
 namespace {
 constexpr double kTwoPi = 6.283185307179586;
 // Penalty weights: a squared limit excess (in units of the limit, summed over
-// the objective's samples) against log cond, which moves by about 1 between a
-// poor and a good motion; and a missing reversal per joint.
+// the objective's samples) against log cond, which moves by a few units
+// between a poor and a good motion; and a missing reversal per joint, squared.
 constexpr double kLimitWeight = 100.0;
-constexpr double kReversalWeight = 0.5;
+constexpr double kReversalWeight = 2.0;
 // Speed (share of velocity_max) over which the soft reversal count's tanh turns.
 constexpr double kReversalSpeed = 0.05;
 // Central-difference step of the gradient, in units of velocity_max.
@@ -256,18 +256,22 @@ class ExcitationObjective {
         penalty += excess(d >= 0 ? d / (limits_.position_max[j] - q0_[j]) : -d / (q0_[j] - limits_.position_min[j]));
         penalty += excess(std::abs(qd[j]) / limits_.velocity_max[j]);
         penalty += excess(std::abs(qdd[j]) / limits_.acceleration_max[j]);
-        // A smooth count of sign changes between neighbouring samples.
+        // A smooth count of sign changes: half the total variation of a
+        // smooth sign of qd (a reversal from +1 to -1 counts 1). The first
+        // sample is left out: there the velocity touches 0 by construction
+        // without changing sign, which the count would take for a reversal.
+        if (i == 0) continue;
         const double sign = std::tanh(qd[j] / (kReversalSpeed * limits_.velocity_max[j]));
-        if (i == 0)
+        if (i == 1)
           first_sign[j] = sign;
         else
-          reversals[j] += 0.5 * (1.0 - sign * last_sign[j]);
+          reversals[j] += 0.5 * std::abs(sign - last_sign[j]);
         last_sign[j] = sign;
       }
     }
     double missing = 0.0;
     for (int j = 0; j < 3; ++j) {
-      reversals[j] += 0.5 * (1.0 - first_sign[j] * last_sign[j]);  // the period wraps around
+      reversals[j] += 0.5 * std::abs(first_sign[j] - last_sign[j]);  // the period wraps around
       const double m = std::max(0.0, min_reversals_ - reversals[j]);
       missing += m * m;
     }

@@ -16,8 +16,8 @@
 // (the gravity regressor, LinearTorqueModel::compute_gravity_regressor, the
 // rigid-body inertia regressor, compute_inertia_regressor, and per joint the
 // armature, viscous, Coulomb (Dahl state) and offset columns, as the fit
-// stacks them), with every joint reversing its velocity at least a given
-// number of times per period. Ceres' GradientProblemSolver (L-BFGS) minimises
+// stacks them), with every joint asked to reverse its velocity a given number
+// of times per period (a penalty, not a constraint). Ceres' GradientProblemSolver (L-BFGS) minimises
 // log cond + penalties for leaving the limits + a penalty for too few
 // reversals, from a random start drawn with a fixed seed; the optimum is then
 // scaled about q0 per joint (position, velocity and acceleration are linear
