@@ -97,7 +97,8 @@ const bool registered = rcm::cli::register_command({"excite", 25, [](CLI::App& a
       "q0 to rest at q0, within the joint limits, optimised for the linear model's regressor; writes "
       "time,position_1..3,velocity_1..3");
   cmd->add_option("--out", args->out, "output CSV file")->required();
-  args->options.add(cmd, "--duration", {"duration_s"});
+  args->options.add(cmd, "--duration", {"duration_s"},
+                    "required here (the default is ExcitationOptions'): the whole trajectory, from rest at q0 to rest at q0");
   args->options.add(cmd, "--rate", {"rate_hz"});
   args->options.add(cmd, "--harmonics", {"harmonics"});
   args->options.add(cmd, "--period", {"period_s"});
