@@ -171,8 +171,14 @@ TEST(Excitation, OptimisedRegressorIsBetterConditionedThanTheStartAndTheRandomTe
             << " Hz: optimised " << r.summary.condition_number << ", random start "
             << r.summary.initial_condition_number << ", random teleoperation " << teleop_condition << " ("
             << r.summary.brief_report() << ", " << r.summary.seconds << " s)\n";
-  // Every joint reverses at least as often as asked.
-  for (int j = 0; j < 3; ++j) EXPECT_GE(r.reversals[static_cast<std::size_t>(j)], o.min_reversals) << "joint " << j;
+  // Every joint reverses as often as asked, and moves to both sides of q0
+  // (both are penalties: checked with some slack on the coverage).
+  for (int j = 0; j < 3; ++j) {
+    EXPECT_GE(r.reversals[static_cast<std::size_t>(j)], o.min_reversals * r.summary.periods) << "joint " << j;
+    const double up = (r.position.col(j).maxCoeff() - o.q0[j]) / (r.limits.position_max[j] - o.q0[j]);
+    const double down = (o.q0[j] - r.position.col(j).minCoeff()) / (o.q0[j] - r.limits.position_min[j]);
+    EXPECT_GT(std::min(up, down), 0.5 * o.position_coverage) << "joint " << j << ": " << down << " / " << up;
+  }
 }
 
 TEST(Excitation, DeterministicForASeed) {

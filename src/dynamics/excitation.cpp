@@ -22,9 +22,12 @@ namespace {
 constexpr double kTwoPi = 6.283185307179586;
 // Penalty weights: a squared limit excess (in units of the limit, summed over
 // the objective's samples) against log cond, which moves by a few units
-// between a poor and a good motion; and a missing reversal per joint, squared.
+// between a poor and a good motion; and a missing reversal per joint, squared,
+// strong enough that the L-BFGS steps find reversals rather than trade them.
 constexpr double kLimitWeight = 100.0;
-constexpr double kReversalWeight = 2.0;
+constexpr double kReversalWeight = 10.0;
+// And a missing share of the room on one side of q0, squared.
+constexpr double kCoverageWeight = 10.0;
 // Speed (share of velocity_max) over which the soft reversal count's tanh turns.
 constexpr double kReversalSpeed = 0.05;
 // Central-difference step of the gradient, in units of velocity_max.
@@ -48,6 +51,7 @@ void ExcitationOptions::check() const {
   require(velocity_max.allFinite() && (velocity_max.array() > 0.0).all(), "velocity_max must be > 0");
   require(acceleration_max.allFinite() && (acceleration_max.array() > 0.0).all(), "acceleration_max must be > 0");
   require(min_reversals >= 0, "min_reversals must be >= 0");
+  require(position_coverage >= 0.0 && position_coverage <= 1.0, "position_coverage must be in [0, 1]");
   require(samples_per_period >= 8 * harmonics, "samples_per_period must be at least 8 x harmonics");
   require(max_iterations >= 0, "max_iterations must be >= 0");
 }
@@ -75,6 +79,8 @@ const OptionTable<ExcitationOptions>& get_option_table(OptionTag<ExcitationOptio
                "rad/s^2, rad/s^2, m/s^2", OptionLimits::above(0))
           .add("min_reversals", &O::min_reversals, "velocity reversals wanted per joint and period", "",
                OptionLimits::at_least(0))
+          .add("position_coverage", &O::position_coverage,
+               "share of the room on each side of q0 every joint is asked to reach", "", OptionLimits::within(0, 1))
           .add("samples_per_period", &O::samples_per_period, "samples of a period the objective is evaluated on",
                "", OptionLimits::at_least(16))
           .add("max_iterations", &O::max_iterations, "L-BFGS iterations (0: the random start as it is)", "",
@@ -212,6 +218,7 @@ class ExcitationObjective {
         harmonics_(o.harmonics),
         samples_(o.samples_per_period),
         min_reversals_(o.min_reversals),
+        coverage_(o.position_coverage),
         conditioning_(get_excitation_dahl_displacement(limits)),
         unit_(ExcitationSeries::count_free_coefficients(o.harmonics)) {
     const int per_joint = 2 * (o.harmonics - 1);
@@ -246,14 +253,18 @@ class ExcitationObjective {
     }
     double penalty = 0.0;
     Eigen::Vector3d reversals = Eigen::Vector3d::Zero(), first_sign = Eigen::Vector3d::Zero(),
-                    last_sign = Eigen::Vector3d::Zero();
+                    last_sign = Eigen::Vector3d::Zero(), reach_up = Eigen::Vector3d::Zero(),
+                    reach_down = Eigen::Vector3d::Zero();
     auto excess = [](double share) { return share > 1.0 ? (share - 1.0) * (share - 1.0) : 0.0; };
     for (int i = 0; i < samples_; ++i) {
       series.compute_state(period_s_ * i / samples_, q, qd, qdd);
       conditioning_.add_sample(q, qd, qdd);
       for (int j = 0; j < 3; ++j) {
         const double d = q[j] - q0_[j];
-        penalty += excess(d >= 0 ? d / (limits_.position_max[j] - q0_[j]) : -d / (q0_[j] - limits_.position_min[j]));
+        const double up = d / (limits_.position_max[j] - q0_[j]), down = -d / (q0_[j] - limits_.position_min[j]);
+        penalty += excess(d >= 0 ? up : down);
+        reach_up[j] = std::max(reach_up[j], up);
+        reach_down[j] = std::max(reach_down[j], down);
         penalty += excess(std::abs(qd[j]) / limits_.velocity_max[j]);
         penalty += excess(std::abs(qdd[j]) / limits_.acceleration_max[j]);
         // A smooth count of sign changes: half the total variation of a
@@ -269,13 +280,17 @@ class ExcitationObjective {
         last_sign[j] = sign;
       }
     }
-    double missing = 0.0;
+    double missing = 0.0, uncovered = 0.0;
     for (int j = 0; j < 3; ++j) {
+      // The positions a later motion will visit lie on both sides of q0.
+      const double u = std::max(0.0, coverage_ - reach_up[j]), v = std::max(0.0, coverage_ - reach_down[j]);
+      uncovered += u * u + v * v;
       reversals[j] += 0.5 * std::abs(first_sign[j] - last_sign[j]);  // the period wraps around
       const double m = std::max(0.0, min_reversals_ - reversals[j]);
       missing += m * m;
     }
-    return conditioning_.get_log_condition_number() + kLimitWeight * penalty + kReversalWeight * missing;
+    return conditioning_.get_log_condition_number() + kLimitWeight * penalty + kReversalWeight * missing +
+           kCoverageWeight * uncovered;
   }
 
  private:
@@ -283,7 +298,7 @@ class ExcitationObjective {
   Eigen::Vector3d q0_;
   double period_s_;
   int harmonics_, samples_;
-  double min_reversals_;
+  double min_reversals_, coverage_;
   RegressorConditioning conditioning_;
   Eigen::VectorXd unit_;
 };

@@ -17,9 +17,10 @@
 // rigid-body inertia regressor, compute_inertia_regressor, and per joint the
 // armature, viscous, Coulomb (Dahl state) and offset columns, as the fit
 // stacks them), with every joint asked to reverse its velocity a given number
-// of times per period (a penalty, not a constraint). Ceres' GradientProblemSolver (L-BFGS) minimises
-// log cond + penalties for leaving the limits + a penalty for too few
-// reversals, from a random start drawn with a fixed seed; the optimum is then
+// of times per period and to reach a share of its room on both sides of q0
+// (penalties, not constraints). Ceres' GradientProblemSolver (L-BFGS) minimises
+// log cond + penalties for leaving the limits, for too few reversals and for
+// too little of the room reached, from a random start drawn with a fixed seed; the optimum is then
 // scaled about q0 per joint (position, velocity and acceleration are linear
 // in the coefficients) so that every written sample is within the limits.
 
@@ -51,6 +52,10 @@ struct ExcitationOptions {
   Eigen::Vector3d velocity_max = Eigen::Vector3d(1.0, 1.0, 0.1);
   Eigen::Vector3d acceleration_max = Eigen::Vector3d(3.0, 3.0, 0.3);
   int min_reversals = 4;           // velocity reversals per joint and period
+  // Share of the room between q0 and each limit (less the margin) that every
+  // joint is asked to reach on both sides, so that the recording covers the
+  // positions later motions visit around q0 (a penalty, as the reversals).
+  double position_coverage = 0.5;
   int samples_per_period = 200;    // where the objective is evaluated
   int max_iterations = 100;        // L-BFGS iterations
   // Throws std::invalid_argument naming the first bad field.
