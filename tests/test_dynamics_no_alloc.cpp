@@ -10,6 +10,7 @@
 #include <new>
 #include <random>
 
+#include "rcm/dynamics/excitation.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/networks.hpp"
 
@@ -92,4 +93,19 @@ TEST(NoAllocation, LstmKernelStepOnEveryInstructionSet) {
     kernel.step(state, x, y);
     EXPECT_EQ(g_allocations - before, 0) << to_string(isa);
   }
+}
+
+TEST(NoAllocation, RegressorConditioningAddSample) {
+  // The excitation's objective adds a sample per point of its grid, thousands
+  // of times per design: the workspace is sized once.
+  auto conditioning = std::make_unique<RegressorConditioning>(Eigen::Vector3d(1e-3, 1e-3, 1e-4));
+  Eigen::Vector3d q(0.1, -0.2, 0.12), qd(0.3, -0.1, 0.02), qdd(0.5, 0.2, -0.1);
+  const long before = g_allocations;
+  for (int t = 0; t < 200; ++t) {
+    q += 0.005 * qd;
+    qd = -qd;
+    conditioning->add_sample(q, qd, qdd);
+  }
+  EXPECT_EQ(g_allocations - before, 0);
+  EXPECT_TRUE(std::isfinite(conditioning->get_log_condition_number()));
 }

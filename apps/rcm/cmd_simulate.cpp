@@ -12,6 +12,7 @@
 #include "rcm/common/interrupt.hpp"
 #include "rcm/estimation/study.hpp"
 #include "rcm/io/atomic_file.hpp"
+#include "rcm/io/joint_trajectory.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/session.hpp"
 #include "rcm/sim/bench.hpp"
@@ -28,6 +29,7 @@ struct SimulateOptions {
   std::string friction;
   std::string arm;
   std::string config_file;
+  std::string free_space_trajectory;
   std::uint64_t seed = 0;
   bool seed_given = false;
   bool quick = false;
@@ -221,6 +223,15 @@ void run_simulate(const SimulateOptions& o) {
     config.protocol.trial_s = 30.0;
     config.protocol.static_hold_s = 5.0;
   }
+  if (!o.free_space_trajectory.empty()) {
+    // Read here for its length (errors name the file, line and column): each
+    // free-space file plays the whole trajectory unless --free-space-s says otherwise.
+    const rcm::JointTrajectory trajectory = rcm::load_joint_trajectory(o.free_space_trajectory);
+    config.trajectory.free_space_path = "file";
+    config.trajectory.free_space_file = o.free_space_trajectory;
+    config.protocol.free_space_s =
+        (trajectory.time[trajectory.time.size() - 1] - trajectory.time[0]) * std::max(1, config.protocol.free_space_files);
+  }
   if (o.free_space_s > 0) config.protocol.free_space_s = o.free_space_s;
   if (o.trial_s > 0) config.protocol.trial_s = o.trial_s;
   if (o.calibration_s > 0) config.protocol.calibration_s = o.calibration_s;
@@ -377,7 +388,11 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
                   "cables, friction on both sides)");
   cmd->add_option("--config", opts->config_file, "JSON file overriding any parameter (keys below)");
   cmd->add_flag("--quick", opts->quick, "short session: 120 s free space, 30 s calibration and trials");
-  cmd->add_option("--free-space-s", opts->free_space_s, "free-space duration, s (default 900)");
+  cmd->add_option("--free-space-s", opts->free_space_s,
+                  "free-space duration, s (default 900; with --free-space-trajectory the file's)");
+  cmd->add_option("--free-space-trajectory", opts->free_space_trajectory,
+                  "record free space along this joint trajectory CSV (time, position_1..N, velocity_1..N; rcm "
+                  "excite writes one) instead of the random teleoperation");
   cmd->add_option("--trial-s", opts->trial_s, "duration of each trial, s (default 60)");
   cmd->add_option("--calibration-s", opts->calibration_s, "calibration duration, s (default 60)");
   cmd->add_option("--threads", opts->threads, "worker threads (default 2)");

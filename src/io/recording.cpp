@@ -12,9 +12,10 @@
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/rosbag2.hpp"
+#include "csv_parts.hpp"
 
 namespace rcm {
-namespace {
+namespace detail {
 
 std::string_view trim(std::string_view s) {
   while (!s.empty() && (s.front() == ' ' || s.front() == '\t' || s.front() == '\r')) s.remove_prefix(1);
@@ -40,20 +41,6 @@ void split_fields(std::string_view line, std::vector<std::string_view>& fields) 
   }
   fields.push_back(line.substr(start));
 }
-
-struct Column {
-  std::size_t index = 0;  // field index in a row
-  std::string name;
-};
-
-struct Layout {
-  RecordingLayout kind = RecordingLayout::rcm_csv;
-  std::optional<Column> time;
-  bool time_in_ns = false;
-  int joints = 0;
-  std::vector<Column> position, velocity, effort, force;
-  std::size_t header_fields = 0;
-};
 
 InputLocation locate(const std::string& source, std::size_t line, const std::string& field) {
   InputLocation where;
@@ -88,10 +75,29 @@ std::vector<Column> find_series(const std::map<std::string, std::size_t>& by_nam
   return out;
 }
 
-Layout parse_header(const std::vector<std::string_view>& fields, const std::string& source,
-                    const RecordingReadOptions& options) {
-  Layout layout;
-  layout.header_fields = fields.size();
+double parse_cell(std::string_view cell, const std::string& source, std::size_t line,
+                  const std::string& column) {
+  std::string_view s = trim(cell);
+  if (s.size() >= 2 && s.front() == '"' && s.back() == '"') s = trim(s.substr(1, s.size() - 2));
+  if (s.empty()) throw InputError(locate(source, line, column), "empty cell, expected a number");
+  std::string_view digits = s;
+  if (digits.front() == '+') digits.remove_prefix(1);
+  double value = 0.0;
+  const auto [ptr, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+  if (ec == std::errc::result_out_of_range)
+    throw InputError(locate(source, line, column),
+                     "number out of range, got " + quote_token(std::string(s)));
+  if (ec != std::errc() || ptr != digits.data() + digits.size())
+    throw InputError(locate(source, line, column),
+                     "expected a number, got " + quote_token(std::string(s)));
+  if (!std::isfinite(value))
+    throw InputError(locate(source, line, column),
+                     "expected a finite number, got " + quote_token(std::string(s)));
+  return value;
+}
+
+std::map<std::string, std::size_t> index_header(const std::vector<std::string_view>& fields,
+                                                const std::string& source) {
   std::map<std::string, std::size_t> by_name;
   for (std::size_t i = 0; i < fields.size(); ++i) {
     std::string_view f = trim(fields[i]);
@@ -108,6 +114,52 @@ Layout parse_header(const std::vector<std::string_view>& fields, const std::stri
       throw InputError(where, "duplicate column name");
     }
   }
+  return by_name;
+}
+
+std::vector<std::pair<std::size_t, std::string_view>> split_lines(std::string_view all) {
+  // Lines, with their 1-based numbers; blank lines carry no data and are skipped.
+  std::vector<std::pair<std::size_t, std::string_view>> lines;
+  std::size_t number = 0, start = 0;
+  while (start <= all.size()) {
+    std::size_t end = all.find('\n', start);
+    if (end == std::string_view::npos) end = all.size();
+    ++number;
+    std::string_view line = all.substr(start, end - start);
+    if (!trim(line).empty()) lines.emplace_back(number, line);
+    if (end == all.size()) break;
+    start = end + 1;
+  }
+  return lines;
+}
+
+}  // namespace detail
+
+namespace {
+
+using detail::Column;
+using detail::find_series;
+using detail::index_header;
+using detail::locate;
+using detail::parse_cell;
+using detail::split_fields;
+using detail::split_lines;
+using detail::trim;
+
+struct Layout {
+  RecordingLayout kind = RecordingLayout::rcm_csv;
+  std::optional<Column> time;
+  bool time_in_ns = false;
+  int joints = 0;
+  std::vector<Column> position, velocity, effort, force;
+  std::size_t header_fields = 0;
+};
+
+Layout parse_header(const std::vector<std::string_view>& fields, const std::string& source,
+                    const RecordingReadOptions& options) {
+  Layout layout;
+  layout.header_fields = fields.size();
+  std::map<std::string, std::size_t> by_name = index_header(fields, source);
 
   const bool rostopic = by_name.count("%time") || by_name.count("field.position0");
   std::string pos_prefix = "position_", vel_prefix = "velocity_", eff_prefix = "effort_";
@@ -166,27 +218,6 @@ Layout parse_header(const std::vector<std::string_view>& fields, const std::stri
   return layout;
 }
 
-double parse_cell(std::string_view cell, const std::string& source, std::size_t line,
-                  const std::string& column) {
-  std::string_view s = trim(cell);
-  if (s.size() >= 2 && s.front() == '"' && s.back() == '"') s = trim(s.substr(1, s.size() - 2));
-  if (s.empty()) throw InputError(locate(source, line, column), "empty cell, expected a number");
-  std::string_view digits = s;
-  if (digits.front() == '+') digits.remove_prefix(1);
-  double value = 0.0;
-  const auto [ptr, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
-  if (ec == std::errc::result_out_of_range)
-    throw InputError(locate(source, line, column),
-                     "number out of range, got " + quote_token(std::string(s)));
-  if (ec != std::errc() || ptr != digits.data() + digits.size())
-    throw InputError(locate(source, line, column),
-                     "expected a number, got " + quote_token(std::string(s)));
-  if (!std::isfinite(value))
-    throw InputError(locate(source, line, column),
-                     "expected a finite number, got " + quote_token(std::string(s)));
-  return value;
-}
-
 }  // namespace
 
 Recording parse_recording(const std::string& text, const std::string& source,
@@ -194,21 +225,7 @@ Recording parse_recording(const std::string& text, const std::string& source,
   if (options.assumed_rate_hz && !(*options.assumed_rate_hz > 0.0 && std::isfinite(*options.assumed_rate_hz)))
     throw InputError(locate(source, 0, ""), "the assumed sampling rate must be a positive number of Hz");
 
-  // Lines, with their 1-based numbers; blank lines carry no data and are skipped.
-  std::vector<std::pair<std::size_t, std::string_view>> lines;
-  {
-    std::string_view all(text);
-    std::size_t number = 0, start = 0;
-    while (start <= all.size()) {
-      std::size_t end = all.find('\n', start);
-      if (end == std::string_view::npos) end = all.size();
-      ++number;
-      std::string_view line = all.substr(start, end - start);
-      if (!trim(line).empty()) lines.emplace_back(number, line);
-      if (end == all.size()) break;
-      start = end + 1;
-    }
-  }
+  const std::vector<std::pair<std::size_t, std::string_view>> lines = split_lines(text);
   if (lines.empty()) throw InputError(locate(source, 0, ""), "file is empty, expected a header row");
   if (lines.front().first != 1)
     throw InputError(locate(source, 1, ""), "expected the header row on line 1, found a blank line");

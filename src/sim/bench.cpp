@@ -263,6 +263,8 @@ SimulatedRecording simulate_free_space(const SimConfig& config, int index) {
   if (config.trajectory.free_space_path == "excitation")
     ref.add_path(0.0, std::make_shared<const ExcitationPath>(config.trajectory, config.protocol.q0,
                                                              derive_seed(config.seed, "path:" + name)));
+  else if (config.trajectory.free_space_path == "file")
+    ref.add_path(0.0, load_sampled_path(config.trajectory.free_space_file, load_robot_model(config.robot)));
   else
     ref = make_teleop_reference(config, name, duration);
   auto recs = simulate_run(config, ref, nullptr, {{name, 0.0, duration}},

@@ -115,7 +115,9 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("trajectory.pause_min_s", &T.pause_min_s, "shortest pause, s");
   add("trajectory.pause_max_s", &T.pause_max_s, "longest pause, s");
   add("trajectory.max_theta_rad", &T.max_theta_rad, "largest pivot angle the ranges may reach, rad");
-  add("trajectory.free_space_path", &T.free_space_path, "free-space recording: teleoperation | excitation");
+  add("trajectory.free_space_path", &T.free_space_path, "free-space recording: teleoperation | excitation | file");
+  add("trajectory.free_space_file", &T.free_space_file,
+      "file: the joint trajectory CSV the free-space recording plays (rcm excite)");
   add("trajectory.excitation_period_s", &T.excitation_period_s, "excitation: fundamental period, s");
   add("trajectory.excitation_harmonics", &T.excitation_harmonics, "excitation: harmonics of the fundamental");
   add("trajectory.excitation_ramp_s", &T.excitation_ramp_s, "excitation: fade-in from rest at q0, s");

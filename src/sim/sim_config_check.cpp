@@ -101,8 +101,10 @@ void validate_config(const SimConfig& c, const std::string& source) {
   require(T.pause_min_s > 0 && T.pause_max_s >= T.pause_min_s, "trajectory.pause_max_s",
           "expected 0 < pause_min_s <= pause_max_s");
   require(T.max_theta_rad > 0 && T.max_theta_rad < 1.3, "trajectory.max_theta_rad", "expected 0..1.3 rad");
-  require(T.free_space_path == "teleoperation" || T.free_space_path == "excitation", "trajectory.free_space_path",
-          "expected teleoperation or excitation, got '" + T.free_space_path + "'");
+  require(T.free_space_path == "teleoperation" || T.free_space_path == "excitation" || T.free_space_path == "file",
+          "trajectory.free_space_path", "expected teleoperation, excitation or file, got '" + T.free_space_path + "'");
+  require(T.free_space_path != "file" || !T.free_space_file.empty(), "trajectory.free_space_file",
+          "required when trajectory.free_space_path is file: a joint trajectory CSV");
   require(T.excitation_period_s > 0, "trajectory.excitation_period_s", "expected > 0");
   require(T.excitation_harmonics >= 1 && T.excitation_harmonics <= 50, "trajectory.excitation_harmonics",
           "expected 1..50");

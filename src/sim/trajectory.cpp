@@ -1,8 +1,15 @@
 #include "rcm/sim/trajectory.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <stdexcept>
+#include <string>
+
+#include "rcm/common/error.hpp"
+#include "rcm/io/joint_trajectory.hpp"
 
 namespace rcm::sim {
 
@@ -231,6 +238,57 @@ ReferenceSample ExcitationPath::evaluate(double t) const {
     out.qdd[j] = ddr * f + 2.0 * dr * df + r * ddf;
   }
   return out;
+}
+
+SampledPath::SampledPath(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
+                         const Eigen::MatrixXd& velocity) {
+  if (time.size() < 1 || position.rows() != time.size() || velocity.rows() != time.size() || position.cols() < 3 ||
+      velocity.cols() < 3)
+    throw std::invalid_argument("SampledPath: samples of at least 3 joints, as many as time stamps");
+  for (Eigen::Index i = 1; i < time.size(); ++i)
+    if (!(time[i] > time[i - 1])) throw std::invalid_argument("SampledPath: time must increase strictly");
+  time_ = time.array() - time[0];
+  q_ = position.leftCols<3>();
+  qd_ = velocity.leftCols<3>();
+}
+
+ReferenceSample SampledPath::evaluate(double t) const {
+  ReferenceSample r;
+  const Eigen::Index n = time_.size();
+  if (n == 1 || t <= 0.0 || t >= time_[n - 1]) {
+    r.q = (t <= 0.0 ? q_.row(0) : q_.row(n - 1)).transpose();
+    return r;
+  }
+  // The interval [t_i, t_i+1) that holds t.
+  const Eigen::Index i =
+      std::max<Eigen::Index>(0, std::upper_bound(time_.data(), time_.data() + n, t) - time_.data() - 1);
+  const double h = time_[i + 1] - time_[i], s = (t - time_[i]) / h, s2 = s * s, s3 = s2 * s;
+  for (int j = 0; j < 3; ++j) {
+    const double p0 = q_(i, j), p1 = q_(i + 1, j), m0 = h * qd_(i, j), m1 = h * qd_(i + 1, j);
+    r.q[j] = (2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * m0 + (3 * s2 - 2 * s3) * p1 + (s3 - s2) * m1;
+    r.qd[j] = ((6 * s2 - 6 * s) * p0 + (3 * s2 - 4 * s + 1) * m0 + (6 * s - 6 * s2) * p1 + (3 * s2 - 2 * s) * m1) / h;
+    r.qdd[j] = ((12 * s - 6) * p0 + (6 * s - 4) * m0 + (6 - 12 * s) * p1 + (6 * s - 2) * m1) / (h * h);
+  }
+  return r;
+}
+
+std::shared_ptr<const SampledPath> load_sampled_path(const std::filesystem::path& path, const PsmModel& robot) {
+  const JointTrajectory trajectory = load_joint_trajectory(path);
+  for (Eigen::Index t = 0; t < trajectory.time.size(); ++t)
+    for (int j = 0; j < 3; ++j) {
+      const DhJoint& joint = robot.joints()[static_cast<std::size_t>(j)];
+      const double q = trajectory.position(t, j);
+      if (q < joint.q_min || q > joint.q_max) {
+        InputLocation where;
+        where.file = trajectory.source;
+        where.line = trajectory.line[static_cast<std::size_t>(t)];
+        where.field = "position_" + std::to_string(j + 1);
+        where.kind = InputLocation::Kind::csv_column;
+        throw InputError(where, fmt::format("{} is outside the joint range [{}, {}] of {} ({})", q, joint.q_min,
+                                            joint.q_max, joint.name, robot.name()));
+      }
+    }
+  return std::make_shared<const SampledPath>(trajectory.time, trajectory.position, trajectory.velocity);
 }
 
 void ReferenceTrajectory::add_path(double t_start, std::shared_ptr<const ReferencePath> path) {

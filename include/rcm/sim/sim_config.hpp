@@ -119,11 +119,16 @@ struct TrajectoryParams {
   double pause_min_s = 0.4;
   double pause_max_s = 2.5;
   double max_theta_rad = 0.95;        // refuse a path whose pivot angle exceeds this
-  // The free-space recording's path: "teleoperation" (the path above) or
-  // "excitation", a periodic finite Fourier series per joint as the dVRK's
+  // The free-space recording's path: "teleoperation" (the path above),
+  // "file" (below) or "excitation", a periodic finite Fourier series per joint as the dVRK's
   // dynamics-identification runs play it: the same period over and over, never
   // at rest after its start. Trials and calibration are always teleoperation.
   std::string free_space_path = "teleoperation";
+  // "file": the free-space recording plays this joint trajectory (time,
+  // position_1..N, velocity_1..N; rcm excite writes one) from its first
+  // sample, interpolated (SampledPath); a recording longer than the file
+  // holds its last sample.
+  std::string free_space_file;
   // Bounded by q0 +- amplitude, as the teleoperation.
   double excitation_period_s = 10.0;  // fundamental period
   int excitation_harmonics = 5;       // frequencies k / period, k = 1..harmonics

@@ -6,9 +6,11 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <vector>
 
+#include "rcm/kinematics/psm_model.hpp"
 #include "rcm/sim/sim_config.hpp"
 
 namespace rcm::sim {
@@ -65,6 +67,27 @@ class ExcitationPath : public ReferencePath {
   double omega_ = 1.0, ramp_s_ = 1.0;
   std::array<std::vector<std::array<double, 2>>, 3> coeff_;  // per joint, per harmonic: a, b
 };
+
+// A path through given samples (a joint trajectory file, JointTrajectory),
+// joints 1-3: cubic Hermite interpolation of position and velocity between
+// samples, so position and velocity are continuous and the acceleration is
+// piecewise linear. Its time starts at the first sample; before it and after
+// the last sample the path holds that sample's position at rest.
+class SampledPath : public ReferencePath {
+ public:
+  SampledPath(const Eigen::VectorXd& time, const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);
+  ReferenceSample evaluate(double t) const override;
+  double duration_s() const { return time_.size() ? time_[time_.size() - 1] : 0.0; }
+
+ private:
+  Eigen::VectorXd time_;  // from 0
+  Eigen::MatrixXd q_, qd_;  // samples x 3
+};
+
+// A trajectory file (rcm/io/joint_trajectory.hpp) as a SampledPath; a
+// position of joints 1-3 outside the robot's joint limits is an InputError
+// naming the file, line and column.
+std::shared_ptr<const SampledPath> load_sampled_path(const std::filesystem::path& path, const PsmModel& robot);
 
 // Fifth-order polynomial from (q, qd, qdd) to (q1, 0, 0) over T seconds.
 struct QuinticMove {
