@@ -13,7 +13,10 @@ pitch, insertion) is fitted with `rcm dynamics fit` and scored with
    of terms absorbs when regressed on them after the fact (rcm's own
    regressors, through its Python module), their RMS by speed tercile and their
    mean by direction of motion;
-3. draws the mean residual against velocity per joint.
+3. draws the mean residual against velocity per joint;
+4. with --payload-split, re-identifies a payload change (`rcm dynamics
+   payload`) on the first seconds of a recording with the new payload and
+   scores the result on another one.
 
 Run with Debian's Python (numpy, gnuplot) and the built module:
   PYTHONPATH=build/python /usr/bin/python3 bench/real_arm_residuals.py --build build \\
@@ -42,6 +45,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "dynamics.md")
 FIGURE = os.path.join(ROOT, "docs", "figures", "real_arm_residual_velocity.png")
 BEGIN, END = "<!-- real-arm:begin -->", "<!-- real-arm:end -->"
+PAYLOAD_BEGIN, PAYLOAD_END = "<!-- real-arm-payload:begin -->", "<!-- real-arm-payload:end -->"
 JOINTS = ("yaw", "pitch", "insertion")
 UNITS = ("N m", "N m", "N")
 
@@ -121,10 +125,60 @@ MODELS = {"linear": [], "linear, free inertia": ["--free-inertia"], "linear, gen
           "hybrid": [], "lstm": []}
 
 
+def payload_table(args, rcm_cli, J):
+    """The payload re-identification table, between its own markers."""
+    out = [f"Measured by `bench/real_arm_residuals.py` on {datetime.datetime.now().strftime('%Y-%m-%d %H:%M')}, "
+           f"{cpu_model()}, {os.cpu_count()} cores."]
+    out.append(f"\n**Payload re-identified** (`rcm dynamics payload` on the first {args.refit_seconds:g} s of the "
+               "second recording, which has the new payload; then `rcm dynamics eval` on the third; the default "
+               "linear model). Torque RMSE yaw / pitch (N m) / insertion (N), and the force error at D = 30 mm, "
+               "theta = 20 deg, before and after:\n")
+    out.append("| split | without | force error (N) | re-identified | force error (N) | first moment found (N m) | "
+               "weight along the instrument found (N) |")
+    out.append("|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as work:
+        for s in args.payload_split:
+            label, files = s.split("=", 1)
+            train, refit_file, test = files.split(":")
+            model, refitted = os.path.join(work, "model.json"), os.path.join(work, "refit.json")
+            run([rcm_cli, "dynamics", "fit", "--model", "linear", "--seed", str(args.seed), "--out", model, train],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            head = os.path.join(work, "refit.csv")
+            with open(refit_file) as f, open(head, "w") as g:
+                header = f.readline()
+                g.write(header)
+                column = header.strip().split(",").index("time")
+                t0 = None
+                for line in f:
+                    t = float(line.split(",")[column])
+                    t0 = t if t0 is None else t0
+                    if t - t0 >= args.refit_seconds:
+                        break
+                    g.write(line)
+            found = json.loads(run([rcm_cli, "dynamics", "payload", model, head, "--out", refitted, "--json"],
+                                   capture_output=True, text=True).stdout)
+            cells = []
+            for m in (model, refitted):
+                pred = os.path.join(work, "pred.csv")
+                ev = json.loads(run([rcm_cli, "dynamics", "eval", m, test, "--json", "--predictions", pred],
+                                    capture_output=True, text=True).stdout)
+                p = np.genfromtxt(pred, delimiter=",", names=True)
+                r = np.stack([p[f"effort_{j}"] - p[f"tau_fs_{j}"] for j in (1, 2, 3)], 1)
+                e = ev["joints"]
+                cells += [f"{e[0]['rmse']:.3f} / {e[1]['rmse']:.3f} / {e[2]['rmse']:.3f}", f"{force_error(J, r):.1f}"]
+            h = np.linalg.norm(found["payload"]["first_moment_n_m"])
+            out.append(f"| {label} | " + " | ".join(cells) + f" | {h:.3f} | {abs(found['payload']['weight_n']):.2f} |")
+
+    block = "\n".join(out)
+    print(block)
+    if not args.no_doc:
+        write_block(DOC, PAYLOAD_BEGIN, PAYLOAD_END, block)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--build", default="build")
-    ap.add_argument("--split", action="append", required=True,
+    ap.add_argument("--split", action="append", default=[],
                     help="LABEL=TRAIN.csv[+TRAIN2.csv...]:TEST.csv")
     ap.add_argument("--models", default="linear|linear, generic",
                     help="'|'-separated: linear, linear, free inertia (19 free coefficients), linear, generic (the free "
@@ -132,6 +186,10 @@ def main():
     ap.add_argument("--max-minutes", default="3", help="wall-clock budget of each network fit")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--no-doc", action="store_true", help="print the tables instead of writing docs/dynamics.md")
+    ap.add_argument("--payload-split", action="append", default=[],
+                    help="LABEL=TRAIN.csv:REFIT.csv:TEST.csv: the linear model fitted on TRAIN, its payload "
+                         "re-identified on the first --refit-seconds of REFIT, scored on TEST")
+    ap.add_argument("--refit-seconds", type=float, default=10.0)
     args = ap.parse_args()
     rcm_cli = os.path.join(args.build, "bin", "rcm")
     kinds = [k.strip() for k in args.models.split("|")]
@@ -141,6 +199,12 @@ def main():
     kin = json.loads(run([rcm_cli, "kinematics", "--q", "0.3490658504,0,0.12", "--offset", "0.03", "--json"],
                          capture_output=True, text=True).stdout)
     J = np.array(kin["J_inc_base"])
+    if args.payload_split:
+        payload_table(args, rcm_cli, J)
+    if not args.split:
+        if not args.payload_split:
+            ap.error("nothing to do: give --split or --payload-split")
+        return
     splits = []
     for s in args.split:
         label, files = s.split("=", 1)

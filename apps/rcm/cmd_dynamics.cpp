@@ -1,5 +1,5 @@
-// `rcm dynamics fit|eval`: learn tau_fs from free-space recordings and score a
-// model as in the paper's Table II.
+// `rcm dynamics fit|eval|payload`: learn tau_fs from free-space recordings,
+// score a model as in the paper's Table II, re-identify a payload change.
 
 #include <fmt/format.h>
 
@@ -18,6 +18,7 @@
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/metrics.hpp"
+#include "rcm/dynamics/payload.hpp"
 #include "rcm/dynamics/torque_model.hpp"
 #include "rcm/io/json_file.hpp"
 #if defined(RCM_HAVE_TORCH)
@@ -216,6 +217,47 @@ void run_eval(const DynamicsArgs& a) {
     std::cout << "regime: " << (recs.size() > 1 ? recs[r].source + ": " : std::string()) << regimes[r].to_text() << "\n";
 }
 
+void run_payload(const DynamicsArgs& a) {
+  using namespace rcm::dynamics;
+  std::unique_ptr<TorqueModel> model = load_torque_model(a.model_path);
+  const auto* linear = dynamic_cast<const LinearTorqueModel*>(model.get());
+  if (!linear)
+    throw rcm::InputError(rcm::InputLocation::plain(a.model_path, "kind"),
+                          fmt::format("expected a linear model (the payload is re-identified on its rigid-body terms), got {}",
+                                      to_string(model->kind())));
+  const auto recs = load_all(a.recordings, a.dedupe);
+  for (const auto& r : recs)
+    if (auto w = check_sample_period(*model, r); !w.empty()) std::cerr << "warning: " << w << "\n";
+  PayloadRefit refit;
+  try {
+    refit = refit_payload(*linear, recs);
+  } catch (const rcm::InputError& e) {
+    // The library names the recording or the model's part; the file is the CLI's.
+    rcm::InputLocation where = e.where();
+    if (where.file.empty()) where.file = a.model_path;
+    throw rcm::InputError(where, e.reason());
+  }
+  save_torque_model(a.out, *refit.model);
+  if (a.json) {
+    nlohmann::json j = refit.to_json();
+    j["model"] = a.model_path;
+    j["out"] = a.out;
+    rcm::cli::print_json(j);
+    return;
+  }
+  std::vector<std::vector<std::string>> rows;
+  for (int j = 0; j < 3; ++j) {
+    const char* unit = j == 2 ? "N" : "N m";
+    rows.push_back({std::to_string(j + 1), fmt::format("{:.4g} {}", refit.rms_before[j], unit),
+                    fmt::format("{:.4g} {}", refit.rms_after[j], unit)});
+  }
+  std::cout << fmt::format("payload re-identified on {} samples (reciprocal condition {:.2g}): first moment "
+                           "[{:.4g}, {:.4g}, {:.4g}] N m, weight along the instrument {:.4g} N\n",
+                           refit.samples, refit.reciprocal_condition, refit.payload[0], refit.payload[1],
+                           refit.payload[2], refit.payload[3])
+            << rcm::cli::format_table({"joint", "RMS residual before", "after"}, rows) << "wrote " << a.out << "\n";
+}
+
 #if defined(RCM_HAVE_TORCH)
 void run_import(const DynamicsArgs& a) {
   auto model = rcm::cli::get_training_functions().import_torchscript(a.torchscript_in);
@@ -286,6 +328,16 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   ev->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   ev->add_flag("--json", args->json, "print {\"joints\": [{\"index\", \"rmse\", \"nrmse_percent\"}]}");
   ev->callback([args] { run_eval(*args); });
+
+  auto* pl = dyn->add_subcommand(
+      "payload", "Re-identify a payload change on the insertion stage from a short free-space recording with it");
+  pl->add_option("model", args->model_path, "linear model fitted without the payload")->required();
+  pl->add_option("recordings", args->recordings, "free-space recordings with the payload (a minute of motion)")
+      ->required();
+  pl->add_option("--out", args->out, "model file to write: the model with the payload's gravity")->required();
+  pl->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
+  pl->add_flag("--json", args->json, "print the payload and the residuals as one JSON object");
+  pl->callback([args] { run_payload(*args); });
 
 #if defined(RCM_HAVE_TORCH)
   auto* im = dyn->add_subcommand("import", "Convert a TorchScript LSTM trained in PyTorch (layout: docs/dynamics.md)");

@@ -356,9 +356,7 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
     const detail::ModelStats& val_stats = stats[kValidation];
     const double rigid_validation = val_stats.compute_loss(detail::solve_rigid_body(train_stats, M).theta);
     if (rigid_validation <= kRigidBodyTolerance * best) {
-      // The instrument axis is perpendicular to the yaw axis at q2 = 0: the
-      // insertion axis z3(q) of every robot rcm loads (docs/formats.md).
-      const double beta = M_PI / 2;
+      const double beta = kInstrumentAxisAngle;
       // What the remaining choices are scored by: the mean squared residual on
       // the validation slice plus, fitted on the slow half and scored on the
       // fast one and the other way round, on the other speed.

@@ -55,6 +55,9 @@
 namespace rcm::dynamics {
 
 constexpr int kInertiaTerms = 19;
+// beta of every robot rcm loads: the instrument axis is perpendicular to the
+// yaw axis at q2 = 0 (the insertion axis z3(q), docs/formats.md).
+constexpr double kInstrumentAxisAngle = 1.5707963267948966;
 constexpr int kGravityMoments = 7;
 constexpr int kRemoteCenterTerms = 8;
 
