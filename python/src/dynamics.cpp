@@ -11,6 +11,7 @@
 #include "rcm/dynamics/rigid_body.hpp"
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/dynamics/networks.hpp"
+#include "rcm/dynamics/payload.hpp"
 #include "rcm/dynamics/torque_model.hpp"
 
 namespace rcm::python {
@@ -290,6 +291,21 @@ void bind_dynamics(py::module_& m, py::module_& d) {
   }, py::arg("model"), py::arg("recordings"), py::arg("first_fraction") = 0.0, py::arg("streaming") = false,
         "Run over every recording (reset at each start) and score samples from first_fraction of each on\n"
         "(what `rcm dynamics eval` reports; streaming=True: predict_torque_streaming, as `--streaming`)");
+  d.def("refit_payload", [](const LinearTorqueModel& model, const std::vector<Recording>& recordings) {
+    PayloadRefit refit;
+    {
+      py::gil_scoped_release release;
+      refit = refit_payload(model, recordings);
+    }
+    py::object out = to_python(refit.to_json());
+    out["model"] = py::cast(std::shared_ptr<LinearTorqueModel>(std::move(refit.model)));
+    return out;
+  }, py::arg("model"), py::arg("recordings"),
+        "Re-identify a payload change on the insertion stage from free-space recordings with it, on a linear\n"
+        "model fitted without it (what `rcm dynamics payload` does). Returns a dict: 'model' (the model with\n"
+        "the payload's gravity), 'payload' {'first_moment_n_m', 'weight_n'}, 'rms_before', 'rms_after',\n"
+        "'instrument_axis', 'reciprocal_condition', 'samples'; rcm.InputError when the model or the motion\n"
+        "cannot identify it.");
 }
 
 }  // namespace rcm::python

@@ -54,6 +54,24 @@ class TestDynamics(unittest.TestCase):
         with self.assertRaises(rcm.InputError):
             rcm.dynamics.compute_inertia_regressor(q, qd[:2], qdd)
 
+    def test_refit_payload(self):
+        # On the recording the model was fitted on there is no payload to find:
+        # the residual does not grow and the weight found is small; the model it
+        # returns predicts like any other. A generic potential is refused.
+        free = rcm.load_recording(session_file("free_space.csv"))
+        out = rcm.dynamics.refit_payload(self.model(), [free])
+        self.assertEqual(out["samples"], free.num_samples)
+        self.assertLess(abs(out["payload"]["weight_n"]), 0.2)
+        for before, after in zip(out["rms_before"], out["rms_after"]):
+            self.assertLessEqual(after, before + 1e-12)
+        self.assertEqual(rcm.dynamics.predict_torque(out["model"], free).shape, (free.num_samples, 3))
+        options = rcm.dynamics.FitOptions()
+        options.verbose = False
+        options.rigid_body = False
+        generic = rcm.dynamics.fit_linear_torque_model([free], options).model
+        with self.assertRaises(rcm.InputError):
+            rcm.dynamics.refit_payload(generic, [free])
+
     def test_fit_matches_cli_fit(self):
         out = tmp_path("cli_linear.json")
         run_cli("dynamics", "fit", "--model", "linear", "--out", out, session_file("free_space.csv"), json_out=False)
