@@ -24,7 +24,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 MAX_LEN = {
     "csv_recording": 4096, "csv_rostopic": 4096, "session": 2048, "torque_model": 32768,
     "tissue_law": 2048, "robot": 4096, "sim_config": 8192, "rosbag2_db3": 16384,
-    "rosbag2_metadata": 2048, "mcap": 16384, "cdr": 1024, "ros_bag": 16384,
+    "rosbag2_metadata": 2048, "mcap": 16384, "cdr": 1024, "ros_bag": 16384, "joint_trajectory": 4096,
 }
 # ASan keeps the allocation stack of every live and quarantined chunk in a
 # depot that is never freed; yaml-cpp's recursive parser makes a new stack for
