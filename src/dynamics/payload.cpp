@@ -72,7 +72,8 @@ PayloadRefit refit_payload(const LinearTorqueModel& model, const std::vector<Rec
   const LinearTorqueParameters& p = model.parameters();
   if (model.num_outputs() < 3)
     throw InputError(InputLocation::plain("", "free-space model"),
-                     fmt::format("expected a model of joints 1-3 (yaw, pitch, insertion); this one predicts {}", model.num_outputs()));
+                     fmt::format("expected a model of joints 1-3 (yaw, pitch, insertion); this one predicts {}",
+                                 model.num_outputs()));
   const Eigen::Vector3d e = get_instrument_axis(p);
   const Eigen::Matrix<double, G, kPayloadTerms> B = compute_payload_coefficient_map(p.gravity_direction, e);
 
@@ -103,7 +104,8 @@ PayloadRefit refit_payload(const LinearTorqueModel& model, const std::vector<Rec
     samples += static_cast<std::size_t>(r.rows());
     residuals.push_back(std::move(r));
   }
-  if (samples == 0) throw InputError(InputLocation::plain("", "recordings"), "expected at least one sample with the payload");
+  if (samples == 0)
+    throw InputError(InputLocation::plain("", "recordings"), "expected at least one sample with the payload");
 
   // Scaled to unit diagonal, the normal matrix's smallest to largest eigenvalue
   // says whether the motion tells the four terms apart.
