@@ -1,13 +1,13 @@
 // The conditioning of the linear model's regressor over a motion
 // (excitation.hpp, RegressorConditioning): what `rcm excite` optimises and
 // reports, and what a recorded motion can be compared with.
-#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
 #include "rcm/dynamics/excitation.hpp"
 #include "rcm/dynamics/linear_model.hpp"
+#include "gram_conditioning.hpp"
 
 namespace rcm::dynamics {
 
@@ -58,33 +58,17 @@ void RegressorConditioning::add_sample(const Eigen::Vector3d& q, const Eigen::Ve
   ++samples_;
 }
 
-namespace {
-// Smallest and largest eigenvalue of the Gram matrix with unit-norm columns;
-// false when a column is zero.
-template <class Gram>
-bool get_extreme_eigenvalues(const Gram& gram, double& lo, double& hi) {
-  constexpr int K = Gram::RowsAtCompileTime;
-  const Eigen::Matrix<double, K, 1> d = gram.diagonal();
-  if (!(d.array() > 0.0).all()) return false;
-  const Eigen::Matrix<double, K, 1> s = d.cwiseSqrt().cwiseInverse();
-  const Gram n = s.asDiagonal() * gram * s.asDiagonal();
-  const Eigen::SelfAdjointEigenSolver<Gram> solver(n, Eigen::EigenvaluesOnly);
-  lo = solver.eigenvalues()(0);
-  hi = solver.eigenvalues()(K - 1);
-  return std::isfinite(lo) && std::isfinite(hi) && hi > 0.0;
-}
-}  // namespace
 
 double RegressorConditioning::get_condition_number() const {
   double lo = 0.0, hi = 0.0;
-  if (!get_extreme_eigenvalues(gram_, lo, hi) || !(lo > 0.0)) return std::numeric_limits<double>::infinity();
+  if (!detail::get_scaled_extreme_eigenvalues(gram_, lo, hi) || !(lo > 0.0)) return std::numeric_limits<double>::infinity();
   return std::sqrt(hi / lo);
 }
 
 double RegressorConditioning::get_log_condition_number() const {
   constexpr double kFloor = 1e-20;
   double lo = 0.0, hi = 0.0;
-  if (!get_extreme_eigenvalues(gram_, lo, hi)) return 0.5 * -std::log(kFloor);
+  if (!detail::get_scaled_extreme_eigenvalues(gram_, lo, hi)) return 0.5 * -std::log(kFloor);
   return 0.5 * std::log(hi / std::max(lo, kFloor * hi));
 }
 

@@ -3,11 +3,13 @@
 #include <fmt/format.h>
 
 #include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "rcm/common/error.hpp"
 #include "rcm/dynamics/rigid_body.hpp"
+#include "gram_conditioning.hpp"
 
 namespace rcm::dynamics {
 
@@ -78,46 +80,51 @@ PayloadRefit refit_payload(const LinearTorqueModel& model, const std::vector<Rec
   const Eigen::Matrix<double, G, kPayloadTerms> B = compute_payload_coefficient_map(p.gravity_direction, e);
 
   // Normal equations of the residual r = effort - model on the payload terms,
-  // pooled over every recording.
-  Eigen::Matrix<double, kPayloadTerms, kPayloadTerms> A = Eigen::Matrix<double, kPayloadTerms, kPayloadTerms>::Zero();
-  Eigen::Matrix<double, kPayloadTerms, 1> b = Eigen::Matrix<double, kPayloadTerms, 1>::Zero();
+  // per joint (A = sum over joints of A_j), pooled over every recording: they
+  // also give each joint's residual after the refit,
+  // |r_j - Y_j x|^2 = |r_j|^2 - 2 x.b_j + x' A_j x, without a second pass.
+  using Normal = Eigen::Matrix<double, kPayloadTerms, kPayloadTerms>;
+  using Terms = Eigen::Matrix<double, kPayloadTerms, 1>;
+  std::array<Normal, 3> A_joint;
+  std::array<Terms, 3> b_joint;
+  for (int j = 0; j < 3; ++j) {
+    A_joint[j].setZero();
+    b_joint[j].setZero();
+  }
   Eigen::Vector3d sum_sq = Eigen::Vector3d::Zero();
   std::size_t samples = 0;
-  std::vector<Eigen::MatrixXd> residuals;
-  residuals.reserve(recordings.size());
   Eigen::Matrix<double, 3, G> Yg;
   for (const Recording& rec : recordings) {
     if (rec.num_joints() < 3)
       throw InputError(InputLocation::plain(rec.source, "position"),
                        fmt::format("expected joints 1-3 (yaw, pitch, insertion); the recording has {}", rec.num_joints()));
     const Eigen::MatrixXd predicted = predict_torque(model, rec);
-    Eigen::MatrixXd r = rec.effort.leftCols(3) - predicted.leftCols(3);
-    for (Eigen::Index t = 0; t < r.rows(); ++t) {
+    for (Eigen::Index t = 0; t < predicted.rows(); ++t) {
       // A recording's matrices are column-major: joint values of one sample are not contiguous.
       const double q[3] = {rec.position(t, 0), rec.position(t, 1), rec.position(t, 2)};
       LinearTorqueModel::compute_gravity_regressor(q, Yg);
       const Eigen::Matrix<double, 3, kPayloadTerms> Y = Yg * B;
-      A.noalias() += Y.transpose() * Y;
-      b.noalias() += Y.transpose() * r.row(t).transpose();
-      sum_sq += r.row(t).transpose().cwiseAbs2();
+      for (int j = 0; j < 3; ++j) {
+        const double r = rec.effort(t, j) - predicted(t, j);
+        A_joint[j].noalias() += Y.row(j).transpose() * Y.row(j);
+        b_joint[j].noalias() += r * Y.row(j).transpose();
+        sum_sq[j] += r * r;
+      }
     }
-    samples += static_cast<std::size_t>(r.rows());
-    residuals.push_back(std::move(r));
+    samples += static_cast<std::size_t>(predicted.rows());
   }
   if (samples == 0)
     throw InputError(InputLocation::plain("", "recordings"), "expected at least one sample with the payload");
+  const Normal A = A_joint[0] + A_joint[1] + A_joint[2];
+  const Terms b = b_joint[0] + b_joint[1] + b_joint[2];
 
-  // Scaled to unit diagonal, the normal matrix's smallest to largest eigenvalue
-  // says whether the motion tells the four terms apart.
-  const Eigen::Vector4d d = A.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
-  const Eigen::Matrix4d As = d.asDiagonal() * A * d.asDiagonal();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> eig(As, Eigen::EigenvaluesOnly);
-  const double rcond = eig.eigenvalues()[0] / std::max(eig.eigenvalues()[3], 1e-300);
+  // Whether the motion tells the four terms apart.
+  double lo = 0.0, hi = 0.0;
+  Eigen::Index worst = 0;
+  const bool nonzero = detail::get_scaled_extreme_eigenvalues(A, lo, hi, &worst);
+  const double rcond = nonzero ? lo / hi : 0.0;
   if (!(rcond >= options.min_reciprocal_condition)) {
-    // The weakest direction, named by its largest term.
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> vecs(As);
-    Eigen::Index worst = 0;
-    vecs.eigenvectors().col(0).cwiseAbs().maxCoeff(&worst);
+    if (nonzero) worst = detail::get_weakest_column(A);
     throw InputError(InputLocation::plain(recordings.front().source, "position"),
                      fmt::format("expected motion that identifies the payload: the recordings leave its term {} undetermined "
                                  "(reciprocal condition {:.2g}); move pitch and insertion over a wider range",
@@ -131,18 +138,11 @@ PayloadRefit refit_payload(const LinearTorqueModel& model, const std::vector<Rec
   out.samples = samples;
   LinearTorqueParameters refit = p;
   refit.gravity += B * out.payload;
-  Eigen::Vector3d sum_sq_after = Eigen::Vector3d::Zero();
-  std::size_t k = 0;
-  for (const Recording& rec : recordings) {
-    const Eigen::MatrixXd& r = residuals[k++];
-    for (Eigen::Index t = 0; t < r.rows(); ++t) {
-      const double q[3] = {rec.position(t, 0), rec.position(t, 1), rec.position(t, 2)};
-      LinearTorqueModel::compute_gravity_regressor(q, Yg);
-      sum_sq_after += (r.row(t).transpose() - Yg * B * out.payload).cwiseAbs2();
-    }
+  for (int j = 0; j < 3; ++j) {
+    const double after = sum_sq[j] - 2.0 * out.payload.dot(b_joint[j]) + out.payload.dot(A_joint[j] * out.payload);
+    out.rms_before[j] = std::sqrt(sum_sq[j] / static_cast<double>(samples));
+    out.rms_after[j] = std::sqrt(std::max(after, 0.0) / static_cast<double>(samples));
   }
-  out.rms_before = (sum_sq / static_cast<double>(samples)).cwiseSqrt();
-  out.rms_after = (sum_sq_after / static_cast<double>(samples)).cwiseSqrt();
 
   TorqueModelInfo info = model.info();
   info.training["payload_refit"] = out.to_json();
