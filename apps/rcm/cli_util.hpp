@@ -25,6 +25,12 @@ void print_json(const nlohmann::json& value);
 std::string format_table(const std::vector<std::string>& header,
                          const std::vector<std::vector<std::string>>& rows);
 
+// Thrown by a command whose work succeeded with an outcome scripts branch on
+// (`rcm setup`: not ready), after its output is written; main returns `code`.
+struct ExitStatus {
+  int code = 1;
+};
+
 nlohmann::json to_json(const Eigen::Vector3d& v);
 nlohmann::json to_json_rows(const Eigen::Matrix3d& m);
 

@@ -1,7 +1,8 @@
 // rcm: sensorless RCM misalignment estimation for the dVRK PSM.
 // Subcommands register themselves (command_registry.hpp); main only orders
 // them, runs CLI11, and turns exceptions into messages and exit codes:
-// 0 success, 2 bad input (located message), 1 anything else, 128 + the
+// 0 success, 2 bad input (located message), 3 a check that found the arm not
+// ready (`rcm setup`), 1 anything else, 128 + the
 // signal (130 SIGINT, 143 SIGTERM) when a command that installs the interrupt
 // handlers (run, dynamics fit, simulate, demo) was stopped by one.
 
@@ -10,6 +11,7 @@
 #include <csignal>
 #include <iostream>
 
+#include "cli_util.hpp"
 #include "command_registry.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/common/interrupt.hpp"
@@ -39,6 +41,8 @@ int main(int argc, char** argv) {
     return app.exit(e);
   } catch (const rcm::Interrupted& e) {
     return interrupted(e.what());
+  } catch (const rcm::cli::ExitStatus& e) {
+    return e.code;
   } catch (const rcm::InputError& e) {
     std::cerr << "rcm: error: " << e.what() << std::endl;
     return 2;

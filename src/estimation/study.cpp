@@ -153,15 +153,28 @@ JointEstimatorOptions make_joint_options_for_model(const JointEstimatorOptions& 
   return o;
 }
 
+namespace {
+
+// Checked before a fit, so that a session without one fails at once.
+void require_monitor_calibration(const Session& session) {
+  if (session.calibration) return;
+  InputLocation where;
+  where.file = session.manifest.string();
+  where.kind = InputLocation::Kind::json_field;
+  where.field = "calibration";
+  throw InputError(where, "missing: the monitor identifies the tissue on a calibration at a known coaxial offset");
+}
+
+}  // namespace
+
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
-  if (!session.calibration) {
-    InputLocation where;
-    where.file = session.manifest.string();
-    where.kind = InputLocation::Kind::json_field;
-    where.field = "calibration";
-    throw InputError(where, "missing: the monitor identifies the tissue on a calibration at a known coaxial offset");
-  }
-  MonitorSetup setup{fit_free_space_step(session, options, fitter), make_incision_frame(session.q0), {}, {}};
+  require_monitor_calibration(session);
+  return prepare_monitor(session, options, fit_free_space_step(session, options, fitter));
+}
+
+MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space) {
+  require_monitor_calibration(session);
+  MonitorSetup setup{std::move(free_space), make_incision_frame(session.q0), {}, {}};
   setup.joint_options = make_joint_options_for_model(options.joint, setup.free_space);
   const Recording calibration = load_recording(session.calibration->recording, get_read_options(session, options.read));
   progress(options.verbose, "identifying the tissue model in torque space on " + calibration.source);

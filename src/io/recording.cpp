@@ -6,6 +6,7 @@
 #include <iostream>
 #include <map>
 #include <mutex>
+#include <stdexcept>
 #include <string_view>
 
 #include "rcm/common/options.hpp"
@@ -356,6 +357,27 @@ Recording load_recording(const std::filesystem::path& path, const RecordingReadO
     return rec;
   }
   return parse_recording(read_text_file(path), path.string(), options);
+}
+
+Recording get_recording_rows(const Recording& recording, Eigen::Index begin, Eigen::Index end) {
+  const Eigen::Index T = recording.time.size();
+  if (begin < 0 || end > T || begin > end)
+    throw std::out_of_range("get_recording_rows: [" + std::to_string(begin) + ", " + std::to_string(end) +
+                            ") outside " + std::to_string(T) + " samples of " + recording.source);
+  Recording out;
+  out.source = recording.source;
+  out.layout = recording.layout;
+  const Eigen::Index n = end - begin;
+  out.time = recording.time.segment(begin, n);
+  out.position = recording.position.middleRows(begin, n);
+  out.velocity = recording.velocity.middleRows(begin, n);
+  out.effort = recording.effort.middleRows(begin, n);
+  if (recording.force) out.force = recording.force->middleRows(begin, n);
+  if (!recording.line.empty())
+    out.line.assign(recording.line.begin() + begin, recording.line.begin() + end);
+  out.time_from_rate = recording.time_from_rate;
+  out.repeated_rows_removed = recording.repeated_rows_removed;
+  return out;
 }
 
 void validate_recording(const Recording& r) {

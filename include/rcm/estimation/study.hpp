@@ -179,6 +179,8 @@ struct MonitorSetup {
   JointEstimatorOptions joint_options;
 };
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter);
+// The same with the free-space model already fitted (or loaded).
+MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space);
 
 // What run_study checks of a session and options before any work: a
 // calibration, at least one trial, every option within its table's limits

@@ -93,6 +93,10 @@ void save_recording(const std::filesystem::path& path, const Recording& recordin
 // increasing, every value finite); throws InputError naming `recording.source`.
 void validate_recording(const Recording& recording);
 
+// Samples [begin, end) of `recording` as a recording of their own (source and
+// lines kept, so that messages still point into the file).
+Recording get_recording_rows(const Recording& recording, Eigen::Index begin, Eigen::Index end);
+
 // What `rcm inspect` shows of a recording.
 struct RecordingSummary {
   std::size_t samples = 0;
