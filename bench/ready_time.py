@@ -1,0 +1,142 @@
+#!/usr/bin/python3
+"""From docking to the first estimate on the simulated bench, end to end:
+
+    rcm excite --duration 120                  (designed before docking)
+    rcm simulate --free-space-trajectory ...   (the robot's time: free space,
+                 --calibration-s 30             baseline, calibration)
+    rcm setup SESSION                          (checks, fits; says ready)
+    rcm monitor --model-file ...               (every trial streamed: the first
+                                                estimate, its settling and error)
+
+for a few seeds. Robot time is the recordings' own duration as `rcm setup`
+counts it; computation is the wall time of `rcm setup` (fit, learning curve,
+tissue model, checks) on this machine. The table goes between the markers of
+docs/setup.md with the date and machine:
+
+    /usr/bin/python3 bench/ready_time.py [--build build] [--seeds 1,2,3] [--no-doc]
+"""
+import argparse
+import datetime
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from doc_tables import cpu_model, run, write_block  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DOC = os.path.join(ROOT, "docs", "setup.md")
+BEGIN, END = "<!-- ready-time:begin -->", "<!-- ready-time:end -->"
+
+
+def timed_json(cmd, ok_codes=(0,)):
+    start = time.monotonic()
+    p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    print("+", " ".join(cmd), file=sys.stderr, flush=True)
+    if p.returncode not in ok_codes:
+        raise SystemExit(f"{cmd[1]} exited {p.returncode}")
+    return json.loads(p.stdout), time.monotonic() - start, p.returncode
+
+
+def one_seed(rcm, seed, work, args):
+    d = os.path.join(work, f"seed{seed}")
+    os.makedirs(d, exist_ok=True)
+    traj = os.path.join(d, "excitation.csv")
+    excite, excite_s, _ = timed_json([rcm, "excite", "--duration", str(args.free_space_s), "--seed", str(seed),
+                                      "--out", traj, "--json"])
+    session_dir = os.path.join(d, "session")
+    run([rcm, "simulate", "--seed", str(seed), "--free-space-trajectory", traj, "--calibration-s",
+         str(args.calibration_s), "--trial-s", str(args.trial_s), "--out", session_dir],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    manifest = os.path.join(session_dir, "session.json")
+    setup, setup_s, code = timed_json([rcm, "setup", manifest, "--out", os.path.join(d, "setup"), "--json"],
+                                      ok_codes=(0, 3))
+    with open(manifest) as f:
+        trials = json.load(f)["trials"]
+    model = os.path.join(d, "setup", "free_space_model.json")
+    errors = {"above": [], "up_to": []}
+    settled = []
+    for t in trials:
+        rec = os.path.join(session_dir, t["recording"])
+        mon, _, _ = timed_json([rcm, "monitor", "--session", manifest, "--model-file", model, rec, "--quiet",
+                                "--json"])
+        D = t["truth"]["misalignment_m"][2]
+        errors["above" if D > 0.020 else "up_to"].append(mon["error_m"])
+        if mon.get("settled_after_s") is not None:
+            settled.append(mon["settled_after_s"])
+    return {
+        "seed": seed,
+        "excite_s": excite_s,
+        "condition_number": excite["condition_number"],
+        "ready": setup["ready"],
+        "exit": code,
+        "missing": [f["message"] for f in setup["findings"] if f["severity"] == "missing"],
+        "robot_s": setup["robot_time_s"],
+        "setup_compute_s": setup["compute_s"],
+        "setup_wall_s": setup_s,
+        "force_error_n": setup["model"]["force_error_n"],
+        "self_check_m": (setup["calibration"] or {}).get("self_check_error_m"),
+        "mean_e_above_20mm": statistics.mean(errors["above"]) if errors["above"] else None,
+        "mean_e_up_to_20mm": statistics.mean(errors["up_to"]) if errors["up_to"] else None,
+        "settled_after_s_max": max(settled) if settled else None,
+        "trials": len(trials),
+    }
+
+
+def mm(v):
+    return "n/a" if v is None else f"{1e3 * v:.2f}"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--build", default=os.path.join(ROOT, "build"))
+    ap.add_argument("--seeds", default="1,2,3")
+    ap.add_argument("--free-space-s", type=float, default=120.0)
+    ap.add_argument("--calibration-s", type=float, default=30.0)
+    ap.add_argument("--trial-s", type=float, default=30.0)
+    ap.add_argument("--keep", help="keep the sessions and reports in this directory")
+    ap.add_argument("--json", help="write every figure to this file")
+    ap.add_argument("--no-doc", action="store_true", help="print the table instead of writing docs/setup.md")
+    args = ap.parse_args()
+    rcm = os.path.join(args.build, "bin", "rcm")
+    work = args.keep or tempfile.mkdtemp(prefix="rcm_ready_")
+    rows = [one_seed(rcm, int(s), work, args) for s in args.seeds.split(",")]
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(rows, f, indent=2)
+
+    stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    lines = [f"Measured by `bench/ready_time.py` on {stamp}, {cpu_model()}, {os.cpu_count()} cores: "
+             f"`rcm excite --duration {args.free_space_s:g}`, `rcm simulate --free-space-trajectory` with "
+             f"`--calibration-s {args.calibration_s:g} --trial-s {args.trial_s:g}`, `rcm setup`, then "
+             "`rcm monitor --model-file` on every trial of the session (its final estimate against the truth, and "
+             "the time from the trial's first motion until the running estimate stays within 5 mm of its final value).",
+             "",
+             "| seed | ready | robot time: free space + baseline + calibration (s) | `rcm setup` computation (s) | "
+             "force error of the model (N) | calibration self-check (mm) | mean e, D > 20 mm (mm) | "
+             "mean e, D <= 20 mm (mm) | settled after the first motion, worst trial (s) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        t = r["robot_s"]
+        lines.append(f"| {r['seed']} | {'yes' if r['ready'] else 'no'} | {t['free_space']:.0f} + {t['baseline']:.1f} + "
+                     f"{t['calibration']:.0f} = {t['total']:.0f} | {r['setup_compute_s']:.1f} | "
+                     f"{r['force_error_n']:.2f} | {mm(r['self_check_m'])} | {mm(r['mean_e_above_20mm'])} | "
+                     f"{mm(r['mean_e_up_to_20mm'])} | "
+                     f"{'n/a' if r['settled_after_s_max'] is None else format(r['settled_after_s_max'], '.2f')} |")
+    for r in rows:
+        for m in r["missing"]:
+            lines.append(f"\nSeed {r['seed']}, missing: {m}")
+    block = "\n".join(lines)
+    if args.no_doc:
+        print(block)
+        return
+    write_block(DOC, BEGIN, END, block)
+    print(block)
+
+
+if __name__ == "__main__":
+    main()
