@@ -1,8 +1,10 @@
 // The whole study on a session (run_study, as `rcm run`), its steps for the
-// online monitor (fit_free_space_step, prepare_monitor) and its results.
+// online monitor (fit_free_space_step, prepare_monitor), its results, and the
+// checks between docking and the first estimate (run_setup, as `rcm setup`).
 
 #include "common.hpp"
 #include "options.hpp"
+#include "rcm/estimation/setup.hpp"
 #include "rcm/estimation/study.hpp"
 
 namespace rcm::python {
@@ -109,6 +111,22 @@ void bind_study(py::module_& m) {
         "Free-space model, incision frame at q0 and the tissue model identified on the calibration, as\n"
         "`rcm monitor` prepares them. Then: OnlinePipeline(setup.free_space.model, OnlineEstimator(\n"
         "setup.incision, setup.tissue, make_online_options(setup.joint_options))).");
+  def_options<SetupOptions>(m, "SetupOptions", "Thresholds of run_setup (`rcm setup`; docs/setup.md)");
+  m.def("run_setup", [](const Session& session, const StudyOptions& o, const SetupOptions& setup_options) {
+    SetupReport report;
+    {
+      py::gil_scoped_release release;
+      report = run_setup(session, o, setup_options, get_python_fitter());
+    }
+    py::object out = to_python(report.to_json());
+    out["text"] = report.to_text();
+    out["free_space_model"] = report.free_space.model ? py::cast(unconst(report.free_space.model)) : py::none();
+    return out;
+  }, py::arg("session"), py::arg("options") = StudyOptions{}, py::arg("setup_options") = SetupOptions{},
+        "Is the arm ready to estimate? What `rcm setup` checks and fits, as the dict of its setup.json\n"
+        "('ready', 'findings' [{'check', 'severity', 'message'}], 'robot_time_s', 'compute_s', 'joints',\n"
+        "'model', 'learning_curve', 'calibration'), plus 'text' (what the command prints) and\n"
+        "'free_space_model' (the fitted TorqueModel, or None when the data could not be fitted).");
   m.def("compute_settled_free_space_torque", [](const TorqueModel& model, py::handle q0, double settle_s) {
     return compute_settled_free_space_torque(
         model, to_vector3(q0, argument_location("rcm.compute_settled_free_space_torque", "q0")), settle_s);

@@ -66,6 +66,30 @@ class TestThreeStep(unittest.TestCase):
         self.assertEqual(cm.exception.field, "calibration")
 
 
+class TestSetup(unittest.TestCase):
+    def test_ready_and_what_is_missing(self):
+        session = rcm.load_session(_state["manifest"])
+        study = quiet_study_options(model_file=None)
+        report = rcm.run_setup(session, study)
+        self.assertTrue(report["ready"], report["text"])
+        self.assertEqual(len(report["joints"]), 3)
+        self.assertIsNotNone(report["free_space_model"])
+        self.assertIn("ready", report["text"])
+        demanding = rcm.SetupOptions()
+        demanding.min_free_space_s = 1e4
+        demanding.workspace_half_range = [0.0, 1.2, 0.0]
+        poor = rcm.run_setup(session, study, demanding)
+        self.assertFalse(poor["ready"])
+        missing = {f["check"]: f["message"] for f in poor["findings"] if f["severity"] == "missing"}
+        self.assertIn("free_space.duration", missing)
+        self.assertIn("s more", missing["free_space.duration"])
+        self.assertIn("toward outer_pitch -1.20 rad and 1.20 rad", missing["free_space.position.outer_pitch"])
+        bad = rcm.SetupOptions()
+        with self.assertRaises(Exception):
+            bad.curve_fractions = [0.5, 0.8]
+            rcm.run_setup(session, study, bad)
+
+
 class TestOnline(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
