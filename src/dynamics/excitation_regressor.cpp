@@ -89,12 +89,11 @@ double compute_regressor_condition_number(const Eigen::MatrixXd& position, const
   return conditioning.get_condition_number();
 }
 
-std::vector<int> count_velocity_reversals(const Eigen::MatrixXd& velocity) {
+std::vector<int> count_velocity_reversals(const Eigen::MatrixXd& velocity, double floor_fraction) {
   std::vector<int> out(static_cast<std::size_t>(velocity.cols()), 0);
   for (Eigen::Index j = 0; j < velocity.cols(); ++j) {
     if (velocity.rows() == 0) continue;
-    // Rounding leaves a path at rest with velocities of either sign near 0.
-    const double floor = 1e-9 * velocity.col(j).cwiseAbs().maxCoeff();
+    const double floor = floor_fraction * velocity.col(j).cwiseAbs().maxCoeff();
     int last = 0;
     for (Eigen::Index t = 0; t < velocity.rows(); ++t) {
       const double v = velocity(t, j);

@@ -10,6 +10,7 @@
 
 #include "rcm/common/error.hpp"
 #include "rcm/common/options.hpp"
+#include "rcm/dynamics/excitation.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/force/incision_force.hpp"
 #include "rcm/kinematics/psm_model.hpp"
@@ -74,18 +75,6 @@ const char* to_string(SetupSeverity severity) {
     case SetupSeverity::missing: return "missing";
   }
   return "?";
-}
-
-int count_velocity_reversals(const Eigen::Ref<const Eigen::VectorXd>& velocity, double threshold) {
-  int sign = 0, reversals = 0;
-  for (Eigen::Index i = 0; i < velocity.size(); ++i) {
-    const double v = velocity[i];
-    const int s = v > threshold ? 1 : (v < -threshold ? -1 : 0);
-    if (s == 0) continue;
-    if (sign != 0 && s != sign) ++reversals;
-    sign = s;
-  }
-  return reversals;
 }
 
 double compute_force_error_rms(const IncisionFrame& incision, const Eigen::Vector3d& q, double D,
@@ -233,7 +222,7 @@ SetupReport run_setup(const Session& session, const StudyOptions& study, const S
       c.speed_max = std::max(c.speed_max, f.velocity.col(j).cwiseAbs().maxCoeff());
     }
     for (const auto& f : free_space)
-      c.reversals += count_velocity_reversals(f.velocity.col(j), options.reversal_speed_fraction * c.speed_max);
+      c.reversals += dynamics::count_velocity_reversals(f.velocity.col(j), options.reversal_speed_fraction).front();
     c.wanted_min = c.wanted_max = session.q0[j];
     if (options.workspace_half_range[j] > 0) {
       c.wanted_min = session.q0[j] - options.workspace_half_range[j];

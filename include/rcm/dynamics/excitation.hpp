@@ -147,9 +147,11 @@ Eigen::Vector3d get_excitation_dahl_displacement(const ExcitationLimits& limits)
 double compute_regressor_condition_number(const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity,
                                           const Eigen::MatrixXd& acceleration, const Eigen::Vector3d& dahl_displacement);
 
-// Sign changes of each column of `velocity`; values within 1e-9 of the
-// column's largest magnitude count as zero (skipped).
-std::vector<int> count_velocity_reversals(const Eigen::MatrixXd& velocity);
+// Sign changes of each column of `velocity`; values within `floor_fraction` of
+// the column's largest magnitude count as zero (skipped): 1e-9 for a designed
+// path (rounding at rest), a tenth or so for a measured one (noise at rest is
+// no reversal).
+std::vector<int> count_velocity_reversals(const Eigen::MatrixXd& velocity, double floor_fraction = 1e-9);
 
 // The solver's outcome.
 struct ExcitationSummary {

@@ -35,7 +35,8 @@ struct SetupOptions {
   Eigen::Vector3d workspace_half_range = Eigen::Vector3d(0.3, 0.3, 0.03);
   int min_reversals = 10;
   // A reversal counts once the velocity has passed this fraction of the
-  // joint's peak speed on both sides: encoder noise at rest is no reversal.
+  // joint's peak speed in the recording on both sides: encoder noise at rest
+  // is no reversal.
   double reversal_speed_fraction = 0.1;
   // Calibration.
   double min_calibration_s = 20.0;
@@ -108,9 +109,6 @@ struct SetupReport {
   nlohmann::json to_json() const;
   std::string to_text() const;
 };
-
-// Velocity reversals of one joint (see SetupOptions::reversal_speed_fraction).
-int count_velocity_reversals(const Eigen::Ref<const Eigen::VectorXd>& velocity, double threshold);
 
 // RMS incision force of independent joint torque errors `sigma` (N m, N m, N)
 // at configuration q and coaxial offset D: Eq. 6 applied to each joint's error.
