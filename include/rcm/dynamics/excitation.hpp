@@ -47,10 +47,12 @@ struct ExcitationOptions {
   Eigen::Vector3d q0 = Eigen::Vector3d(0.0, 0.0, 0.12);  // start and end, rad, rad, m
   // Kept free inside the robot description's joint limits at each end.
   Eigen::Vector3d position_margin = Eigen::Vector3d(0.10, 0.10, 0.01);
-  // Conservative choices for a Classic PSM moving in free space, not limits
-  // read from a data sheet: rad/s, rad/s, m/s and rad/s^2, rad/s^2, m/s^2.
-  Eigen::Vector3d velocity_max = Eigen::Vector3d(1.0, 1.0, 0.1);
-  Eigen::Vector3d acceleration_max = Eigen::Vector3d(3.0, 3.0, 0.3);
+  // rad/s, rad/s, m/s and rad/s^2, rad/s^2, m/s^2: below what a periodic
+  // identification path reaches on a real Classic PSM moving freely, not
+  // limits read from a data sheet. A recording slower than the motions the
+  // model is later run on leaves them outside its regime (regime.hpp).
+  Eigen::Vector3d velocity_max = Eigen::Vector3d(1.5, 1.5, 0.3);
+  Eigen::Vector3d acceleration_max = Eigen::Vector3d(6.0, 6.0, 1.5);
   int min_reversals = 4;           // velocity reversals per joint and period
   // Share of the room between q0 and each limit (less the margin) that every
   // joint is asked to reach on both sides, so that the recording covers the
