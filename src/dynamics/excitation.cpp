@@ -73,9 +73,9 @@ const OptionTable<ExcitationOptions>& get_option_table(OptionTag<ExcitationOptio
           .add("position_margin", &O::position_margin,
                "kept free inside the robot description's joint limits at each end", "rad, rad, m",
                OptionLimits::at_least(0))
-          .add("velocity_max", &O::velocity_max, "largest joint speed (a conservative choice)", "rad/s, rad/s, m/s",
+          .add("velocity_max", &O::velocity_max, "largest joint speed (lower it for a first run on an arm)", "rad/s, rad/s, m/s",
                OptionLimits::above(0))
-          .add("acceleration_max", &O::acceleration_max, "largest joint acceleration (a conservative choice)",
+          .add("acceleration_max", &O::acceleration_max, "largest joint acceleration (lower it for a first run on an arm)",
                "rad/s^2, rad/s^2, m/s^2", OptionLimits::above(0))
           .add("min_reversals", &O::min_reversals, "velocity reversals wanted per joint and period", "",
                OptionLimits::at_least(0))
