@@ -286,14 +286,16 @@ def figure(summary, model, kinds, path, work):
                 out.write(" ".join(f"{c:.6g}" for c in cols) + "\n")
     tmp = path + ".tmp.png"
     script = ["set terminal pngcairo size 1200,900 font ',10'", f"set output '{tmp}'", "set multiplot layout 2,2",
-              "set grid", "set logscale x", "set xtics (0.5, 1, 2, 5, 10, 15)", "set key top right font ',9'",
+              "set grid", "set logscale x", "set xrange [0.4:19]", "set xtics (0.5, 1, 2, 5, 10, 15)", "set key top right font ',9'",
               "set xlabel 'free-space data (min)'"]
     styles = {"teleoperation": "lt 1 pt 7", "excitation": "lt 2 pt 5 dt 2"}
+    noise = next(s["noise_nrmse_percent"] for s in summary if s["model"] == model)
     for j, name in enumerate(JOINTS):
         c = 2 + 3 * j
         script += [f"set title 'held-out NRMSE, {name}'", "set ylabel 'NRMSE (%)'",
                    "plot " + ", ".join(f"'{files[d]}' using 1:{c}:{c + 1}:{c + 2} with yerrorlines {styles[d]} "
-                                       f"title '{d}'" for d in kinds)]
+                                       f"title '{d}'" for d in kinds) +
+                   f", {noise[j]:.6g} with lines lt 0 lw 2 title 'effort noise alone'"]
     script += ["set title 'estimate error of the trials (joint method)'", "set ylabel 'mean e (mm)'",
                "set logscale y",
                "plot " + ", ".join(f"'{files[d]}' using 1:{c}:{c + 1}:{c + 2} with yerrorlines {styles[d]} "
