@@ -2,8 +2,8 @@
 """Learning curves of the free-space torque model on the simulated bench.
 
 Per seed S, `rcm simulate --seed S` records one session (900 s of free space,
-or the longest length asked, and its trials) and `rcm simulate --seed S+100 --quick
---free-space-s 300` a hold-out free-space teleoperation no model is fitted on.
+or the longest length asked, and its trials) and `rcm simulate --seed S+100
+--quick --free-space-s 300` a hold-out free-space teleoperation no model is fitted on.
 For each free-space length L (minutes) and each kind of free-space data:
 
   teleoperation  the first L minutes of the session's own free_space.csv;
@@ -27,11 +27,11 @@ pairs NAME_full.csv / NAME_half.csv (one path at two speeds, one payload); the
 model is fitted on the first L of one file and scored on the other, for the
 lengths the file holds. Nothing of those files is copied.
 
-  /usr/bin/python3 bench/learning_curve.py --build build [--seeds 1,2,3] [--models linear] [--real DIR]
-      [--json FILE] [--no-doc] [--quick]
+  /usr/bin/python3 bench/learning_curve.py --build build [--seeds 1,2,3] [--models linear]
+      [--data teleoperation,excitation] [--real DIR] [--json FILE] [--no-doc] [--quick]
 
---quick (what tests/test_learning_curve.py runs): the first seed, lengths 0.5, 1
-and 2 min, torque only, nothing written to docs/.
+--quick: the first seed, lengths 0.5, 1 and 2 min, torque only, nothing written
+to docs/; tests/test_learning_curve.py runs it with --data teleoperation.
 """
 import argparse
 import datetime
