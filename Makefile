@@ -15,7 +15,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
-.PHONY: deps build test build-sanitize test-sanitize demo bench coverage docs-figures soak fuzz fuzz-deps clean
+.PHONY: deps build test build-sanitize test-sanitize demo bench coverage learning-curve docs-figures soak fuzz fuzz-deps clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -84,6 +84,13 @@ bench: build
 COVERAGE_SEEDS ?= 1,2
 coverage: build
 	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
+
+# The free-space model's held-out torque error and estimate error against the
+# length of teleoperation and excitation data (about 10 minutes on 2 cores);
+# writes its table and figure into docs/dynamics.md. REAL=DIR adds the curve of
+# real recordings (NAME_full.csv / NAME_half.csv pairs).
+learning-curve: build
+	$(PYTHON) bench/learning_curve.py --build $(BUILD) $(if $(REAL),--real $(REAL))
 
 # The figures the README quotes, from runs on this machine, with the date and
 # machine: the demo's table and wall times (README, docs/benchmarks.md), the
