@@ -181,6 +181,40 @@ TEST(Excitation, OptimisedRegressorIsBetterConditionedThanTheStartAndTheRandomTe
   }
 }
 
+namespace {
+// Per joint, the least share of the speed limit reached in either direction
+// (column 0) and the share of the acceleration limit reached (column 1).
+Eigen::Matrix<double, 3, 2> get_speed_reach(const ExcitationTrajectory& r) {
+  Eigen::Matrix<double, 3, 2> reach;
+  for (int j = 0; j < 3; ++j) {
+    reach(j, 0) = std::min(r.velocity.col(j).maxCoeff(), -r.velocity.col(j).minCoeff()) / r.limits.velocity_max[j];
+    reach(j, 1) = r.acceleration.col(j).cwiseAbs().maxCoeff() / r.limits.acceleration_max[j];
+  }
+  return reach;
+}
+}  // namespace
+
+TEST(Excitation, SpeedCoverageDrivesEveryJointTowardItsSpeedLimits) {
+  // Conditioning alone settles for a slow motion on some joint; the model's
+  // regime is then the speeds it went through, and a faster teleoperation
+  // leaves it.
+  ExcitationOptions o;
+  o.harmonics = 4;
+  ExcitationOptions slow = o;
+  slow.speed_coverage = 0.0;
+  const ExcitationTrajectory covered = design_excitation(robot(), o), uncovered = design_excitation(robot(), slow);
+  ASSERT_TRUE(covered.summary.limits_satisfied);
+  const Eigen::Matrix<double, 3, 2> reach = get_speed_reach(covered), reach_without = get_speed_reach(uncovered);
+  std::cout << "share of the speed limit (both ways) and acceleration limit reached, joints 1-3:\n"
+            << reach << "\nwithout the coverage term:\n"
+            << reach_without << "\n";
+  EXPECT_GT(reach.sum(), reach_without.sum() + 0.1);
+  // The speeds are within reach of every joint; the acceleration limits are
+  // not, on the insertion's range at a 10 s period with 4 harmonics, and only
+  // pull the motion toward them.
+  for (int j = 0; j < 3; ++j) EXPECT_GT(reach(j, 0), 0.5 * o.speed_coverage) << "joint " << j;
+}
+
 TEST(Excitation, DeterministicForASeed) {
   const ExcitationTrajectory again = design_excitation(robot(), small_options());
   EXPECT_EQ(again.position, small_design().position);
@@ -195,6 +229,9 @@ TEST(Excitation, BadOptionsAreRefused) {
   o.duration_s = 0.0;
   EXPECT_THROW(o.check(), std::invalid_argument);
   o.duration_s = std::nan("");
+  EXPECT_THROW(o.check(), std::invalid_argument);
+  o = small_options();
+  o.speed_coverage = 1.5;
   EXPECT_THROW(o.check(), std::invalid_argument);
   o = small_options();
   o.harmonics = 1;

@@ -109,6 +109,7 @@ const bool registered = rcm::cli::register_command({"excite", 25, [](CLI::App& a
   args->options.add(cmd, "--position-margin", {"position_margin"});
   args->options.add(cmd, "--min-reversals", {"min_reversals"});
   args->options.add(cmd, "--position-coverage", {"position_coverage"});
+  args->options.add(cmd, "--speed-coverage", {"speed_coverage"});
   args->options.add(cmd, "--max-iterations", {"max_iterations"});
   cmd->add_option("--robot", args->robot, "built-in robot name or rcm-robot/1 JSON file (its joint limits)");
   cmd->add_flag("--json", args->json, "print the summary as one JSON object");

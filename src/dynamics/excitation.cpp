@@ -52,6 +52,7 @@ void ExcitationOptions::check() const {
   require(acceleration_max.allFinite() && (acceleration_max.array() > 0.0).all(), "acceleration_max must be > 0");
   require(min_reversals >= 0, "min_reversals must be >= 0");
   require(position_coverage >= 0.0 && position_coverage <= 1.0, "position_coverage must be in [0, 1]");
+  require(speed_coverage >= 0.0 && speed_coverage <= 1.0, "speed_coverage must be in [0, 1]");
   require(samples_per_period >= 8 * harmonics, "samples_per_period must be at least 8 x harmonics");
   require(max_iterations >= 0, "max_iterations must be >= 0");
 }
@@ -81,6 +82,9 @@ const OptionTable<ExcitationOptions>& get_option_table(OptionTag<ExcitationOptio
                OptionLimits::at_least(0))
           .add("position_coverage", &O::position_coverage,
                "share of the room on each side of q0 every joint is asked to reach", "", OptionLimits::within(0, 1))
+          .add("speed_coverage", &O::speed_coverage,
+               "share of the speed limit (both directions) and the acceleration limit every joint is asked to reach",
+               "", OptionLimits::within(0, 1))
           .add("samples_per_period", &O::samples_per_period, "samples of a period the objective is evaluated on",
                "", OptionLimits::at_least(16))
           .add("max_iterations", &O::max_iterations, "L-BFGS iterations (0: the random start as it is)", "",
@@ -219,6 +223,7 @@ class ExcitationObjective {
         samples_(o.samples_per_period),
         min_reversals_(o.min_reversals),
         coverage_(o.position_coverage),
+        speed_coverage_(o.speed_coverage),
         conditioning_(get_excitation_dahl_displacement(limits)),
         unit_(ExcitationSeries::count_free_coefficients(o.harmonics)) {
     const int per_joint = 2 * (o.harmonics - 1);
@@ -254,7 +259,8 @@ class ExcitationObjective {
     double penalty = 0.0;
     Eigen::Vector3d reversals = Eigen::Vector3d::Zero(), first_sign = Eigen::Vector3d::Zero(),
                     last_sign = Eigen::Vector3d::Zero(), reach_up = Eigen::Vector3d::Zero(),
-                    reach_down = Eigen::Vector3d::Zero();
+                    reach_down = Eigen::Vector3d::Zero(), speed_up = Eigen::Vector3d::Zero(),
+                    speed_down = Eigen::Vector3d::Zero(), acceleration_reach = Eigen::Vector3d::Zero();
     auto excess = [](double share) { return share > 1.0 ? (share - 1.0) * (share - 1.0) : 0.0; };
     for (int i = 0; i < samples_; ++i) {
       series.compute_state(period_s_ * i / samples_, q, qd, qdd);
@@ -265,8 +271,12 @@ class ExcitationObjective {
         penalty += excess(d >= 0 ? up : down);
         reach_up[j] = std::max(reach_up[j], up);
         reach_down[j] = std::max(reach_down[j], down);
-        penalty += excess(std::abs(qd[j]) / limits_.velocity_max[j]);
-        penalty += excess(std::abs(qdd[j]) / limits_.acceleration_max[j]);
+        const double speed = qd[j] / limits_.velocity_max[j], acceleration = qdd[j] / limits_.acceleration_max[j];
+        penalty += excess(std::abs(speed));
+        penalty += excess(std::abs(acceleration));
+        speed_up[j] = std::max(speed_up[j], speed);
+        speed_down[j] = std::max(speed_down[j], -speed);
+        acceleration_reach[j] = std::max(acceleration_reach[j], std::abs(acceleration));
         // A smooth count of sign changes: half the total variation of a
         // smooth sign of qd (a reversal from +1 to -1 counts 1). The first
         // sample is left out: there the velocity touches 0 by construction
@@ -285,6 +295,12 @@ class ExcitationObjective {
       // The positions a later motion will visit lie on both sides of q0.
       const double u = std::max(0.0, coverage_ - reach_up[j]), v = std::max(0.0, coverage_ - reach_down[j]);
       uncovered += u * u + v * v;
+      // And the speeds: the regime's velocity range is signed, its acceleration
+      // a magnitude.
+      for (const double reach : {speed_up[j], speed_down[j], acceleration_reach[j]}) {
+        const double w = std::max(0.0, speed_coverage_ - reach);
+        uncovered += w * w;
+      }
       reversals[j] += 0.5 * std::abs(first_sign[j] - last_sign[j]);  // the period wraps around
       const double m = std::max(0.0, min_reversals_ - reversals[j]);
       missing += m * m;
@@ -298,7 +314,7 @@ class ExcitationObjective {
   Eigen::Vector3d q0_;
   double period_s_;
   int harmonics_, samples_;
-  double min_reversals_, coverage_;
+  double min_reversals_, coverage_, speed_coverage_;
   RegressorConditioning conditioning_;
   Eigen::VectorXd unit_;
 };
