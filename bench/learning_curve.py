@@ -21,7 +21,8 @@ estimate, and is most of the run's time.
 
 The table (mean over the seeds and their range) and a figure go between the
 learning-curve markers of docs/dynamics.md and into
-docs/figures/learning_curve.png, with the date and machine; `--json FILE` keeps
+docs/figures/learning_curve.png, with the date and machine (a run of network
+kinds alone: the table only, between the learning-curve-networks markers); `--json FILE` keeps
 every point. `--real DIR` adds a torque-only curve on real recordings: DIR holds
 pairs NAME_full.csv / NAME_half.csv (one path at two speeds, one payload); the
 model is fitted on the first L of one file and scored on the other, for the
@@ -50,7 +51,10 @@ from doc_tables import cpu_model, run, write_block
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "dynamics.md")
 FIGURE = os.path.join(ROOT, "docs", "figures", "learning_curve.png")
+# The linear curve's block; a run of network kinds alone (their fits take
+# minutes each, so fewer seeds and lengths) goes to its own block.
 BEGIN, END = "<!-- learning-curve:begin -->", "<!-- learning-curve:end -->"
+NETWORK_BEGIN, NETWORK_END = "<!-- learning-curve-networks:begin -->", "<!-- learning-curve-networks:end -->"
 JOINTS = ("yaw", "pitch", "insertion")
 DATA_KINDS = ("teleoperation", "excitation")
 NO_BOOTSTRAP = {"joint": {"bootstrap_replicates": 0, "calibration_bootstrap_replicates": 0}}
@@ -95,7 +99,10 @@ def fit_and_score(args, rcm, model_kind, train, test, model):
         cmd += ["--model", model_kind, "--max-minutes", str(args.max_minutes)]
     fit = rcm_json(cmd)
     ev = rcm_json([rcm, "dynamics", "eval", model, test, "--json"])
-    return {"fit_s": fit["seconds"], "train_samples": fit["train_samples"],
+    # A network fit that ran into its wall-clock budget was still improving.
+    budget = model_kind != "linear" and fit["seconds"] >= 0.98 * 60 * args.max_minutes
+    return {"fit_s": fit["seconds"], "train_samples": fit["train_samples"], "budget_reached": budget,
+            "epochs": fit.get("epochs", 0),
             "rmse": [j["rmse"] for j in ev["joints"]], "nrmse_percent": [j["nrmse_percent"] for j in ev["joints"]],
             "range": [j["range"] for j in ev["joints"]]}
 
@@ -187,6 +194,8 @@ def summarize(points, quick):
     for (model, data, L), ps in groups.items():
         s = {"model": model, "data": data, "minutes": L, "seeds": [p["seed"] for p in ps],
              "fit_s": stats([p["fit_s"] for p in ps]),
+             "budget_reached": any(p.get("budget_reached") for p in ps),
+             "epochs": stats([p.get("epochs", 0) for p in ps]),
              "nrmse_percent": [stats([p["nrmse_percent"][j] for p in ps]) for j in range(3)],
              "rmse": [stats([p["rmse"][j] for p in ps]) for j in range(3)],
              # The NRMSE the effort sensor's noise alone gives on the hold-out.
@@ -228,6 +237,13 @@ def ratios(summary):
     return out
 
 
+def fit_note(s):
+    """Epochs of a network fit, and whether it stopped at its budget."""
+    if s["model"] == "linear":
+        return ""
+    return f" ({s['epochs']['mean']:.0f} epochs{', budget reached' if s['budget_reached'] else ''})"
+
+
 def f3(values, digits=2):
     return " / ".join(f"{v:.{digits}f}" for v in values)
 
@@ -236,7 +252,7 @@ def table(summary, ratio, rise, real, args, header):
     lines = [header, ""]
     for model in args.models:
         rows = [s for s in summary if s["model"] == model]
-        lines += [f"**{model}**: held-out NRMSE and RMSE on the hold-out teleoperation, mean e of the session's "
+        lines += ([""] if len(lines) > 2 else []) + [f"**{model}**: held-out NRMSE and RMSE on the hold-out teleoperation, mean e of the session's "
                   "trials (joint method); mean over the seeds, range in brackets.", "",
                   "| free space | data | NRMSE yaw / pitch / insertion (%) | NRMSE range over seeds (%) | "
                   "RMSE yaw / pitch (N m) / insertion (N) | mean e, D > 20 mm | mean e, D <= 20 mm | fit (s) |",
@@ -247,10 +263,11 @@ def table(summary, ratio, rise, real, args, header):
                  for k in ("e_above_20mm_mm", "e_up_to_20mm_mm")]
             lines.append(f"| {s['minutes']:g} min | {s['data']} | {f3([x['mean'] for x in n])} | "
                          f"{f3([x['min'] for x in n])} .. {f3([x['max'] for x in n])} | "
-                         f"{f3([x['mean'] for x in s['rmse']], 3)} | {e[0]} | {e[1]} | {s['fit_s']['mean']:.1f} |")
+                         f"{f3([x['mean'] for x in s['rmse']], 3)} | {e[0]} | {e[1]} | {s['fit_s']['mean']:.1f}"
+                         f"{fit_note(s)} |")
         lines.append(f"\nThe effort sensor's noise alone (the simulator's `sensors.effort_noise` over the hold-out's "
                      f"torque range): NRMSE {f3(rows[0]['noise_nrmse_percent'])} %.")
-        if rise.get(model):
+        if rise.get(model) and model == "linear":
             lines.append("\nLargest rise of one seed's held-out NRMSE from one length to the next, yaw / pitch / "
                          "insertion (the tolerance of tests/test_learning_curve.py rests on it): " +
                          "; ".join(f"{d} {' / '.join(f'{v:+.1f}' for v in r)} %" for d, r in rise[model].items()) + ".")
@@ -345,6 +362,7 @@ def main():
         flags = [f"--seeds {','.join(map(str, seeds))}", f"--minutes {','.join(f'{L:g}' for L in args.minutes)}"]
         flags += [f"--data {','.join(args.data)}"] if tuple(args.data) != DATA_KINDS else []
         flags += [f"--models {','.join(args.models)}"] if args.models != ["linear"] else []
+        flags += [f"--max-minutes {args.max_minutes:g}"] if args.models != ["linear"] else []
         flags += ["--real DIR"] if args.real else []
         header = (f"Measured by `bench/learning_curve.py {' '.join(flags)}` on {datetime.datetime.now().strftime('%Y-%m-%d %H:%M')}, "
                   f"{os.cpu_count()} cores of {cpu_model()}, load average {os.getloadavg()[0]:.1f} at the end, "
@@ -372,7 +390,10 @@ def main():
                 figure(summary, "linear", args.data, FIGURE, work)
                 block += ("\n\n![held-out NRMSE and mean e against the length of free-space data, linear model]"
                           "(figures/learning_curve.png)")
-            write_block(DOC, BEGIN, END, block)
+            if "linear" in args.models:
+                write_block(DOC, BEGIN, END, block)
+            else:
+                write_block(DOC, NETWORK_BEGIN, NETWORK_END, block)
             print(f"wrote {DOC}", file=sys.stderr)
     finally:
         if not args.keep:
