@@ -124,4 +124,9 @@ nlohmann::json to_json(py::handle value) {
   return nlohmann::json::parse(text);
 }
 
+PsmModel resolve_robot(py::handle robot) {
+  if (py::isinstance<PsmModel>(robot)) return robot.cast<PsmModel>();
+  return load_robot_model(py::str(robot).cast<std::string>(), "robot");
+}
+
 }  // namespace rcm::python

@@ -25,6 +25,7 @@
 
 #include "rcm/common/error.hpp"
 #include "rcm/estimation/joint.hpp"
+#include "rcm/kinematics/psm_model.hpp"
 
 // The joint estimator's samples stay a C++ vector on the Python side (an opaque
 // list-like object): they are thousands of small structs that only the C++ code reads.
@@ -57,6 +58,10 @@ py::array readonly_view(const Eigen::VectorXd& vector, py::handle owner);
 // json module so that both sides agree on every corner case.
 py::object to_python(const nlohmann::json& value);
 nlohmann::json to_json(py::handle value);
+
+// A robot argument: an rcm.PsmModel, or a built-in name or rcm-robot/1 file
+// (load_robot_model; rcm.InputError otherwise).
+PsmModel resolve_robot(py::handle robot);
 
 // Area bindings, called in this order from module.cpp.
 void bind_io(py::module_& m);

@@ -6,6 +6,7 @@
 
 #include "common.hpp"
 #include "options.hpp"
+#include "rcm/dynamics/excitation.hpp"
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/rigid_body.hpp"
@@ -276,6 +277,46 @@ void bind_dynamics(py::module_& m, py::module_& d) {
                                                    argument_location("rcm.dynamics.fit_torque_model", "kind")));
   }, py::arg("kind"), py::arg("recordings"), py::arg("options") = FitOptions{},
         "fit_linear_torque_model for kind linear; other kinds need LibTorch (rcm.InputError)");
+
+  def_options<ExcitationOptions>(d, "ExcitationOptions",
+                                 "Options of design_excitation (`rcm excite`'s flags: one table, ExcitationOptions)");
+  py::class_<ExcitationSummary>(d, "ExcitationSummary", "The solver's outcome (docs/dynamics.md, \"Status\")")
+      .def_readonly("converged", &ExcitationSummary::converged)
+      .def_readonly("termination", &ExcitationSummary::termination)
+      .def_readonly("message", &ExcitationSummary::message)
+      .def_readonly("iterations", &ExcitationSummary::iterations)
+      .def_readonly("initial_condition_number", &ExcitationSummary::initial_condition_number)
+      .def_readonly("condition_number", &ExcitationSummary::condition_number, "of the written samples")
+      .def_readonly("limits_satisfied", &ExcitationSummary::limits_satisfied)
+      .def_readonly("limit_scale", &ExcitationSummary::limit_scale)
+      .def_readonly("periods", &ExcitationSummary::periods)
+      .def_readonly("period_s", &ExcitationSummary::period_s)
+      .def_readonly("seconds", &ExcitationSummary::seconds)
+      .def("brief_report", &ExcitationSummary::brief_report);
+  py::class_<ExcitationTrajectory>(d, "ExcitationTrajectory",
+                                   "A designed free-space trajectory of joints 1-3, sampled at the options' rate")
+      .def_property_readonly("time", [](py::object self) {
+        return readonly_view(self.cast<const ExcitationTrajectory&>().time, self);
+      }, "(T,) s, from 0 to the duration")
+      .def_property_readonly("position", [](py::object self) {
+        return readonly_view(self.cast<const ExcitationTrajectory&>().position, self);
+      }, "(T, 3) rad, rad, m")
+      .def_property_readonly("velocity", [](py::object self) {
+        return readonly_view(self.cast<const ExcitationTrajectory&>().velocity, self);
+      }, "(T, 3) rad/s, rad/s, m/s")
+      .def_property_readonly("acceleration", [](py::object self) {
+        return readonly_view(self.cast<const ExcitationTrajectory&>().acceleration, self);
+      }, "(T, 3) rad/s^2, rad/s^2, m/s^2")
+      .def_readonly("reversals", &ExcitationTrajectory::reversals, "velocity sign changes per joint")
+      .def_readonly("summary", &ExcitationTrajectory::summary);
+  d.def("design_excitation", [](const ExcitationOptions& options, py::handle robot) {
+    const PsmModel model = resolve_robot(robot);
+    py::gil_scoped_release release;
+    return design_excitation(model, options);
+  }, py::arg("options") = ExcitationOptions{}, py::arg("robot") = "dvrk-psm-classic",
+        "Design a free-space excitation trajectory (`rcm excite`; docs/dynamics.md, \"Excitation trajectories\"):\n"
+        "the same samples as the CLI's CSV for the same options. Bad options: ValueError naming the field;\n"
+        "q0 outside the limits: rcm.InputError.");
 
   d.def("compute_torque_errors", [](py::handle measured, py::handle predicted) {
     const std::string fn = "rcm.dynamics.compute_torque_errors";

@@ -26,11 +26,6 @@ struct IncisionKinematics {
   JacobianCondition condition;
 };
 
-PsmModel resolve_robot(py::handle robot) {
-  if (py::isinstance<PsmModel>(robot)) return robot.cast<PsmModel>();
-  return load_robot_model(py::str(robot).cast<std::string>(), "robot");
-}
-
 InputLocation limit_location(const std::string& function, const std::string& argument) {
   InputLocation where;
   where.file = function;

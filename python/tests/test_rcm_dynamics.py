@@ -159,6 +159,42 @@ class TestDynamics(unittest.TestCase):
         self.assertEqual(cm.exception.file, session_file("session.json"))
 
 
+class TestExcitation(unittest.TestCase):
+    def test_design_matches_cli_and_respects_its_limits(self):
+        # A short design, so that the test stays quick; the CLI's CSV for the
+        # same options holds the same samples.
+        o = rcm.dynamics.ExcitationOptions(duration_s=12.0, period_s=6.0, harmonics=3, max_iterations=15, seed=4)
+        t = rcm.dynamics.design_excitation(o)
+        self.assertEqual(t.position.shape, (len(t.time), 3))
+        self.assertEqual(t.velocity.shape, t.acceleration.shape)
+        self.assertTrue(t.summary.limits_satisfied)
+        self.assertEqual(t.summary.periods, 2)
+        np.testing.assert_allclose(t.position[0], o.q0, atol=1e-12)
+        np.testing.assert_allclose(t.position[-1], o.q0, atol=1e-9)
+        np.testing.assert_allclose(t.velocity[[0, -1]], 0.0, atol=1e-9)
+        self.assertTrue(np.all(np.abs(t.velocity).max(axis=0) <= np.asarray(o.velocity_max) * (1 + 1e-9)))
+        self.assertTrue(np.all(np.abs(t.acceleration).max(axis=0) <= np.asarray(o.acceleration_max) * (1 + 1e-9)))
+        self.assertFalse(t.position.flags.writeable)
+        out = tmp_path("excitation.csv")
+        cli = run_cli("excite", "--duration", 12, "--period", 6, "--harmonics", 3, "--max-iterations", 15, "--seed", 4,
+                      "--out", out, "--json")
+        self.assertAlmostEqual(cli["condition_number"], t.summary.condition_number, delta=1e-6 * t.summary.condition_number)
+        with open(out) as f:
+            rows = list(csv.DictReader(f))
+        self.assertEqual(len(rows), len(t.time))
+        for k in range(3):
+            np.testing.assert_allclose([float(r[f"position_{k + 1}"]) for r in rows], t.position[:, k], atol=1e-9)
+            np.testing.assert_allclose([float(r[f"velocity_{k + 1}"]) for r in rows], t.velocity[:, k], atol=1e-9)
+
+    def test_bad_options_and_start_are_refused(self):
+        with self.assertRaises(ValueError):
+            rcm.dynamics.ExcitationOptions(speed_coverage=1.5)
+        with self.assertRaises(rcm.InputError):
+            rcm.dynamics.design_excitation(rcm.dynamics.ExcitationOptions(duration_s=2.0, q0=[0.0, 0.0, 0.5]))
+        with self.assertRaises(rcm.InputError):
+            rcm.dynamics.design_excitation(robot="no-such-robot")
+
+
 class TestForce(unittest.TestCase):
     def test_series_matches_cli(self):
         path = session_file("D30_r10_15.csv")
