@@ -287,7 +287,7 @@ SetupReport run_setup(const Session& session, const StudyOptions& study, const S
 
   // The model, and its error as a force at the incision.
   try {
-    r.free_space = fit_free_space_step(session, study, fitter);
+    r.free_space = fit_free_space_step(free_space, study, fitter);
   } catch (const InputError& e) {
     // Data too poor to fit is a finding like the others: the checks above say why.
     add("model.fit", SetupSeverity::missing, std::string("free-space model: not fitted: ") + e.what());
@@ -351,7 +351,7 @@ SetupReport run_setup(const Session& session, const StudyOptions& study, const S
           regime_text);
     std::optional<MonitorSetup> monitor;
     try {
-      monitor = prepare_monitor(session, study, r.free_space);
+      monitor = prepare_monitor(session, study, r.free_space, *calibration);
     } catch (const InputError& e) {
       add("calibration.tissue", SetupSeverity::missing, std::string("tissue model: not identified: ") + e.what());
       return finish(r, start);

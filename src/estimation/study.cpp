@@ -111,10 +111,18 @@ Eigen::Vector3d compute_settled_free_space_torque(const dynamics::TorqueModel& m
 FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOptions& options,
                                        const TorqueModelFitter& fitter) {
   const auto start = std::chrono::steady_clock::now();
-  FreeSpaceModelStep out;
-  out.kind = fitter.resolve_kind(options.model_kind);
   std::vector<Recording> free_space;
   for (const auto& p : session.free_space) free_space.push_back(load_recording(p, get_read_options(session, options.read)));
+  FreeSpaceModelStep out = fit_free_space_step(free_space, options, fitter);
+  out.seconds = seconds_since(start);
+  return out;
+}
+
+FreeSpaceModelStep fit_free_space_step(const std::vector<Recording>& free_space, const StudyOptions& options,
+                                       const TorqueModelFitter& fitter) {
+  const auto start = std::chrono::steady_clock::now();
+  FreeSpaceModelStep out;
+  out.kind = fitter.resolve_kind(options.model_kind);
   if (options.model_file) {
     progress(options.verbose, "loading free-space model " + options.model_file->string());
     out.model = dynamics::load_torque_model(*options.model_file);
@@ -174,9 +182,15 @@ MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options
 
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space) {
   require_monitor_calibration(session);
+  return prepare_monitor(session, options, std::move(free_space),
+                         load_recording(session.calibration->recording, get_read_options(session, options.read)));
+}
+
+MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space,
+                             const Recording& calibration) {
+  require_monitor_calibration(session);
   MonitorSetup setup{std::move(free_space), make_incision_frame(session.q0), {}, {}};
   setup.joint_options = make_joint_options_for_model(options.joint, setup.free_space);
-  const Recording calibration = load_recording(session.calibration->recording, get_read_options(session, options.read));
   progress(options.verbose, "identifying the tissue model in torque space on " + calibration.source);
   const Eigen::MatrixXd tau_fs_cal = dynamics::predict_torque(*setup.free_space.model, calibration);
   setup.tissue = fit_joint_tissue_model(

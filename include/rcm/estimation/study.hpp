@@ -165,6 +165,11 @@ struct FreeSpaceModelStep {
 };
 FreeSpaceModelStep fit_free_space_step(const Session& session, const StudyOptions& options,
                                        const TorqueModelFitter& fitter);
+// The same on the session's free-space recordings already read (in the
+// manifest's order), for a caller that has checked them (run_setup); seconds
+// then counts the fit alone.
+FreeSpaceModelStep fit_free_space_step(const std::vector<Recording>& free_space, const StudyOptions& options,
+                                       const TorqueModelFitter& fitter);
 
 // The torque-space estimators' options for a free-space model: the residual
 // scales are its held-out RMSE per joint, the sample period its own.
@@ -181,6 +186,9 @@ struct MonitorSetup {
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter);
 // The same with the free-space model already fitted (or loaded).
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space);
+// The same with the session's calibration recording already read, too.
+MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space,
+                             const Recording& calibration);
 
 // What run_study checks of a session and options before any work: a
 // calibration, at least one trial, every option within its table's limits
