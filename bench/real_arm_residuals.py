@@ -75,6 +75,13 @@ def dahl_states(q, x_c):
     return z
 
 
+def knot_hats(x, k):
+    """n x k: the piecewise-linear basis of k knots equally spaced over x's range."""
+    knots = np.linspace(x.min(), x.max(), k)
+    h = knots[1] - knots[0] if k > 1 and x.max() > x.min() else 1.0
+    return np.clip(1.0 - np.abs((x[:, None] - knots[None, :]) / h), 0.0, None)
+
+
 def features(d):
     if "qdd" not in d:
         d["qdd"] = zero_phase_acceleration(d["t"], d["qd"])
@@ -112,6 +119,10 @@ def groups(d):
         "Dahl, bristle scale": per_joint([d["z"]]),
         "Dahl, 10x longer": per_joint([d["z_slow"]]),
         "sqrt(|qd|) sign(qd)": per_joint([np.sign(qd) * np.sqrt(np.abs(qd))]),
+        # A Coulomb level that varies along the travel: the Dahl state times
+        # each of 6 piecewise-linear knots over the joint's range.
+        "Coulomb along the travel": per_joint([np.stack([d["z"][:, j] * knot_hats(d["q"][:, j], 6)[:, k]
+                                                         for j in range(3)], 1) for k in range(6)]),
     }
 
 
@@ -121,7 +132,8 @@ def force_error(J, residual):
     return float(np.sqrt((f ** 2).sum(1).mean()))
 
 
-MODELS = {"linear": [], "linear, free inertia": ["--free-inertia"], "linear, generic": ["--generic-structure"],
+MODELS = {"linear": [], "linear, constant Coulomb": ["--constant-coulomb"], "linear, free inertia": ["--free-inertia"],
+          "linear, generic": ["--generic-structure"],
           "hybrid": [], "lstm": []}
 
 
@@ -218,7 +230,9 @@ def main():
 
     # 1. rcm's models.
     out.append(f"**Torque error** (`rcm dynamics fit --model M --seed {args.seed}` on the first, `rcm dynamics eval` on the "
-               "second; `linear`: the default fit, inertia tied by the bodies of a remote-centre arm; `linear, free "
+               "second; `linear`: the default fit, inertia tied by the bodies of a remote-centre arm, Coulomb levels "
+               "that vary along the travel where they predict better; `linear, constant Coulomb`: "
+               "`--constant-coulomb`, one Coulomb level per joint; `linear, free "
                "inertia`: `--free-inertia`, the 19 inertia coefficients free; `linear, generic`: `--generic-structure`, "
                "the free potential and constant armature; networks "
                f"with `--max-minutes {args.max_minutes}`), and the RMS incision force error the residual causes at "
@@ -226,6 +240,7 @@ def main():
     out.append("| split | model | RMSE yaw / pitch (N m) / insertion (N) | NRMSE % | force error (N) | test samples out of regime |")
     out.append("|---|---|---|---|---|---|")
     residuals = {}
+    profiles = {}  # training files -> the default fit's Coulomb level along each joint's travel
     with tempfile.TemporaryDirectory() as work:
         for label, train, test in splits:
             for kind in kinds:
@@ -240,6 +255,9 @@ def main():
                 p = np.genfromtxt(pred, delimiter=",", names=True)
                 r = np.stack([p[f"effort_{j}"] - p[f"tau_fs_{j}"] for j in (1, 2, 3)], 1)
                 residuals[(label, kind)] = r
+                if kind == "linear":
+                    lp = rcm.dynamics.load_torque_model(model).parameters
+                    profiles.setdefault(tuple(train), (label, lp.coulomb, lp.coulomb_profile, lp.coulomb_profile_range))
                 e = ev["joints"]
                 reg = ev["regime"][0]
                 out.append(f"| {label} | {kind} | {e[0]['rmse']:.3f} / {e[1]['rmse']:.3f} / {e[2]['rmse']:.3f} | "
@@ -261,6 +279,20 @@ def main():
             out.append(f"| {label} | " + " | ".join(f"{x:.2f}" for x in ratio) +
                        f" | {int((ratio <= 0.5).sum())} of 3 |")
 
+    if profiles:
+        out.append("\n**The Coulomb level the default fit kept along each joint's travel** (`linear`: the Dahl "
+                   "state's coefficient at each knot, from the low to the high end of the range it was fitted on; "
+                   "a joint without a row kept a constant level):\n")
+        out.append("| fitted on (first split) | joint | range | level at the knots |")
+        out.append("|---|---|---|---|")
+        for train, (label, coulomb, profile, span) in profiles.items():
+            for j in range(3):
+                if profile.size == 0 or not np.any(profile[j]):
+                    continue
+                unit = "m" if j == 2 else "rad"
+                out.append(f"| {label} | {JOINTS[j]} | {span[j, 0]:.3f} .. {span[j, 1]:.3f} {unit} | " +
+                           " / ".join(f"{coulomb[j] + v:.3f}" for v in profile[j]) + f" {UNITS[j]} |")
+
     data = {}
 
     def get(path):
@@ -269,7 +301,7 @@ def main():
         return data[path]
 
     # 2. What the linear models' test residuals are made of.
-    explained_kinds = [k for k in ("linear, generic", "linear") if k in kinds]
+    explained_kinds = [k for k in ("linear, generic", "linear, constant Coulomb", "linear") if k in kinds]
     names = list(groups(get(splits[0][2])).keys())
     out.append("\n**What the residual is made of.** R^2: the share of each joint's test residual (its mean square) that "
                "each group of terms absorbs when regressed on it after the fact, an upper bound on what adding the "
@@ -277,7 +309,8 @@ def main():
                "third of the samples by |qd|. Direction: mean residual while the joint moves up minus while it moves "
                "down. Free potential and armature: the structure `--generic-structure` fits; rigid-body inertia: "
                "rcm's 19 Lagrange terms (both regressors from rcm's Python module); Dahl states at 0.3 % and 3 % of "
-               "each joint's range.\n")
+               "each joint's range; Coulomb along the travel: the first Dahl state times six piecewise-linear knots "
+               "over the joint's range.\n")
     out.append("| split | model | joint | RMS | " + " | ".join(f"R^2 {n}" for n in names) +
                " | RMS by speed tercile | direction |")
     out.append("|---|---|---|---|" + "---|" * len(names) + "---|---|")

@@ -12,10 +12,12 @@ Per split and joint it reports the torque RMSE (mean over the seeds, and their
 range), the share of the residual's power above 5 Hz and the share of it that
 the measured qddot (zero-phase, 0.1 s) explains by least squares (an
 inertia-like error). Beside them, the real Classic PSM1 recordings' figures for
-the same protocol. The table goes between the speed-effect markers of
-docs/simulator.md, with the date and machine.
+the same protocol (--real DIR: psm1_105g_insertion_full.csv, ..._half.csv and
+the 205 g pair, fitted and scored the same way; they stay where they are). The
+table goes between the speed-effect markers of docs/simulator.md, with the date
+and machine.
 
-  /usr/bin/python3 bench/sim_speed_effect.py --build build [--seeds 1,2,3] [--arms cable,rigid] [--no-doc]
+  /usr/bin/python3 bench/sim_speed_effect.py --build build [--seeds 1,2,3] [--arms cable,rigid] [--real DIR] [--no-doc]
 """
 import argparse
 import datetime
@@ -36,10 +38,9 @@ BEGIN, END = "<!-- speed-effect:begin -->", "<!-- speed-effect:end -->"
 JOINTS = ("yaw", "pitch", "insertion")
 # The real Classic PSM1 recordings of the same protocol (one excitation path,
 # 200 Hz for 30 s and the same points at half speed, 100 Hz), with 105 g and
-# 205 g on the instrument: the default linear model's RMSE, yaw / pitch (N m),
-# insertion (N).
-REAL = {"105 g": {"full -> half": (0.037, 0.056, 0.138), "half -> full": (0.096, 0.099, 0.234)},
-        "205 g": {"full -> half": (0.036, 0.061, 0.134), "half -> full": (0.124, 0.100, 0.222)}}
+# 205 g on the instrument, in --real DIR.
+REAL = {"105 g": ("psm1_105g_insertion_full.csv", "psm1_105g_insertion_half.csv"),
+        "205 g": ("psm1_205g_insertion_full.csv", "psm1_205g_insertion_half.csv")}
 
 
 def residual_traits(test, predictions):
@@ -80,6 +81,11 @@ def fmt3(v, digits=3):
     return " / ".join(f"{x:.{digits}f}" for x in v)
 
 
+def fmt_range(r):
+    """lo .. hi over the seeds; blank for one run."""
+    return "" if np.array_equal(r[0], r[1]) else f"{fmt3(r[0])} .. {fmt3(r[1])}"
+
+
 def summarize(runs):
     """Mean over runs of each split's per-joint figures, the RMSE's range."""
     out = {}
@@ -101,6 +107,7 @@ def main():
     ap.add_argument("--arms", default="cable,rigid", help="arm presets (rcm simulate --arm)")
     ap.add_argument("--config", help="a JSON file passed to every rcm simulate (--config)")
     ap.add_argument("--keep", help="keep the recordings and models in this directory")
+    ap.add_argument("--real", help="directory of the real PSM1 recordings (REAL above); without it, no real rows")
     ap.add_argument("--no-doc", action="store_true", help="print the table instead of writing docs/")
     args = ap.parse_args()
     rcm = os.path.join(args.build, "bin", "rcm")
@@ -121,7 +128,12 @@ def main():
             run(cmd, stdout=subprocess.DEVNULL)
             runs.append(experiment(rcm, os.path.join(out, "fast.csv"), os.path.join(out, "slow.csv"), work,
                                    f"{arm}_{seed}"))
-        results[arm] = summarize(runs)
+        results[f"bench, {arm} arm"] = summarize(runs)
+    if args.real:
+        for label, (fast, slow) in REAL.items():
+            results[f"real PSM1, {label}"] = summarize(
+                [experiment(rcm, os.path.join(args.real, fast), os.path.join(args.real, slow), work,
+                            "real_" + label.replace(" ", ""))])
 
     stamp = datetime.date.today().isoformat()
     lines = [f"Measured by `bench/sim_speed_effect.py` on {stamp}, {cpu_model()}, {os.cpu_count()} cores: "
@@ -134,22 +146,18 @@ def main():
              "| arm | fitted on -> scored on | RMSE yaw / pitch (N m) / insertion (N) | range over seeds | "
              "cross / in-sample at the scored speed | residual power above 5 Hz | qddot explains |",
              "|---|---|---|---|---|---|---|"]
-    for arm, s in results.items():
-        name = f"bench, {arm} arm"
+    for name, s in results.items():
         for split, own in (("full -> half", "full"), ("half -> full", "half")):
             x = s[split]
             lines.append(f"| {name} | {own} -> {own} (in-sample) | {fmt3(x['in'])} | "
-                         f"{fmt3(x['in_range'][0])} .. {fmt3(x['in_range'][1])} | | | |")
+                         f"{fmt_range(x['in_range'])} | | | |")
         for split in ("full -> half", "half -> full"):
             x = s[split]
             # Against the in-sample error at the speed it is scored on.
             ratio = x["rmse"] / s["half -> full" if split == "full -> half" else "full -> half"]["in"]
-            lines.append(f"| {name} | {split} | {fmt3(x['rmse'])} | {fmt3(x['range'][0])} .. {fmt3(x['range'][1])} | "
+            lines.append(f"| {name} | {split} | {fmt3(x['rmse'])} | {fmt_range(x['range'])} | "
                          f"{fmt3(ratio, 1)} | {' / '.join(f'{v:.0%}' for v in x['hf'])} | "
                          f"{' / '.join(f'{v:.0%}' for v in x['qdd_r2'])} |")
-    for label, splits in REAL.items():
-        for split, rmse in splits.items():
-            lines.append(f"| real PSM1, {label} | {split} | {fmt3(rmse)} | | | | |")
     block = "\n".join(lines)
     if args.no_doc:
         print(block)

@@ -42,6 +42,11 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
   models.push_back(std::make_unique<LinearTorqueModel>(info, lp));
   LinearTorqueParameters lp_rigid = lp;  // with the rigid-body inertia of joints 1-3
   lp_rigid.inertia = Eigen::VectorXd::Constant(19, 0.1);
+  lp_rigid.coulomb_slow = lp_rigid.sqrt_viscous = Eigen::VectorXd::Constant(6, 0.1);
+  lp_rigid.coulomb_profile = Eigen::MatrixXd::Constant(6, rcm::dynamics::kCoulombProfileKnots, 0.05);
+  lp_rigid.coulomb_profile_range = Eigen::MatrixXd(6, 2);
+  lp_rigid.coulomb_profile_range.col(0).setConstant(-1.0);
+  lp_rigid.coulomb_profile_range.col(1).setConstant(1.0);
   models.push_back(std::make_unique<LinearTorqueModel>(info, lp_rigid));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(12, 32, 1, 16, 6, 2), norm));
   Normalization with_direction = norm;  // the fitted default: three direction features per joint

@@ -128,17 +128,27 @@ Eigen::Matrix<double, kInertiaTerms, 1> get_free_inertia() {
   return inertia;
 }
 
+// The insertion's Coulomb level along its travel: constant, or one that varies
+// as a real PSM's does (not a piecewise-linear function of q3).
+double get_constant_insertion_coulomb(double) { return 0.4; }
+double get_varying_insertion_coulomb(double q3) {
+  const double u = (q3 - 0.13) / 0.07;
+  return 0.4 + 0.2 * u + 0.15 * std::cos(M_PI * u);
+}
+
 rcm::Recording make_rigid_arm_run(double speed, double rate_hz, double duration_s, unsigned seed,
                                   const Eigen::Matrix<double, kInertiaTerms, 1>& inertia = get_free_inertia(),
-                                  double sliding_mass = 0.0) {
+                                  double sliding_mass = 0.0,
+                                  double (*insertion_coulomb)(double) = get_constant_insertion_coulomb) {
   const Eigen::Vector3d g = Eigen::Vector3d(0.25, -0.3, 0.92).normalized();
   Eigen::Matrix<double, kGravityMoments, 1> v;
   v << 0.3, -0.4, 1.2, -0.6, 0.2, 2.5, 0.8;
   Eigen::Matrix<double, 17, kGravityMoments> P;
   rcm::dynamics::compute_gravity_moment_map(g, P);
   const Eigen::Matrix<double, 17, 1> gravity = P * v;
-  const Eigen::Vector3d armature(0.03, 0.04, 0.3 + sliding_mass), viscous(0.02, 0.03, 0.3), coulomb(0.06, 0.08, 0.4),
-      offset(0.1, -0.15, -1.2), x_c(0.01, 0.01, 0.001);
+  const Eigen::Vector3d armature(0.03, 0.04, 0.3 + sliding_mass), viscous(0.02, 0.03, 0.3), offset(0.1, -0.15, -1.2),
+      x_c(0.01, 0.01, 0.001);
+  Eigen::Vector3d coulomb(0.06, 0.08, 0.0);
   const double a[3][3] = {{0.3, 0.1, 0.05}, {0.35, 0.12, 0.04}, {0.04, 0.02, 0.01}};
   const double w0 = 2 * M_PI / 4.0;
   std::mt19937 rng(seed);
@@ -166,6 +176,7 @@ rcm::Recording make_rigid_arm_run(double speed, double rate_hz, double duration_
     rcm::dynamics::LinearTorqueModel::compute_gravity_regressor(q, Yg);
     rcm::dynamics::compute_inertia_regressor(q, qd, qdd, Yi);
     const Eigen::Vector3d qv(q[0], q[1], q[2]);
+    coulomb[2] = insertion_coulomb(q[2]);
     for (int j = 0; j < 3; ++j) {
       if (t > 0) z[j] = rcm::dynamics::compute_dahl_state(z[j], qv[j] - q_prev[j], x_c[j]);
       r.time(t) = time;
@@ -333,6 +344,132 @@ TEST(RigidBodyFit, RemoteCenterArmTiesItsInertiaAndCarriesToTheSlowRun) {
   // Off, the free coefficients are fitted.
   options.remote_center = false;
   EXPECT_EQ(rcm::dynamics::fit_linear_torque_model({fast}, options).summary.structure, "rigid-body");
+}
+
+TEST(CoulombProfile, KnotWeightsInterpolateAndHoldBeyondTheRange) {
+  int k;
+  double w;
+  rcm::dynamics::compute_knot_weights(0.0, 0.0, 1.0, 6, k, w);
+  EXPECT_EQ(k, 0);
+  EXPECT_EQ(w, 0.0);
+  rcm::dynamics::compute_knot_weights(0.5, 0.0, 1.0, 6, k, w);  // halfway between knots 2 (0.4) and 3 (0.6)
+  EXPECT_EQ(k, 2);
+  EXPECT_NEAR(w, 0.5, 1e-12);
+  rcm::dynamics::compute_knot_weights(-3.0, 0.0, 1.0, 6, k, w);
+  EXPECT_EQ(k, 0);
+  EXPECT_EQ(w, 0.0);
+  rcm::dynamics::compute_knot_weights(1.0, 0.0, 1.0, 6, k, w);
+  EXPECT_EQ(k, 4);
+  EXPECT_EQ(w, 1.0);
+  rcm::dynamics::compute_knot_weights(7.0, 0.0, 1.0, 6, k, w);
+  EXPECT_EQ(k, 4);
+  EXPECT_EQ(w, 1.0);
+  rcm::dynamics::compute_knot_weights(std::nan(""), 0.0, 1.0, 6, k, w);
+  EXPECT_EQ(k, 0);
+  EXPECT_EQ(w, 0.0);
+}
+
+// The Coulomb level a fitted model applies at q on joint j.
+double get_coulomb_level(const rcm::dynamics::LinearTorqueParameters& p, int j, double q) {
+  double level = p.coulomb[j];
+  if (p.coulomb_profile.size()) {
+    int k;
+    double w;
+    rcm::dynamics::compute_knot_weights(q, p.coulomb_profile_range(j, 0), p.coulomb_profile_range(j, 1),
+                                        static_cast<int>(p.coulomb_profile.cols()), k, w);
+    level += (1 - w) * p.coulomb_profile(j, k) + w * p.coulomb_profile(j, k + 1);
+  }
+  return level;
+}
+
+TEST(CoulombProfile, FrictionThatVariesAlongTheTravelIsFoundAndCarriesToTheSlowRun) {
+  // The insertion's Coulomb level changes along its stroke by as much as it is
+  // (a real PSM's insertion): the fit finds the profile, and it carries from
+  // the fast run to the slow one, where a constant level cannot.
+  const RemoteCenterArm arm;
+  const auto inertia = arm.get_inertia_coefficients();
+  const rcm::Recording fast = make_rigid_arm_run(1.0, 200.0, 60.0, 7, inertia, arm.m_sliding,
+                                                 get_varying_insertion_coulomb),
+                       slow = make_rigid_arm_run(0.5, 100.0, 120.0, 8, inertia, arm.m_sliding,
+                                                 get_varying_insertion_coulomb);
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const auto fit = rcm::dynamics::fit_linear_torque_model({fast}, options);
+  options.coulomb_profile = false;
+  const auto constant = rcm::dynamics::fit_linear_torque_model({fast}, options);
+  const auto& p = static_cast<const rcm::dynamics::LinearTorqueModel&>(*fit.model).parameters();
+  ASSERT_EQ(p.coulomb_profile.rows(), 3);
+  ASSERT_EQ(p.coulomb_profile.cols(), rcm::dynamics::kCoulombProfileKnots);
+  EXPECT_EQ(static_cast<const rcm::dynamics::LinearTorqueModel&>(*constant.model).parameters().coulomb_profile.size(), 0);
+  // The level it found, over the range the fast run covered.
+  const double lo = p.coulomb_profile_range(2, 0), hi = p.coulomb_profile_range(2, 1);
+  EXPECT_NEAR(lo, fast.position.col(2).minCoeff(), 1e-3);
+  EXPECT_NEAR(hi, fast.position.col(2).maxCoeff(), 1e-3);
+  for (int i = 0; i <= 10; ++i) {
+    const double q3 = lo + (hi - lo) * i / 10.0;
+    EXPECT_NEAR(get_coulomb_level(p, 2, q3), get_varying_insertion_coulomb(q3), 0.05) << "q3 " << q3;
+  }
+  const auto e = rcm::dynamics::evaluate_torque_model(*fit.model, {slow});
+  const auto e_constant = rcm::dynamics::evaluate_torque_model(*constant.model, {slow});
+  EXPECT_LT(e[2].rmse, 0.5 * e_constant[2].rmse) << e[2].rmse << " vs " << e_constant[2].rmse;
+  for (int j = 0; j < 3; ++j) EXPECT_LT(e[j].nrmse_percent, 2.0) << "joint " << j + 1;
+}
+
+TEST(CoulombProfile, AConstantLevelCostsLittleOnTheOtherSpeed) {
+  // Every level constant: a profile the fit keeps takes up part of what the
+  // rest of the model leaves on this one path (here on pitch, whose slow-run
+  // error grows from about 0.011 to 0.013 N m), and costs the slow run at
+  // most a quarter of a percent of each joint's torque range.
+  const rcm::Recording fast = make_rigid_arm_run(1.0, 200.0, 60.0, 7), slow = make_rigid_arm_run(0.5, 100.0, 120.0, 8);
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const auto fit = rcm::dynamics::fit_linear_torque_model({fast}, options);
+  options.coulomb_profile = false;
+  const auto constant = rcm::dynamics::fit_linear_torque_model({fast}, options);
+  const auto e = rcm::dynamics::evaluate_torque_model(*fit.model, {slow});
+  const auto e_constant = rcm::dynamics::evaluate_torque_model(*constant.model, {slow});
+  for (int j = 0; j < 3; ++j)
+    EXPECT_LT(e[j].nrmse_percent, e_constant[j].nrmse_percent + 0.25)
+        << "joint " << j + 1 << ": " << e[j].nrmse_percent << " vs " << e_constant[j].nrmse_percent;
+}
+
+TEST(CoulombProfile, TravelsWithTheModelFileAndIsChecked) {
+  const RemoteCenterArm arm;
+  const rcm::Recording fast = make_rigid_arm_run(1.0, 200.0, 30.0, 3, arm.get_inertia_coefficients(), arm.m_sliding,
+                                                 get_varying_insertion_coulomb);
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const auto fit = rcm::dynamics::fit_linear_torque_model({fast}, options);
+  const nlohmann::json doc = rcm::dynamics::torque_model_to_json(*fit.model);
+  ASSERT_TRUE(doc["parameters"].contains("coulomb_profile"));
+  const auto back = rcm::dynamics::torque_model_from_json(doc, "m.json");
+  EXPECT_EQ(rcm::dynamics::torque_model_to_json(*back), doc);
+  const Eigen::MatrixXd a = rcm::dynamics::predict_torque_streaming(*fit.model, fast);
+  const Eigen::MatrixXd b = rcm::dynamics::predict_torque_streaming(*back, fast);
+  EXPECT_EQ(a, b);
+  auto expect_refused = [&](nlohmann::json bad, const std::string& field) {
+    try {
+      rcm::dynamics::torque_model_from_json(bad, "m.json");
+      ADD_FAILURE() << "accepted a bad " << field;
+    } catch (const rcm::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("parameters." + field), std::string::npos) << e.what();
+    }
+  };
+  nlohmann::json half = doc;  // the profile and its range come together
+  half["parameters"].erase("coulomb_profile_range");
+  expect_refused(half, "coulomb_profile_range");
+  nlohmann::json rows = doc;  // one row per joint
+  rows["parameters"]["coulomb_profile"] = doc["parameters"]["coulomb_profile_range"];
+  rows["parameters"]["coulomb_profile_range"] = doc["parameters"]["coulomb_profile"];
+  expect_refused(rows, "coulomb_profile");
+  // Built in code, the same checks: lo < hi on every row, one row per joint.
+  const auto& model = static_cast<const rcm::dynamics::LinearTorqueModel&>(*fit.model);
+  rcm::dynamics::LinearTorqueParameters bad = model.parameters();
+  bad.coulomb_profile_range(1, 1) = bad.coulomb_profile_range(1, 0);
+  EXPECT_THROW(rcm::dynamics::LinearTorqueModel(model.info(), bad), std::invalid_argument);
+  bad = model.parameters();
+  bad.coulomb_profile.conservativeResize(2, Eigen::NoChange);
+  EXPECT_THROW(rcm::dynamics::LinearTorqueModel(model.info(), bad), std::invalid_argument);
 }
 
 }  // namespace

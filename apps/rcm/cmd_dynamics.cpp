@@ -36,6 +36,7 @@ struct DynamicsArgs {
   bool streaming = false;
   bool generic_structure = false;
   bool free_inertia = false;
+  bool constant_coulomb = false;
   std::string model_path;
   rcm::cli::OptionFlags<rcm::dynamics::FitOptions> fit;  // the flags that are fields of FitOptions
   std::optional<std::string> direction_features;     // unset: the kind's default
@@ -104,6 +105,9 @@ void run_fit(const DynamicsArgs& a) {
   if (a.free_inertia && kind != TorqueModelKind::linear && kind != TorqueModelKind::hybrid)
     throw rcm::InputError(rcm::cli::flag_location("--free-inertia"), "is for --model linear or hybrid only");
   o.remote_center = !a.free_inertia;
+  if (a.constant_coulomb && kind != TorqueModelKind::linear && kind != TorqueModelKind::hybrid)
+    throw rcm::InputError(rcm::cli::flag_location("--constant-coulomb"), "is for --model linear or hybrid only");
+  o.coulomb_profile = !a.constant_coulomb;
   const auto recs = load_all(a.recordings, a.dedupe);
   if (a.output_delay && kind == TorqueModelKind::lstm && !recs.empty()) {
     // Checked here too, so that a delay longer than the burn-in names the flag.
@@ -313,6 +317,9 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->add_flag("--free-inertia", args->free_inertia,
                 "linear, hybrid: the rigid-body structure's 19 inertia coefficients free instead of tied by the bodies "
                 "of a remote-centre arm (links turning about the RCM, a body sliding along the instrument axis)");
+  fit->add_flag("--constant-coulomb", args->constant_coulomb,
+                "linear, hybrid: one Coulomb level per joint instead of a level that varies along the joint's travel "
+                "(kept when it predicts better)");
   fit->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   fit->add_flag("--json", args->json, "print the fit summary as one JSON object");
   fit->callback([args] { run_fit(*args); });

@@ -188,7 +188,14 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("batch_acceleration_window_s", &LinearTorqueParameters::batch_acceleration_window_s)
       .def_readonly("inertia", &LinearTorqueParameters::inertia, "19 rigid-body inertia coefficients (empty: none)")
       .def_readonly("gravity_direction", &LinearTorqueParameters::gravity_direction,
-                    "the gravity direction the fit found (unit, base frame; empty: free potential)");
+                    "the gravity direction the fit found (unit, base frame; empty: free potential)")
+      .def_readonly("coulomb_slow", &LinearTorqueParameters::coulomb_slow, "of the slow Dahl state (empty: none)")
+      .def_readonly("sqrt_viscous", &LinearTorqueParameters::sqrt_viscous, "of sqrt(|qd|) sign(qd) (empty: none)")
+      .def_readonly("coulomb_profile", &LinearTorqueParameters::coulomb_profile,
+                    "the Coulomb level's change along each joint's travel at equally spaced knots (rows: joints; "
+                    "empty: constant)")
+      .def_readonly("coulomb_profile_range", &LinearTorqueParameters::coulomb_profile_range,
+                    "the range [lo, hi] the knots span, per joint");
   py::class_<LinearTorqueModel, TorqueModel, std::shared_ptr<LinearTorqueModel>>(
       d, "LinearTorqueModel", "Rigid-body terms linear in parameters plus friction with a Dahl state")
       .def_property_readonly("parameters", &LinearTorqueModel::parameters);

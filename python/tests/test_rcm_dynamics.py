@@ -54,6 +54,23 @@ class TestDynamics(unittest.TestCase):
         with self.assertRaises(rcm.InputError):
             rcm.dynamics.compute_inertia_regressor(q, qd[:2], qdd)
 
+    def test_coulomb_profile_is_exposed_with_its_range(self):
+        # Kept or not by the fit; when kept, one row per joint over the range
+        # the joint covered, zero at the first knot; the option table has it.
+        p = self.model().parameters
+        self.assertEqual(len(p.coulomb_slow), 3)
+        self.assertEqual(len(p.sqrt_viscous), 3)
+        if p.coulomb_profile.size:
+            self.assertEqual(p.coulomb_profile.shape[0], 3)
+            self.assertGreaterEqual(p.coulomb_profile.shape[1], 2)
+            np.testing.assert_array_equal(p.coulomb_profile[:, 0], 0.0)
+            self.assertEqual(p.coulomb_profile_range.shape, (3, 2))
+            self.assertTrue((p.coulomb_profile_range[:, 1] > p.coulomb_profile_range[:, 0]).all())
+        else:
+            self.assertEqual(p.coulomb_profile_range.size, 0)
+        options = rcm.dynamics.FitOptions()
+        self.assertTrue(options.coulomb_profile)
+
     def test_refit_payload(self):
         # On the recording the model was fitted on there is no payload to find:
         # the residual does not grow and the weight found is small; the model it

@@ -249,6 +249,9 @@ const OptionTable<FitOptions>& get_option_table(OptionTag<FitOptions>) {
           .add("remote_center", &FitOptions::remote_center,
                "linear, hybrid, with the rigid-body structure: its inertia tied by the bodies of a remote-centre "
                "arm (false: 19 free coefficients)")
+          .add("coulomb_profile", &FitOptions::coulomb_profile,
+               "linear, hybrid, with the rigid-body structure: a Coulomb level that varies along each joint's "
+               "travel, when it predicts better (false: constant)")
           .add_check([](const FitOptions& o) { o.check(); });
   return table;
 }

@@ -9,6 +9,7 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <array>
+#include <bitset>
 #include <chrono>
 #include <cmath>
 #include <iostream>
@@ -33,6 +34,10 @@ constexpr int kBlock = 4;  // armature, viscous, coulomb, offset
 // factor of the generic one's (FitOptions::rigid_body): a time slice of the same
 // motion favours the free potential, which generalises worse across speeds.
 constexpr double kRigidBodyTolerance = 1.25;
+// A joint's Coulomb profile (5 more parameters) is kept when it lowers that
+// score by more than this fraction: a smaller gain is within what any 5 columns
+// take from the noise of one path.
+constexpr double kProfileGain = 0.01;
 
 // Gram matrix of one joint's regressor [gravity (17, joints 1-3), qdd, v, z, 1]
 // and its products with the torque, for one x_c and one qddot candidate.
@@ -339,10 +344,20 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
   // inertia tied by the bodies of a remote-centre arm, kept unless it fits
   // the validation split much worse than the free inertia coefficients.
   if (options.rigid_body && M >= 3) {
+    // The Coulomb profile's knots span each joint's range over the samples fitted.
+    std::vector<double> lo(M, std::numeric_limits<double>::infinity());
+    std::vector<double> hi(M, -std::numeric_limits<double>::infinity());
+    for (const auto* segments : {&split.train, &split.validation})
+      for (const auto& seg : *segments)
+        for (int j = 0; j < M; ++j) {
+          const auto column = recordings[seg.recording].position.col(j).segment(seg.begin, seg.size());
+          lo[j] = std::min(lo[j], column.minCoeff());
+          hi[j] = std::max(hi[j], column.maxCoeff());
+        }
     std::vector<detail::JointEstimatorChoice> estimators(M);
     for (int j = 0; j < M; ++j)
       estimators[j] = {p.dahl_displacement[j], p.acceleration_window_s[j], p.acceleration_filter_s[j],
-                       p.batch_acceleration_window_s[j]};
+                       p.batch_acceleration_window_s[j], lo[j], std::max(hi[j], lo[j] + 1e-6)};
     // The time split's training and validation samples, and the same samples
     // cut by speed (split_by_speed: slow, fast), in one pass.
     enum { kTrain, kValidation, kSlow, kFast };
@@ -360,17 +375,18 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
       // What the remaining choices are scored by: the mean squared residual on
       // the validation slice plus, fitted on the slow half and scored on the
       // fast one and the other way round, on the other speed.
-      auto score = [&](detail::InertiaStructure structure) {
+      auto score = [&](detail::InertiaStructure structure, unsigned profile) {
         auto mean_loss = [&](int scored, int fitted_on) {
-          const detail::RigidBodySolution fit = detail::solve_rigid_body(stats[fitted_on], M, structure, beta);
+          const detail::RigidBodySolution fit =
+              detail::solve_rigid_body(stats[fitted_on], M, structure, beta, profile);
           return stats[scored].compute_loss(fit.theta) / static_cast<double>(std::max<std::size_t>(stats[scored].rows, 1));
         };
         return mean_loss(kValidation, kTrain) + 0.5 * (mean_loss(kFast, kSlow) + mean_loss(kSlow, kFast));
       };
       detail::InertiaStructure inertia = detail::InertiaStructure::free;
       if (options.remote_center) {
-        const double free_score = score(detail::InertiaStructure::free);
-        const double tied_score = score(detail::InertiaStructure::remote_center);
+        const double free_score = score(detail::InertiaStructure::free, 0u);
+        const double tied_score = score(detail::InertiaStructure::remote_center, 0u);
         if (tied_score <= kRigidBodyTolerance * free_score) {
           inertia = detail::InertiaStructure::remote_center;
         } else {
@@ -380,10 +396,20 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
               100.0 * (tied_score / free_score - 1.0)));
         }
       }
+      // Each joint's Coulomb profile, kept when it predicts the validation slice
+      // and the other speed better than a constant level.
+      unsigned profile = 0u;
+      if (options.coulomb_profile) {
+        double best_score = score(inertia, profile);
+        for (int j = 0; j < std::min(M, 32); ++j) {  // one bit per joint
+          const double with = score(inertia, profile | 1u << j);
+          if (with < (1.0 - kProfileGain) * best_score) best_score = with, profile |= 1u << j;
+        }
+      }
       detail::ModelStats all = train_stats;
       all += val_stats;
-      const detail::RigidBodySolution rigid = detail::solve_rigid_body(all, M, inertia, beta);
-      best = val_stats.compute_loss(detail::solve_rigid_body(train_stats, M, inertia, beta).theta);
+      const detail::RigidBodySolution rigid = detail::solve_rigid_body(all, M, inertia, beta, profile);
+      best = val_stats.compute_loss(detail::solve_rigid_body(train_stats, M, inertia, beta, profile).theta);
       p.gravity = rigid.theta.head(G);
       p.inertia = rigid.theta.segment(G, kInertiaTerms);
       p.gravity_direction = rigid.gravity_direction;
@@ -399,8 +425,20 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
         p.coulomb_slow[j] = rigid.theta(detail::rigid_body_block_index(j, 4));
         p.sqrt_viscous[j] = rigid.theta(detail::rigid_body_block_index(j, 5));
       }
+      if (profile) {
+        p.coulomb_profile = Eigen::MatrixXd::Zero(M, kCoulombProfileKnots);
+        p.coulomb_profile_range.resize(M, 2);
+        for (int j = 0; j < M; ++j) {
+          for (int k = 1; k < kCoulombProfileKnots && (profile >> j & 1u); ++k)
+            p.coulomb_profile(j, k) =
+                rigid.theta(detail::rigid_body_block_index(j, detail::kCoulombProfileFirst + k - 1));
+          p.coulomb_profile_range.row(j) << estimators[j].profile_lo, estimators[j].profile_hi;
+        }
+      }
       const bool tied = inertia == detail::InertiaStructure::remote_center;
-      params = kGravityMoments + 2 + (tied ? kRemoteCenterTerms : kInertiaTerms) + detail::kRigidBodyBlock * M;
+      params = kGravityMoments + 2 + (tied ? kRemoteCenterTerms : kInertiaTerms) +
+               detail::kCoulombProfileFirst * M +
+               (kCoulombProfileKnots - 1) * static_cast<int>(std::bitset<32>(profile).count());
       summary.structure = tied ? "remote-center" : "rigid-body";
     } else {
       summary.warnings.push_back(fmt::format(

@@ -78,6 +78,15 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
   if (q.coulomb_slow.size() != q.sqrt_viscous.size() || (q.coulomb_slow.size() != 0 && q.coulomb_slow.size() != M))
     throw std::invalid_argument("linear model: coulomb_slow and sqrt_viscous need one value per output joint, or none");
   has_extra_friction_ = q.coulomb_slow.size() == M;
+  if (q.coulomb_profile.size() != 0 || q.coulomb_profile_range.size() != 0) {
+    if (q.coulomb_profile.rows() != M || q.coulomb_profile.cols() < 2 || q.coulomb_profile_range.rows() != M ||
+        q.coulomb_profile_range.cols() != 2)
+      throw std::invalid_argument(
+          "linear model: coulomb_profile needs M x K values (K >= 2) and coulomb_profile_range M x 2, or neither");
+    if (!q.coulomb_profile.allFinite() ||
+        !(q.coulomb_profile_range.col(1).array() > q.coulomb_profile_range.col(0).array()).all())
+      throw std::invalid_argument("linear model: coulomb_profile must be finite over ranges with lo < hi");
+  }
   if (!(q.acceleration_window_s.array() >= 0).all() || !(q.acceleration_filter_s.array() >= 0).all() ||
       !(q.batch_acceleration_window_s.array() >= 0).all())
     throw std::invalid_argument("linear model: the acceleration windows and filters must be >= 0");
@@ -124,7 +133,15 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
     }
     double qdd = ws.qdd[j].update(t, qd[j]);
     if (qdd_batch && p.batch_acceleration_window_s[j] > 0) qdd = qdd_batch[j];
-    double value = p.armature[j] * qdd + p.viscous[j] * qd[j] + p.coulomb[j] * ws.z[j] + p.offset[j];
+    double coulomb = p.coulomb[j];
+    if (p.coulomb_profile.size()) {
+      int k;
+      double w;
+      compute_knot_weights(q[j], p.coulomb_profile_range(j, 0), p.coulomb_profile_range(j, 1),
+                           static_cast<int>(p.coulomb_profile.cols()), k, w);
+      coulomb += (1.0 - w) * p.coulomb_profile(j, k) + w * p.coulomb_profile(j, k + 1);
+    }
+    double value = p.armature[j] * qdd + p.viscous[j] * qd[j] + coulomb * ws.z[j] + p.offset[j];
     if (j < 3) value += ws.Y.row(j).dot(p.gravity);
     if (has_extra_friction_) value += p.coulomb_slow[j] * ws.z_slow[j] + p.sqrt_viscous[j] * compute_sqrt_velocity(qd[j]);
     tau[j] = value;
@@ -176,6 +193,10 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
   if (p.gravity_direction.size()) j["gravity_direction"] = detail::encode_vector(p.gravity_direction);
   if (p.coulomb_slow.size()) j["coulomb_slow"] = detail::encode_vector(p.coulomb_slow);
   if (p.sqrt_viscous.size()) j["sqrt_viscous"] = detail::encode_vector(p.sqrt_viscous);
+  if (p.coulomb_profile.size()) {
+    j["coulomb_profile"] = detail::encode_array(p.coulomb_profile);
+    j["coulomb_profile_range"] = detail::encode_array(p.coulomb_profile_range);
+  }
   return j;
 }
 
@@ -223,6 +244,19 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
   if (j.contains("coulomb_slow")) {
     p.coulomb_slow = decode_vector_d(j["coulomb_slow"], source, f + ".coulomb_slow", M);
     p.sqrt_viscous = decode_vector_d(j["sqrt_viscous"], source, f + ".sqrt_viscous", M);
+  }
+  if (j.contains("coulomb_profile") != j.contains("coulomb_profile_range"))
+    fail(source, f + (j.contains("coulomb_profile") ? ".coulomb_profile_range" : ".coulomb_profile"),
+         "missing (the two come together)");
+  if (j.contains("coulomb_profile")) {
+    p.coulomb_profile = decode_array_d(j["coulomb_profile"], source, f + ".coulomb_profile");
+    p.coulomb_profile_range = decode_array_d(j["coulomb_profile_range"], source, f + ".coulomb_profile_range");
+    if (p.coulomb_profile.rows() != M || p.coulomb_profile.cols() < 2)
+      fail(source, f + ".coulomb_profile", fmt::format("expected {} rows of at least 2 values", M));
+    if (p.coulomb_profile_range.rows() != M || p.coulomb_profile_range.cols() != 2)
+      fail(source, f + ".coulomb_profile_range", fmt::format("expected {} rows of 2 values", M));
+    if (!(p.coulomb_profile_range.col(1).array() > p.coulomb_profile_range.col(0).array()).all())
+      fail(source, f + ".coulomb_profile_range", "expected lo < hi on every row");
   }
   if (!(p.acceleration_filter_s.array() >= 0).all())
     fail(source, f + ".acceleration_filter_s", "expected values >= 0");

@@ -108,6 +108,13 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
         row(rigid_body_block_index(j, 3)) = w;
         row(rigid_body_block_index(j, 4)) = z_slow[j] * w;
         row(rigid_body_block_index(j, 5)) = compute_sqrt_velocity(rec.velocity(t, j)) * w;
+        int k;
+        double u;
+        compute_knot_weights(rec.position(t, j), choices[j].profile_lo, choices[j].profile_hi, kCoulombProfileKnots, k,
+                             u);
+        // Knot 0's column is the constant Coulomb column's.
+        if (k > 0) row(rigid_body_block_index(j, kCoulombProfileFirst + k - 1)) = (1.0 - u) * z[j] * w;
+        row(rigid_body_block_index(j, kCoulombProfileFirst + k)) = u * z[j] * w;
         for (std::size_t g = 0; g < num_groups; ++g)
           if (in & (1u << g)) {
             F[g].row(n[g]) = row;
@@ -205,13 +212,19 @@ namespace {
 // blocks] to the full layout, its gravity block filled for each g.
 class RigidBodyProblem {
  public:
-  RigidBodyProblem(const ModelStats& stats, int M, InertiaStructure structure, double beta) : stats_(stats) {
+  RigidBodyProblem(const ModelStats& stats, int M, InertiaStructure structure, double beta, unsigned profile_joints)
+      : stats_(stats) {
     const int P = static_cast<int>(stats.A.rows());
     const int blocks = P - kRigidBodyShared;
     const bool tied = structure == InertiaStructure::remote_center;
     const int first_block = kGravityMoments + (tied ? kRemoteCenterTerms : kInertiaTerms);
     T_ = Eigen::MatrixXd::Zero(P, first_block + blocks);
     T_.bottomRightCorner(blocks, blocks).setIdentity();
+    // A joint without the profile: its columns map to nothing, the ridge holds them at 0.
+    for (int j = 0; j < M; ++j)
+      if (!(profile_joints >> j & 1u))
+        for (int k = kCoulombProfileFirst; k < kRigidBodyBlock; ++k)
+          T_(rigid_body_block_index(j, k), first_block + kRigidBodyBlock * j + k) = 0.0;
     for (int j = 0; j < M; ++j) {
       // Friction >= 0; with the remote-centre bodies the armatures are
       // inertias (>= 0) and the viscous term may bend a sqrt-viscous one
@@ -253,12 +266,13 @@ class RigidBodyProblem {
 }  // namespace
 
 RigidBodySolution solve_rigid_body_at(const ModelStats& stats, int M, InertiaStructure structure, double beta,
-                                      const Eigen::Vector3d& g) {
-  return RigidBodyProblem(stats, M, structure, beta).solve_at(g);
+                                      const Eigen::Vector3d& g, unsigned profile_joints) {
+  return RigidBodyProblem(stats, M, structure, beta, profile_joints).solve_at(g);
 }
 
-RigidBodySolution solve_rigid_body(const ModelStats& stats, int M, InertiaStructure structure, double beta) {
-  RigidBodyProblem problem(stats, M, structure, beta);
+RigidBodySolution solve_rigid_body(const ModelStats& stats, int M, InertiaStructure structure, double beta,
+                                   unsigned profile_joints) {
+  RigidBodyProblem problem(stats, M, structure, beta, profile_joints);
   // g and -g give the same span: the upper half sphere is enough.
   RigidBodySolution best;
   double best_polar = 0.0, best_azimuth = 0.0;

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "rcm/dynamics/fit.hpp"
+#include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/rigid_body.hpp"
 
 namespace rcm::dynamics::detail {
@@ -18,11 +19,14 @@ struct JointEstimatorChoice {
   double dahl_displacement = 1e-3;
   double causal_window_s = 0.0, causal_filter_s = 0.03;  // compute_step's qddot
   double batch_window_s = 0.0;  // the zero-phase qddot regressed on; 0: the causal one
+  // The range the Coulomb profile's knots span (the training range).
+  double profile_lo = 0.0, profile_hi = 1.0;
 };
 
 // Normal equations of the weighted rows of every joint, parameters in the order
 // [gravity 17 | inertia 19 | per joint: armature, viscous, coulomb, offset,
-// slow coulomb, sqrt-viscous] (LinearTorqueParameters).
+// slow coulomb, sqrt-viscous, Coulomb profile at knots 1..K-1]
+// (LinearTorqueParameters, K = kCoulombProfileKnots).
 struct ModelStats {
   Eigen::MatrixXd A;
   Eigen::VectorXd b;
@@ -33,7 +37,8 @@ struct ModelStats {
   double compute_loss(const Eigen::VectorXd& theta) const;
 };
 constexpr int kRigidBodyShared = 17 + kInertiaTerms;
-constexpr int kRigidBodyBlock = 6;
+constexpr int kCoulombProfileFirst = 6;  // block entry of the profile's knot 1
+constexpr int kRigidBodyBlock = kCoulombProfileFirst + kCoulombProfileKnots - 1;
 inline int rigid_body_block_index(int joint, int k) { return kRigidBodyShared + kRigidBodyBlock * joint + k; }
 
 // Rows weighted by weight[j] per joint; states (Dahl, causal qddot) run from the
@@ -74,11 +79,13 @@ struct RigidBodySolution {
 // (viscous, Coulomb, slow Coulomb and sqrt-viscous >= 0; with the remote-centre
 // structure also the sliding mass and the armatures, which are inertias).
 // beta: the instrument-axis angle of the remote-centre structure, rad.
+// profile_joints: bit j set, joint j has a Coulomb profile; the others' are held at 0.
 RigidBodySolution solve_rigid_body(const ModelStats& stats, int num_outputs,
-                                   InertiaStructure structure = InertiaStructure::free, double beta = 0.0);
+                                   InertiaStructure structure = InertiaStructure::free, double beta = 0.0,
+                                   unsigned profile_joints = 0u);
 // The same at one gravity direction g.
 RigidBodySolution solve_rigid_body_at(const ModelStats& stats, int num_outputs, InertiaStructure structure,
-                                      double beta, const Eigen::Vector3d& g);
+                                      double beta, const Eigen::Vector3d& g, unsigned profile_joints = 0u);
 
 // min |A^(1/2) x - ...|: (A + ridge) x = b with x[i] >= 0 for i in `nonnegative`
 // by an active set; the ridge, relative to each diagonal, picks the small-norm

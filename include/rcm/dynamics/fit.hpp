@@ -80,6 +80,11 @@ struct FitOptions {
   // unless that fits the validation split more than 25 % worse than the free
   // coefficients; false: the free coefficients always.
   bool remote_center = true;
+  // linear and hybrid, with the rigid-body structure: a Coulomb level that
+  // varies along each joint's travel (linear_model.hpp), kept per joint when it
+  // predicts the validation split and the other speed more than 1 % better
+  // than a constant level; false: a constant level always.
+  bool coulomb_profile = true;
 
   // Throws InputError when a value is out of range.
   void check() const;

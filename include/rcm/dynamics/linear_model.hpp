@@ -30,6 +30,12 @@
 // travel) and sqrt(|dq|) sign(dq), friction that grows with speed but less than
 // linearly (on the real PSM a viscous term fitted at one speed mispredicts the
 // other). Viscous and Coulomb coefficients are kept >= 0 (active set).
+// And a Coulomb level that varies along each joint's travel: the Dahl state's
+// coefficient is coulomb + a piecewise-linear profile over knots equally spaced
+// on the training range (zero at the first knot, constant beyond the range),
+// kept per joint when it predicts the validation split and the other speed
+// better by more than 1 %. On the real PSM the insertion's friction changes
+// along the stroke, with the same shape at both speeds and both payloads.
 
 #include <Eigen/Core>
 #include <cmath>
@@ -51,6 +57,21 @@ inline double compute_dahl_state(double z, double dq, double x_c) {
 
 // The slow Dahl state's characteristic displacement, in units of x_c.
 constexpr double kSlowDahlFactor = 10.0;
+// Knots of the Coulomb profile a fit places over each joint's training range.
+constexpr int kCoulombProfileKnots = 6;
+// Piecewise-linear interpolation at x between K >= 2 knots equally spaced over
+// [lo, hi], constant beyond: the value is (1 - w) c[k] + w c[k + 1].
+inline void compute_knot_weights(double x, double lo, double hi, int K, int& k, double& w) {
+  const double u = (x - lo) / (hi - lo) * (K - 1);
+  if (!(u > 0)) {  // also NaN: the first knot
+    k = 0, w = 0.0;
+  } else if (u >= K - 1) {
+    k = K - 2, w = 1.0;
+  } else {
+    k = static_cast<int>(u), w = u - k;
+  }
+}
+
 // sqrt(|v|) sign(v).
 inline double compute_sqrt_velocity(double v) { return v >= 0 ? std::sqrt(v) : -std::sqrt(-v); }
 
@@ -81,6 +102,12 @@ struct LinearTorqueParameters {
   // compute_sqrt_velocity(qd).
   Eigen::VectorXd coulomb_slow;
   Eigen::VectorXd sqrt_viscous;
+  // Per output joint (empty: none): the Coulomb level's change along the travel
+  // at K >= 2 knots equally spaced over [coulomb_profile_range(j, 0),
+  // coulomb_profile_range(j, 1)] (M x K, joint units, first column 0), added to
+  // `coulomb` by compute_knot_weights.
+  Eigen::MatrixXd coulomb_profile;
+  Eigen::MatrixXd coulomb_profile_range;  // M x 2, lo < hi
 };
 
 class LinearTorqueModel final : public TorqueModel {
