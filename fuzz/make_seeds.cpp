@@ -116,6 +116,14 @@ void write_model_seeds(const rcm::Recording& rec, const fs::path& linear_path, c
   save_torque_model(dir / "mlp.json", MlpTorqueModel(info, make_random_mlp_stacks(2 * N, 4, M, 1), norm));
   save_torque_model(dir / "lstm.json", LstmTorqueModel(info, make_random_lstm_network(2 * N, 3, 1, 3, M, 2), norm));
   std::shared_ptr<const LinearTorqueModel> base(dynamic_cast<const LinearTorqueModel*>(linear_any.release()));
+  LinearTorqueParameters with_profile = base->parameters();  // a Coulomb level along the travel
+  with_profile.coulomb_profile = Eigen::MatrixXd::Zero(M, kCoulombProfileKnots);
+  with_profile.coulomb_profile.col(1).setConstant(0.05);
+  with_profile.coulomb_profile.col(kCoulombProfileKnots - 1).setConstant(0.08);
+  with_profile.coulomb_profile_range = Eigen::MatrixXd(M, 2);
+  with_profile.coulomb_profile_range.col(0).setConstant(-0.5);
+  with_profile.coulomb_profile_range.col(1).setConstant(0.5);
+  save_torque_model(dir / "linear_profile.json", LinearTorqueModel(info, with_profile));
   save_torque_model(dir / "hybrid.json",
                     HybridTorqueModel(info, base, make_random_lstm_network(2 * N, 3, 1, 3, M, 3), norm));
   (void)rec;
