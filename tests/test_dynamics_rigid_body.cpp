@@ -369,19 +369,6 @@ TEST(CoulombProfile, KnotWeightsInterpolateAndHoldBeyondTheRange) {
   EXPECT_EQ(w, 0.0);
 }
 
-// The Coulomb level a fitted model applies at q on joint j.
-double get_coulomb_level(const rcm::dynamics::LinearTorqueParameters& p, int j, double q) {
-  double level = p.coulomb[j];
-  if (p.coulomb_profile.size()) {
-    int k;
-    double w;
-    rcm::dynamics::compute_knot_weights(q, p.coulomb_profile_range(j, 0), p.coulomb_profile_range(j, 1),
-                                        static_cast<int>(p.coulomb_profile.cols()), k, w);
-    level += (1 - w) * p.coulomb_profile(j, k) + w * p.coulomb_profile(j, k + 1);
-  }
-  return level;
-}
-
 TEST(CoulombProfile, FrictionThatVariesAlongTheTravelIsFoundAndCarriesToTheSlowRun) {
   // The insertion's Coulomb level changes along its stroke by as much as it is
   // (a real PSM's insertion): the fit finds the profile, and it carries from
@@ -397,7 +384,8 @@ TEST(CoulombProfile, FrictionThatVariesAlongTheTravelIsFoundAndCarriesToTheSlowR
   const auto fit = rcm::dynamics::fit_linear_torque_model({fast}, options);
   options.coulomb_profile = false;
   const auto constant = rcm::dynamics::fit_linear_torque_model({fast}, options);
-  const auto& p = static_cast<const rcm::dynamics::LinearTorqueModel&>(*fit.model).parameters();
+  const auto& model = static_cast<const rcm::dynamics::LinearTorqueModel&>(*fit.model);
+  const auto& p = model.parameters();
   ASSERT_EQ(p.coulomb_profile.rows(), 3);
   ASSERT_EQ(p.coulomb_profile.cols(), rcm::dynamics::kCoulombProfileKnots);
   EXPECT_EQ(static_cast<const rcm::dynamics::LinearTorqueModel&>(*constant.model).parameters().coulomb_profile.size(), 0);
@@ -407,7 +395,7 @@ TEST(CoulombProfile, FrictionThatVariesAlongTheTravelIsFoundAndCarriesToTheSlowR
   EXPECT_NEAR(hi, fast.position.col(2).maxCoeff(), 1e-3);
   for (int i = 0; i <= 10; ++i) {
     const double q3 = lo + (hi - lo) * i / 10.0;
-    EXPECT_NEAR(get_coulomb_level(p, 2, q3), get_varying_insertion_coulomb(q3), 0.05) << "q3 " << q3;
+    EXPECT_NEAR(model.get_coulomb_level(2, q3), get_varying_insertion_coulomb(q3), 0.05) << "q3 " << q3;
   }
   const auto e = rcm::dynamics::evaluate_torque_model(*fit.model, {slow});
   const auto e_constant = rcm::dynamics::evaluate_torque_model(*constant.model, {slow});

@@ -133,15 +133,8 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
     }
     double qdd = ws.qdd[j].update(t, qd[j]);
     if (qdd_batch && p.batch_acceleration_window_s[j] > 0) qdd = qdd_batch[j];
-    double coulomb = p.coulomb[j];
-    if (p.coulomb_profile.size()) {
-      int k;
-      double w;
-      compute_knot_weights(q[j], p.coulomb_profile_range(j, 0), p.coulomb_profile_range(j, 1),
-                           static_cast<int>(p.coulomb_profile.cols()), k, w);
-      coulomb += (1.0 - w) * p.coulomb_profile(j, k) + w * p.coulomb_profile(j, k + 1);
-    }
-    double value = p.armature[j] * qdd + p.viscous[j] * qd[j] + coulomb * ws.z[j] + p.offset[j];
+    double value =
+        p.armature[j] * qdd + p.viscous[j] * qd[j] + get_coulomb_level(j, q[j]) * ws.z[j] + p.offset[j];
     if (j < 3) value += ws.Y.row(j).dot(p.gravity);
     if (has_extra_friction_) value += p.coulomb_slow[j] * ws.z_slow[j] + p.sqrt_viscous[j] * compute_sqrt_velocity(qd[j]);
     tau[j] = value;
@@ -153,6 +146,16 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
     for (int j = 0; j < 3; ++j) tau[j] += ws.Y_inertia.row(j).dot(p.inertia);
   }
   ws.has_previous = true;
+}
+
+double LinearTorqueModel::get_coulomb_level(int j, double q) const {
+  const auto& p = parameters_;
+  if (!p.coulomb_profile.size()) return p.coulomb[j];
+  int k;
+  double w;
+  compute_knot_weights(q, p.coulomb_profile_range(j, 0), p.coulomb_profile_range(j, 1),
+                       static_cast<int>(p.coulomb_profile.cols()), k, w);
+  return p.coulomb[j] + ((1.0 - w) * p.coulomb_profile(j, k) + w * p.coulomb_profile(j, k + 1));
 }
 
 Eigen::MatrixXd LinearTorqueModel::predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,

@@ -125,6 +125,9 @@ class LinearTorqueModel final : public TorqueModel {
   Eigen::MatrixXd predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
                                    const Eigen::MatrixXd& velocity) const override;
   const LinearTorqueParameters& parameters() const { return parameters_; }
+  // The coefficient of joint j's Dahl state at position q: `coulomb` plus the
+  // profile there (compute_knot_weights), or `coulomb` alone without one.
+  double get_coulomb_level(int j, double q) const;
 
   // dU/dq_j of the 17 gravity basis functions at q (joints 1-3), j = 0..2.
   static void compute_gravity_regressor(const double* q, Eigen::Matrix<double, 3, kGravityTerms>& Y);
