@@ -11,11 +11,13 @@ fit's own held-out slice of its file is the in-sample figure.
 Per split and joint it reports the torque RMSE (mean over the seeds, and their
 range), the share of the residual's power above 5 Hz and the share of it that
 the measured qddot (zero-phase, 0.1 s) explains by least squares (an
-inertia-like error). Beside them, the real Classic PSM1 recordings' figures for
-the same protocol (--real DIR: psm1_105g_insertion_full.csv, ..._half.csv and
-the 205 g pair, fitted and scored the same way; they stay where they are). The
-table goes between the speed-effect markers of docs/simulator.md, with the date
-and machine.
+inertia-like error), with its coefficient: the inertia the scored run shows
+beyond what the fit found, in kg m^2 (yaw, pitch) and kg (insertion).
+Beside them, the real Classic PSM1 recordings' figures for the same protocol
+(--real DIR: psm1_105g_insertion_full.csv, ..._half.csv and the 205 g pair,
+fitted and scored the same way; they stay where they are). The table goes
+between the speed-effect markers of docs/simulator.md, with the date and
+machine.
 
   /usr/bin/python3 bench/sim_speed_effect.py --build build [--seeds 1,2,3] [--arms cable,rigid] [--real DIR] [--no-doc]
 """
@@ -44,7 +46,9 @@ REAL = {"105 g": ("psm1_105g_insertion_full.csv", "psm1_105g_insertion_half.csv"
 
 
 def residual_traits(test, predictions):
-    """Per joint: RMSE, share of residual power above 5 Hz, R^2 of qddot on it."""
+    """Per joint: RMSE, share of residual power above 5 Hz, R^2 of qddot on it
+    and its least-squares coefficient (the inertia the scored run shows beyond
+    the model's, kg m^2 or kg)."""
     d = load(test)
     pred = np.genfromtxt(predictions, delimiter=",", names=True)
     r = np.stack([pred[f"effort_{j}"] - pred[f"tau_fs_{j}"] for j in (1, 2, 3)], 1)
@@ -59,7 +63,8 @@ def residual_traits(test, predictions):
         A = np.stack([qdd[:, j], np.ones(len(e))], 1)
         fit = np.linalg.lstsq(A, r[:, j], rcond=None)[0]
         r2 = 1.0 - np.mean((r[:, j] - A @ fit) ** 2) / np.mean((r[:, j] - r[:, j].mean()) ** 2)
-        out.append({"rmse": float(np.sqrt(np.mean(r[:, j] ** 2))), "hf": float(hf), "qdd_r2": float(max(r2, 0.0))})
+        out.append({"rmse": float(np.sqrt(np.mean(r[:, j] ** 2))), "hf": float(hf), "qdd_r2": float(max(r2, 0.0)),
+                    "qdd_coef": float(fit[0])})
     return out
 
 
@@ -91,7 +96,7 @@ def summarize(runs):
     out = {}
     for split in ("full -> half", "half -> full"):
         rmse = np.array([[j["rmse"] for j in r[split]["out"]] for r in runs])
-        out[split] = {k: np.mean([[j[k] for j in r[split]["out"]] for r in runs], 0) for k in ("hf", "qdd_r2")}
+        out[split] = {k: np.mean([[j[k] for j in r[split]["out"]] for r in runs], 0) for k in ("hf", "qdd_r2", "qdd_coef")}
         out[split]["rmse"] = rmse.mean(0)
         out[split]["range"] = (rmse.min(0), rmse.max(0))
         ins = np.array([r[split]["in"] for r in runs])
@@ -144,20 +149,21 @@ def main():
              "protocol, 105 g and 205 g on the instrument, fitted and scored the same way.",
              "",
              "| arm | fitted on -> scored on | RMSE yaw / pitch (N m) / insertion (N) | range over seeds | "
-             "cross / in-sample at the scored speed | residual power above 5 Hz | qddot explains |",
-             "|---|---|---|---|---|---|---|"]
+             "cross / in-sample at the scored speed | residual power above 5 Hz | qddot explains | "
+             "qddot coefficient (kg m^2 / kg m^2 / kg) |",
+             "|---|---|---|---|---|---|---|---|"]
     for name, s in results.items():
         for split, own in (("full -> half", "full"), ("half -> full", "half")):
             x = s[split]
             lines.append(f"| {name} | {own} -> {own} (in-sample) | {fmt3(x['in'])} | "
-                         f"{fmt_range(x['in_range'])} | | | |")
+                         f"{fmt_range(x['in_range'])} | | | | |")
         for split in ("full -> half", "half -> full"):
             x = s[split]
             # Against the in-sample error at the speed it is scored on.
             ratio = x["rmse"] / s["half -> full" if split == "full -> half" else "full -> half"]["in"]
             lines.append(f"| {name} | {split} | {fmt3(x['rmse'])} | {fmt_range(x['range'])} | "
                          f"{fmt3(ratio, 1)} | {' / '.join(f'{v:.0%}' for v in x['hf'])} | "
-                         f"{' / '.join(f'{v:.0%}' for v in x['qdd_r2'])} |")
+                         f"{' / '.join(f'{v:.0%}' for v in x['qdd_r2'])} | {fmt3(x['qdd_coef'])} |")
     block = "\n".join(lines)
     if args.no_doc:
         print(block)
