@@ -186,6 +186,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("acceleration_window_s", &LinearTorqueParameters::acceleration_window_s)
       .def_readonly("acceleration_filter_s", &LinearTorqueParameters::acceleration_filter_s)
       .def_readonly("batch_acceleration_window_s", &LinearTorqueParameters::batch_acceleration_window_s)
+      .def_readonly("batch_acceleration_degree", &LinearTorqueParameters::batch_acceleration_degree)
       .def_readonly("inertia", &LinearTorqueParameters::inertia, "19 rigid-body inertia coefficients (empty: none)")
       .def_readonly("gravity_direction", &LinearTorqueParameters::gravity_direction,
                     "the gravity direction the fit found (unit, base frame; empty: free potential)")

@@ -123,11 +123,17 @@ inline bool is_time_sorted(const Eigen::VectorXd& time) {
 }
 
 // Zero-phase qddot of a whole recording (time never decreasing): at each sample
-// the slope of the least-squares quadratic through the samples within
-// +- window / 2 of it. Symmetric inside the recording; near either end the window
-// is cut and the fit becomes one-sided. With fewer than three distinct times in
-// the window, the difference across it.
+// the slope there of the least-squares polynomial of `degree` (2 or 3) through
+// the samples within +- window / 2 of it. Symmetric inside the recording; near
+// either end the window is cut and the fit becomes one-sided. Why the cubic: over
+// a symmetric window a quadratic's slope is a straight line's, which passes a
+// sinusoid of angular frequency w at 1 - (w window / 2)^2 / 10 of its size, so
+// the inertia fitted at one speed takes in the droop at that speed's
+// frequencies and mispredicts another speed; the cubic's passes it at
+// 1 - O((w window / 2)^4) (0.998 where the quadratic's is 0.90). With too few
+// distinct times for the cubic, the quadratic; for the quadratic, the
+// difference across the window.
 Eigen::VectorXd compute_zero_phase_acceleration(const Eigen::VectorXd& time, const Eigen::VectorXd& velocity,
-                                                double window_s);
+                                                double window_s, int degree);
 
 }  // namespace rcm::dynamics::detail

@@ -229,12 +229,14 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
       {0.0, kDefaultAccelerationFilter}, {0.0, 0.01}, {0.0, 0.02}, {0.0, 0.05}, {0.04, 0.0}, {0.06, 0.0},
       {0.08, 0.0}, {0.10, 0.0}, {0.12, 0.0}, {0.16, 0.0}, {0.20, 0.0}, {0.06, 0.01}, {0.10, 0.01}};
   // Zero-phase windows (predict_torque); the fit regresses on the chosen one.
+  // The cubic's slope is noisier than a straight line's over the same window,
+  // so its windows run longer.
   // Recordings read from files have increasing time; one built in memory whose
   // time goes back gets the causal estimate only.
   bool sorted = true;
   for (const auto& r : recordings) sorted = sorted && is_time_sorted(r.time);
   const std::vector<double> batch_windows =
-      sorted ? std::vector<double>{0.03, 0.05, 0.07, 0.10, 0.15, 0.20} : std::vector<double>{};
+      sorted ? std::vector<double>{0.07, 0.10, 0.15, 0.20, 0.30, 0.40} : std::vector<double>{};
   const int K = static_cast<int>(grid.size());
   const int A = static_cast<int>(accelerations.size());
   const int B = static_cast<int>(batch_windows.size());
@@ -246,7 +248,8 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
     std::vector<std::vector<Eigen::VectorXd>> batch(recordings.size());
     for (std::size_t r = 0; r < recordings.size(); ++r)
       for (double w : batch_windows)
-        batch[r].push_back(compute_zero_phase_acceleration(recordings[r].time, recordings[r].velocity.col(j), w));
+        batch[r].push_back(compute_zero_phase_acceleration(recordings[r].time, recordings[r].velocity.col(j), w,
+                                                           kZeroPhaseAccelerationDegree));
     train.emplace_back(recordings, split.train, j, x_c, accelerations, batch, weight[j], sample_period);
     val.emplace_back(recordings, split.validation, j, x_c, accelerations, batch, weight[j], sample_period);
   }

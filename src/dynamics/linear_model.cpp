@@ -90,6 +90,8 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
   if (!(q.acceleration_window_s.array() >= 0).all() || !(q.acceleration_filter_s.array() >= 0).all() ||
       !(q.batch_acceleration_window_s.array() >= 0).all())
     throw std::invalid_argument("linear model: the acceleration windows and filters must be >= 0");
+  if (q.batch_acceleration_degree != 2 && q.batch_acceleration_degree != 3)
+    throw std::invalid_argument("linear model: batch_acceleration_degree must be 2 or 3");
 }
 
 std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() const {
@@ -167,7 +169,8 @@ Eigen::MatrixXd LinearTorqueModel::predict_sequence(const Eigen::VectorXd& time,
   Eigen::MatrixXd qdd = Eigen::MatrixXd::Zero(M, T);  // column per sample
   for (int j = 0; j < M; ++j)
     if (parameters_.batch_acceleration_window_s[j] > 0)
-      qdd.row(j) = compute_zero_phase_acceleration(time, velocity.col(j), parameters_.batch_acceleration_window_s[j])
+      qdd.row(j) = compute_zero_phase_acceleration(time, velocity.col(j), parameters_.batch_acceleration_window_s[j],
+                                                   parameters_.batch_acceleration_degree)
                        .transpose();
   auto ws = create_workspace();
   Eigen::VectorXd q(N), qd(N), tau(M);
@@ -191,7 +194,8 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
           {"dahl_displacement", detail::encode_vector(p.dahl_displacement)},
           {"acceleration_window_s", detail::encode_vector(p.acceleration_window_s)},
           {"acceleration_filter_s", detail::encode_vector(p.acceleration_filter_s)},
-          {"batch_acceleration_window_s", detail::encode_vector(p.batch_acceleration_window_s)}};
+          {"batch_acceleration_window_s", detail::encode_vector(p.batch_acceleration_window_s)},
+          {"batch_acceleration_degree", p.batch_acceleration_degree}};
   if (p.inertia.size()) j["inertia"] = detail::encode_vector(p.inertia);
   if (p.gravity_direction.size()) j["gravity_direction"] = detail::encode_vector(p.gravity_direction);
   if (p.coulomb_slow.size()) j["coulomb_slow"] = detail::encode_vector(p.coulomb_slow);
@@ -236,6 +240,14 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
     p.batch_acceleration_window_s = Eigen::VectorXd::Zero(M);
   if (!(p.batch_acceleration_window_s.array() >= 0).all())
     fail(source, f + ".batch_acceleration_window_s", "expected values >= 0");
+  // Files without the degree were fitted on the quadratic's slope.
+  p.batch_acceleration_degree = 2;
+  if (j.contains("batch_acceleration_degree")) {
+    const auto& d = j["batch_acceleration_degree"];
+    if (!d.is_number_integer() || (d.get<std::int64_t>() != 2 && d.get<std::int64_t>() != 3))
+      fail(source, f + ".batch_acceleration_degree", "expected 2 or 3");
+    p.batch_acceleration_degree = static_cast<int>(d.get<std::int64_t>());
+  }
   if (j.contains("inertia")) {
     if (M < 3) fail(source, f + ".inertia", "needs joints 1-3 predicted");
     p.inertia = decode_vector_d(j["inertia"], source, f + ".inertia", kInertiaTerms);

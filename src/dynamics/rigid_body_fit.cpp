@@ -74,7 +74,8 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
     // The zero-phase qddot of each joint whose choice regresses on it.
     for (int j = 0; j < M; ++j)
       batch[j] = choices[j].batch_window_s > 0
-                     ? compute_zero_phase_acceleration(rec.time, rec.velocity.col(j), choices[j].batch_window_s)
+                     ? compute_zero_phase_acceleration(rec.time, rec.velocity.col(j), choices[j].batch_window_s,
+                                                       kZeroPhaseAccelerationDegree)
                      : Eigen::VectorXd();
     for (auto& e : estimators) e.reset();
     z.setZero();

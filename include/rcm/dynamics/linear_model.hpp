@@ -17,9 +17,11 @@
 // constant acceleration_filter_s (0: none). Both are chosen per joint at fit time
 // on the validation split. Over a whole recording (predict_torque, offline) qddot
 // may instead come from a zero-phase estimate, the slope of a least-squares
-// quadratic through the samples within +- batch_acceleration_window_s / 2 of each
-// sample (0: the causal estimate); the fit then regresses on that estimate, so
-// the armature is not biased by the causal lag. compute_step() stays causal.
+// polynomial of batch_acceleration_degree (a cubic: flat over the band a
+// recording moves in, so the inertia carries to other speeds) through the
+// samples within +- batch_acceleration_window_s / 2 of each sample (0: the
+// causal estimate); the fit then regresses on that estimate, so the armature is
+// not biased by the causal lag. compute_step() stays causal.
 // Friction per joint: viscous v, an offset, and Coulomb/stiction through a Dahl
 // state z in [-1, 1] that moves toward sign(dq) over a characteristic
 // displacement x_c and stays put at rest, so the holding torque remembers the
@@ -59,6 +61,9 @@ inline double compute_dahl_state(double z, double dq, double x_c) {
 constexpr double kSlowDahlFactor = 10.0;
 // Knots of the Coulomb profile a fit places over each joint's training range.
 constexpr int kCoulombProfileKnots = 6;
+// Degree of the local polynomial a fit takes the zero-phase qddot from (the
+// slope of a cubic; see LinearTorqueParameters::batch_acceleration_degree).
+constexpr int kZeroPhaseAccelerationDegree = 3;
 // Piecewise-linear interpolation at x between K >= 2 knots equally spaced over
 // [lo, hi], constant beyond: the value is (1 - w) c[k] + w c[k + 1].
 inline void compute_knot_weights(double x, double lo, double hi, int K, int& k, double& w) {
@@ -89,6 +94,9 @@ struct LinearTorqueParameters {
   Eigen::VectorXd acceleration_filter_s;  // s, >= 0
   // Zero-phase qddot of predict_torque() per output joint; empty: all 0 (causal).
   Eigen::VectorXd batch_acceleration_window_s;  // s, >= 0
+  // Degree of the polynomial whose slope that is: 3 (cubic), or 2 (quadratic,
+  // what model files without the field were fitted with).
+  int batch_acceleration_degree = kZeroPhaseAccelerationDegree;
   // Rigid-body inertia of joints 1-3 (rigid_body.hpp, kInertiaTerms values;
   // each joint's qddot as for its armature); empty: none, as in files written
   // before it existed or fitted with FitOptions::rigid_body off.
