@@ -71,6 +71,13 @@ class TestDynamics(unittest.TestCase):
         options = rcm.dynamics.FitOptions()
         self.assertTrue(options.coulomb_profile)
 
+    def test_zero_phase_acceleration_degree(self):
+        # A fit takes qddot from the slope of a local cubic, one window per joint.
+        p = self.model().parameters
+        self.assertEqual(p.batch_acceleration_degree, 3)
+        self.assertEqual(len(p.batch_acceleration_window_s), 3)
+        self.assertTrue((p.batch_acceleration_window_s > 0).all())
+
     def test_refit_payload(self):
         # On the recording the model was fitted on there is no payload to find:
         # the residual does not grow and the weight found is small; the model it

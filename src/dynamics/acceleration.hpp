@@ -130,9 +130,9 @@ inline bool is_time_sorted(const Eigen::VectorXd& time) {
 // sinusoid of angular frequency w at 1 - (w window / 2)^2 / 10 of its size, so
 // the inertia fitted at one speed takes in the droop at that speed's
 // frequencies and mispredicts another speed; the cubic's passes it at
-// 1 - O((w window / 2)^4) (0.998 where the quadratic's is 0.90). With too few
-// distinct times for the cubic, the quadratic; for the quadratic, the
-// difference across the window.
+// 1 - O((w window / 2)^4) (0.998 at w window / 2 = 1, where the quadratic's
+// is 0.90). With too few distinct times for the cubic, the quadratic; for the
+// quadratic, the difference across the window.
 Eigen::VectorXd compute_zero_phase_acceleration(const Eigen::VectorXd& time, const Eigen::VectorXd& velocity,
                                                 double window_s, int degree);
 
