@@ -25,7 +25,14 @@ struct CubicMoments {
       for (int c = 0; c < 4; ++c) A(r, c) = s[r + c];
     return A;
   }
-  double get_slope() const { return get_normal_matrix().ldlt().solve(Eigen::Vector4d(v[0], v[1], v[2], v[3]))(1); }
+  // The slope c1, or false when the samples cannot pin a cubic down.
+  bool compute_slope(double& slope) const {
+    const Eigen::Matrix4d A = get_normal_matrix();
+    const double n = s[0];
+    if (!(A.determinant() > 1e-12 * n * n * n * n)) return false;
+    slope = A.ldlt().solve(Eigen::Vector4d(v[0], v[1], v[2], v[3]))(1);
+    return true;
+  }
 };
 
 }  // namespace
@@ -41,15 +48,16 @@ Eigen::VectorXd compute_zero_phase_acceleration(const Eigen::VectorXd& time, con
     while (time(lo) < time(i) - h * (1.0 + 1e-9)) ++lo;
     if (hi < i + 1) hi = i + 1;
     while (hi < T && time(hi) <= time(i) + h * (1.0 + 1e-9)) ++hi;
-    const double n = static_cast<double>(hi - lo);
     if (degree == 3 && hi - lo >= 5) {
       CubicMoments m;
       for (Eigen::Index k = lo; k < hi; ++k) m.add((time(k) - time(i)) / h, velocity(k));
-      if (m.get_normal_matrix().determinant() > 1e-12 * n * n * n * n) {
-        out(i) = m.get_slope() / h;
+      double slope;
+      if (m.compute_slope(slope)) {
+        out(i) = slope / h;
         continue;
       }
     }
+    const double n = static_cast<double>(hi - lo);
     QuadraticMoments m;
     for (Eigen::Index k = lo; k < hi; ++k) m.add((time(k) - time(i)) / h, velocity(k));
     if (hi - lo >= 3 && m.get_normal_matrix().determinant() > 1e-9 * n * n * n) {
