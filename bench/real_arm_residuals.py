@@ -16,7 +16,13 @@ pitch, insertion) is fitted with `rcm dynamics fit` and scored with
 3. draws the mean residual against velocity per joint;
 4. with --payload-split, re-identifies a payload change (`rcm dynamics
    payload`) on the first seconds of a recording with the new payload and
-   scores the result on another one.
+   scores the result on another one;
+5. with --pair FAST:SLOW (two runs of the same path points, row for row, the
+   second slower), compares the runs row by row: at the same point of the path
+   gravity and any position-dependent torque cancel, so the difference in
+   effort is what the change of speed alone does (inertia, friction's rate
+   dependence, anything else that differs between the runs), and what the
+   default model fitted on either run predicts of it.
 
 Run with Debian's Python (numpy, gnuplot) and the built module:
   PYTHONPATH=build/python /usr/bin/python3 bench/real_arm_residuals.py --build build \\
@@ -46,6 +52,7 @@ DOC = os.path.join(ROOT, "docs", "dynamics.md")
 FIGURE = os.path.join(ROOT, "docs", "figures", "real_arm_residual_velocity.png")
 BEGIN, END = "<!-- real-arm:begin -->", "<!-- real-arm:end -->"
 PAYLOAD_BEGIN, PAYLOAD_END = "<!-- real-arm-payload:begin -->", "<!-- real-arm-payload:end -->"
+PAIRS_BEGIN, PAIRS_END = "<!-- real-arm-pairs:begin -->", "<!-- real-arm-pairs:end -->"
 JOINTS = ("yaw", "pitch", "insertion")
 UNITS = ("N m", "N m", "N")
 
@@ -132,7 +139,8 @@ def force_error(J, residual):
     return float(np.sqrt((f ** 2).sum(1).mean()))
 
 
-MODELS = {"linear": [], "linear, constant Coulomb": ["--constant-coulomb"], "linear, free inertia": ["--free-inertia"],
+MODELS = {"linear": [], "linear, no insertion stiffness": ["--no-insertion-stiffness"],
+          "linear, constant Coulomb": ["--constant-coulomb"], "linear, free inertia": ["--free-inertia"],
           "linear, generic": ["--generic-structure"],
           "hybrid": [], "lstm": []}
 
@@ -187,6 +195,79 @@ def payload_table(args, rcm_cli, J):
         write_block(DOC, PAYLOAD_BEGIN, PAYLOAD_END, block)
 
 
+def pair_table(args, rcm_cli):
+    """Row-by-row comparison of runs of the same path at two speeds, between its own markers."""
+    out = [f"Measured by `bench/real_arm_residuals.py` on {datetime.datetime.now().strftime('%Y-%m-%d %H:%M')}, "
+           f"{cpu_model()}, {os.cpu_count()} cores."]
+    out.append("\n**The same path points at two speeds, row by row.** d = fast run minus slow run at the same row "
+               "(the same commanded point). Position: RMS of d q against the joint's RMS excursion. The effort "
+               "difference regressed on d qddot (zero-phase cubic, 0.15 s) and a constant: the apparent inertia "
+               "(kg m^2, kg) and the offset between the runs (N m, N), with the share R^2 of the difference they "
+               "explain; then R^2 once d qd and d sqrt(|qd|) sign(qd) (friction that depends on the rate) are added. "
+               "Last two columns: the default fit (`rcm dynamics fit`) on one run predicts both, and the RMS of "
+               "what its predicted difference misses of the measured one:\n")
+    out.append("| runs | joint | position d / excursion | RMS effort d | apparent inertia | offset between runs | "
+               "R^2 inertia + offset | R^2 with the rate terms | missed, fit on the fast run | missed, fit on the slow run |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|")
+    units = ("kg m^2", "kg m^2", "kg")
+    insertion = []
+    with tempfile.TemporaryDirectory() as work:
+        for s in args.pair:
+            label, files = s.split("=", 1)
+            fast, slow = files.split(":")
+            a, b = load(fast), load(slow)
+            if len(a["t"]) != len(b["t"]):
+                raise SystemExit(f"--pair {label}: {fast} has {len(a['t'])} rows and {slow} {len(b['t'])}; "
+                                 "the runs must hold the same path points row for row")
+            # What each run's default fit predicts on both runs, and the
+            # insertion it finds with and without the stiffness.
+            predicted = {}
+            for name, train in (("fast", fast), ("slow", slow)):
+                model = os.path.join(work, f"{name}.json")
+                plain = os.path.join(work, f"{name}_plain.json")
+                run([rcm_cli, "dynamics", "fit", "--seed", str(args.seed), "--out", model, train],
+                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                run([rcm_cli, "dynamics", "fit", "--seed", str(args.seed), "--no-insertion-stiffness", "--out", plain,
+                     train], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                with_k = rcm.dynamics.load_torque_model(model).parameters
+                without = rcm.dynamics.load_torque_model(plain).parameters
+                insertion.append(f"| {label}, {name} run | {without.armature[2]:.3f} kg | {with_k.armature[2]:.3f} kg | "
+                                 f"{with_k.stiffness[2]:.2f} N/m |")
+                for which, path in (("fast", fast), ("slow", slow)):
+                    pred = os.path.join(work, "pred.csv")
+                    run([rcm_cli, "dynamics", "eval", model, path, "--json", "--predictions", pred],
+                        stdout=subprocess.DEVNULL)
+                    p = np.genfromtxt(pred, delimiter=",", names=True)
+                    predicted[(name, which)] = np.stack([p[f"tau_fs_{j}"] for j in (1, 2, 3)], 1)
+            qdd_a = zero_phase_acceleration(a["t"], a["qd"])
+            qdd_b = zero_phase_acceleration(b["t"], b["qd"])
+            sq = lambda v: np.sign(v) * np.sqrt(np.abs(v))
+            for j in range(3):
+                de = a["tau"][:, j] - b["tau"][:, j]
+                ss = ((de - de.mean()) ** 2).sum()
+                X = np.stack([qdd_a[:, j] - qdd_b[:, j], np.ones_like(de)], 1)
+                th = np.linalg.lstsq(X, de, rcond=None)[0]
+                r2 = 1.0 - ((de - X @ th) ** 2).sum() / ss
+                Xr = np.column_stack([X, a["qd"][:, j] - b["qd"][:, j], sq(a["qd"][:, j]) - sq(b["qd"][:, j])])
+                r2r = 1.0 - ((de - Xr @ np.linalg.lstsq(Xr, de, rcond=None)[0]) ** 2).sum() / ss
+                missed = [np.sqrt(((de - (predicted[(n, "fast")][:, j] - predicted[(n, "slow")][:, j])) ** 2).mean())
+                          for n in ("fast", "slow")]
+                dq = np.sqrt(((a["q"][:, j] - b["q"][:, j]) ** 2).mean()) / a["q"][:, j].std()
+                out.append(f"| {label} | {JOINTS[j]} | {100 * dq:.1f} % | {np.sqrt((de ** 2).mean()):.3f} {UNITS[j]} | "
+                           f"{th[0]:.3f} {units[j]} | {th[1]:+.3f} {UNITS[j]} | {r2:.2f} | {r2r:.2f} | "
+                           f"{missed[0]:.3f} {UNITS[j]} | {missed[1]:.3f} {UNITS[j]} |")
+    out.append("\n**The insertion as each run's default fit sees it**: its mass along the axis (the armature, which "
+               "holds the sliding body's mass), fitted with `--no-insertion-stiffness` and by default, and the "
+               "stiffness the default fit found:\n")
+    out.append("| run | mass, no stiffness | mass, default | stiffness |")
+    out.append("|---|---|---|---|")
+    out += insertion
+    block = "\n".join(out)
+    print(block)
+    if not args.no_doc:
+        write_block(DOC, PAIRS_BEGIN, PAIRS_END, block)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--build", default="build")
@@ -202,6 +283,8 @@ def main():
                     help="LABEL=TRAIN.csv:REFIT.csv:TEST.csv: the linear model fitted on TRAIN, its payload "
                          "re-identified on the first --refit-seconds of REFIT, scored on TEST")
     ap.add_argument("--refit-seconds", type=float, default=10.0)
+    ap.add_argument("--pair", action="append", default=[],
+                    help="LABEL=FAST.csv:SLOW.csv, two runs of the same path points row for row (item 5)")
     args = ap.parse_args()
     rcm_cli = os.path.join(args.build, "bin", "rcm")
     kinds = [k.strip() for k in args.models.split("|")]
@@ -213,9 +296,11 @@ def main():
     J = np.array(kin["J_inc_base"])
     if args.payload_split:
         payload_table(args, rcm_cli, J)
+    if args.pair:
+        pair_table(args, rcm_cli)
     if not args.split:
-        if not args.payload_split:
-            ap.error("nothing to do: give --split or --payload-split")
+        if not args.payload_split and not args.pair:
+            ap.error("nothing to do: give --split, --payload-split or --pair")
         return
     splits = []
     for s in args.split:

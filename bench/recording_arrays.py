@@ -10,8 +10,8 @@ def load(path):
     return {"t": d["time"], "q": col("position"), "qd": col("velocity"), "tau": col("effort")}
 
 
-def zero_phase_acceleration(t, qd, window=0.1):
-    """Slope of a least-squares quadratic through +- window/2 of each sample (as rcm's offline estimate)."""
+def zero_phase_acceleration(t, qd, window=0.15, degree=3):
+    """Slope of a least-squares polynomial through +- window/2 of each sample (rcm's offline estimate: a cubic)."""
     out = np.zeros_like(qd)
     lo = hi = 0
     n = len(t)
@@ -22,6 +22,6 @@ def zero_phase_acceleration(t, qd, window=0.1):
         while hi < n and t[hi] <= t[i] + window / 2:
             hi += 1
         s = t[lo:hi] - t[i]
-        A = np.stack([np.ones_like(s), s, s * s], 1)
+        A = np.stack([s ** k for k in range(degree + 1)], 1)
         out[i] = np.linalg.lstsq(A, qd[lo:hi], rcond=None)[0][1]
     return out

@@ -37,6 +37,7 @@ struct DynamicsArgs {
   bool generic_structure = false;
   bool free_inertia = false;
   bool constant_coulomb = false;
+  bool no_insertion_stiffness = false;
   std::string model_path;
   rcm::cli::OptionFlags<rcm::dynamics::FitOptions> fit;  // the flags that are fields of FitOptions
   std::optional<std::string> direction_features;     // unset: the kind's default
@@ -108,6 +109,9 @@ void run_fit(const DynamicsArgs& a) {
   if (a.constant_coulomb && kind != TorqueModelKind::linear && kind != TorqueModelKind::hybrid)
     throw rcm::InputError(rcm::cli::flag_location("--constant-coulomb"), "is for --model linear or hybrid only");
   o.coulomb_profile = !a.constant_coulomb;
+  if (a.no_insertion_stiffness && kind != TorqueModelKind::linear && kind != TorqueModelKind::hybrid)
+    throw rcm::InputError(rcm::cli::flag_location("--no-insertion-stiffness"), "is for --model linear or hybrid only");
+  o.insertion_stiffness = !a.no_insertion_stiffness;
   const auto recs = load_all(a.recordings, a.dedupe);
   if (a.output_delay && kind == TorqueModelKind::lstm && !recs.empty()) {
     // Checked here too, so that a delay longer than the burn-in names the flag.
@@ -320,6 +324,8 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->add_flag("--constant-coulomb", args->constant_coulomb,
                 "linear, hybrid: one Coulomb level per joint instead of a level that varies along the joint's travel "
                 "(kept when it predicts better)");
+  fit->add_flag("--no-insertion-stiffness", args->no_insertion_stiffness,
+                "linear, hybrid: no stiffness along the insertion (an elastic element no rigid link's weight gives)");
   fit->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   fit->add_flag("--json", args->json, "print the fit summary as one JSON object");
   fit->callback([args] { run_fit(*args); });

@@ -196,7 +196,9 @@ void bind_dynamics(py::module_& m, py::module_& d) {
                     "the Coulomb level's change along each joint's travel at equally spaced knots (rows: joints; "
                     "empty: constant)")
       .def_readonly("coulomb_profile_range", &LinearTorqueParameters::coulomb_profile_range,
-                    "the range [lo, hi] the knots span, per joint");
+                    "the range [lo, hi] the knots span, per joint")
+      .def_readonly("stiffness", &LinearTorqueParameters::stiffness,
+                    "torque per unit of each joint's position (the insertion's elastic element; empty: none)");
   py::class_<LinearTorqueModel, TorqueModel, std::shared_ptr<LinearTorqueModel>>(
       d, "LinearTorqueModel", "Rigid-body terms linear in parameters plus friction with a Dahl state")
       .def_property_readonly("parameters", &LinearTorqueModel::parameters);

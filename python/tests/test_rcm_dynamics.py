@@ -60,6 +60,10 @@ class TestDynamics(unittest.TestCase):
         p = self.model().parameters
         self.assertEqual(len(p.coulomb_slow), 3)
         self.assertEqual(len(p.sqrt_viscous), 3)
+        # The insertion's stiffness comes with the rigid-body structure, on the insertion only.
+        self.assertEqual(len(p.stiffness), 3)
+        self.assertEqual(p.stiffness[0], 0.0)
+        self.assertEqual(p.stiffness[1], 0.0)
         if p.coulomb_profile.size:
             self.assertEqual(p.coulomb_profile.shape[0], 3)
             self.assertGreaterEqual(p.coulomb_profile.shape[1], 2)

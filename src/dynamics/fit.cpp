@@ -252,6 +252,9 @@ const OptionTable<FitOptions>& get_option_table(OptionTag<FitOptions>) {
           .add("coulomb_profile", &FitOptions::coulomb_profile,
                "linear, hybrid, with the rigid-body structure: a Coulomb level that varies along each joint's "
                "travel, when it predicts better (false: constant)")
+          .add("insertion_stiffness", &FitOptions::insertion_stiffness,
+               "linear, hybrid, with the rigid-body structure: a stiffness along the insertion, an elastic element "
+               "that no rigid link's weight gives (false: none)")
           .add_check([](const FitOptions& o) { o.check(); });
   return table;
 }

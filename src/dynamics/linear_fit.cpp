@@ -38,6 +38,8 @@ constexpr double kRigidBodyTolerance = 1.25;
 // score by more than this fraction: a smaller gain is within what any 5 columns
 // take from the noise of one path.
 constexpr double kProfileGain = 0.01;
+// Joints 1-3 of the structure are yaw, pitch and insertion.
+constexpr int kInsertionJoint = 2;
 
 // Gram matrix of one joint's regressor [gravity (17, joints 1-3), qdd, v, z, 1]
 // and its products with the torque, for one x_c and one qddot candidate.
@@ -360,7 +362,7 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
     std::vector<detail::JointEstimatorChoice> estimators(M);
     for (int j = 0; j < M; ++j)
       estimators[j] = {p.dahl_displacement[j], p.acceleration_window_s[j], p.acceleration_filter_s[j],
-                       p.batch_acceleration_window_s[j], lo[j], std::max(hi[j], lo[j] + 1e-6)};
+                       p.batch_acceleration_window_s[j], lo[j], std::max(hi[j], lo[j] + 1e-6), 0.5 * (lo[j] + hi[j])};
     // The time split's training and validation samples, and the same samples
     // cut by speed (split_by_speed: slow, fast), in one pass.
     enum { kTrain, kValidation, kSlow, kFast };
@@ -372,7 +374,10 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
         detail::accumulate_rigid_body_stats(recordings, groups, estimators, weight, sample_period);
     const detail::ModelStats& train_stats = stats[kTrain];
     const detail::ModelStats& val_stats = stats[kValidation];
-    const double rigid_validation = val_stats.compute_loss(detail::solve_rigid_body(train_stats, M).theta);
+    // The insertion's stiffness (linear_model.hpp) comes with the structure.
+    const unsigned stiffness = options.insertion_stiffness ? 1u << kInsertionJoint : 0u;
+    const double rigid_validation = val_stats.compute_loss(
+        detail::solve_rigid_body(train_stats, M, detail::InertiaStructure::free, 0.0, 0u, stiffness).theta);
     if (rigid_validation <= kRigidBodyTolerance * best) {
       const double beta = kInstrumentAxisAngle;
       // What the remaining choices are scored by: the mean squared residual on
@@ -381,7 +386,7 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
       auto score = [&](detail::InertiaStructure structure, unsigned profile) {
         auto mean_loss = [&](int scored, int fitted_on) {
           const detail::RigidBodySolution fit =
-              detail::solve_rigid_body(stats[fitted_on], M, structure, beta, profile);
+              detail::solve_rigid_body(stats[fitted_on], M, structure, beta, profile, stiffness);
           return stats[scored].compute_loss(fit.theta) / static_cast<double>(std::max<std::size_t>(stats[scored].rows, 1));
         };
         return mean_loss(kValidation, kTrain) + 0.5 * (mean_loss(kFast, kSlow) + mean_loss(kSlow, kFast));
@@ -411,8 +416,9 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
       }
       detail::ModelStats all = train_stats;
       all += val_stats;
-      const detail::RigidBodySolution rigid = detail::solve_rigid_body(all, M, inertia, beta, profile);
-      best = val_stats.compute_loss(detail::solve_rigid_body(train_stats, M, inertia, beta, profile).theta);
+      const detail::RigidBodySolution rigid = detail::solve_rigid_body(all, M, inertia, beta, profile, stiffness);
+      best = val_stats.compute_loss(
+          detail::solve_rigid_body(train_stats, M, inertia, beta, profile, stiffness).theta);
       p.gravity = rigid.theta.head(G);
       p.inertia = rigid.theta.segment(G, kInertiaTerms);
       p.gravity_direction = rigid.gravity_direction;
@@ -421,6 +427,13 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
         p.viscous[j] = rigid.theta(detail::rigid_body_block_index(j, 1));
         p.coulomb[j] = rigid.theta(detail::rigid_body_block_index(j, 2));
         p.offset[j] = rigid.theta(detail::rigid_body_block_index(j, 3));
+      }
+      if (stiffness) {
+        p.stiffness = Eigen::VectorXd::Zero(M);
+        for (int j = 0; j < M; ++j) {
+          p.stiffness[j] = rigid.theta(detail::rigid_body_block_index(j, detail::kStiffnessEntry));
+          p.offset[j] -= p.stiffness[j] * estimators[j].stiffness_origin;
+        }
       }
       p.coulomb_slow.resize(M);
       p.sqrt_viscous.resize(M);
@@ -440,8 +453,9 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
       }
       const bool tied = inertia == detail::InertiaStructure::remote_center;
       params = kGravityMoments + 2 + (tied ? kRemoteCenterTerms : kInertiaTerms) +
-               detail::kCoulombProfileFirst * M +
-               (kCoulombProfileKnots - 1) * static_cast<int>(std::bitset<32>(profile).count());
+               detail::kStiffnessEntry * M +
+               (kCoulombProfileKnots - 1) * static_cast<int>(std::bitset<32>(profile).count()) +
+               static_cast<int>(std::bitset<32>(stiffness).count());
       summary.structure = tied ? "remote-center" : "rigid-body";
     } else {
       summary.warnings.push_back(fmt::format(

@@ -78,6 +78,8 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
   if (q.coulomb_slow.size() != q.sqrt_viscous.size() || (q.coulomb_slow.size() != 0 && q.coulomb_slow.size() != M))
     throw std::invalid_argument("linear model: coulomb_slow and sqrt_viscous need one value per output joint, or none");
   has_extra_friction_ = q.coulomb_slow.size() == M;
+  if (q.stiffness.size() != 0 && (q.stiffness.size() != M || !q.stiffness.allFinite()))
+    throw std::invalid_argument("linear model: stiffness needs one finite value per output joint, or none");
   if (q.coulomb_profile.size() != 0 || q.coulomb_profile_range.size() != 0) {
     if (q.coulomb_profile.rows() != M || q.coulomb_profile.cols() < 2 || q.coulomb_profile_range.rows() != M ||
         q.coulomb_profile_range.cols() != 2)
@@ -139,6 +141,7 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
         p.armature[j] * qdd + p.viscous[j] * qd[j] + get_coulomb_level(j, q[j]) * ws.z[j] + p.offset[j];
     if (j < 3) value += ws.Y.row(j).dot(p.gravity);
     if (has_extra_friction_) value += p.coulomb_slow[j] * ws.z_slow[j] + p.sqrt_viscous[j] * compute_sqrt_velocity(qd[j]);
+    if (p.stiffness.size()) value += p.stiffness[j] * q[j];
     tau[j] = value;
     ws.acceleration[j] = qdd;
     ws.prev_q[j] = q[j];
@@ -204,6 +207,7 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
     j["coulomb_profile"] = detail::encode_array(p.coulomb_profile);
     j["coulomb_profile_range"] = detail::encode_array(p.coulomb_profile_range);
   }
+  if (p.stiffness.size()) j["stiffness"] = detail::encode_vector(p.stiffness);
   return j;
 }
 
@@ -273,6 +277,7 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
     if (!(p.coulomb_profile_range.col(1).array() > p.coulomb_profile_range.col(0).array()).all())
       fail(source, f + ".coulomb_profile_range", "expected lo < hi on every row");
   }
+  if (j.contains("stiffness")) p.stiffness = decode_vector_d(j["stiffness"], source, f + ".stiffness", M);
   if (!(p.acceleration_filter_s.array() >= 0).all())
     fail(source, f + ".acceleration_filter_s", "expected values >= 0");
   if (!(p.acceleration_window_s.array() >= 0).all())

@@ -109,6 +109,7 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
         row(rigid_body_block_index(j, 3)) = w;
         row(rigid_body_block_index(j, 4)) = z_slow[j] * w;
         row(rigid_body_block_index(j, 5)) = compute_sqrt_velocity(rec.velocity(t, j)) * w;
+        row(rigid_body_block_index(j, kStiffnessEntry)) = (rec.position(t, j) - choices[j].stiffness_origin) * w;
         int k;
         double u;
         compute_knot_weights(rec.position(t, j), choices[j].profile_lo, choices[j].profile_hi, kCoulombProfileKnots, k,
@@ -213,7 +214,8 @@ namespace {
 // blocks] to the full layout, its gravity block filled for each g.
 class RigidBodyProblem {
  public:
-  RigidBodyProblem(const ModelStats& stats, int M, InertiaStructure structure, double beta, unsigned profile_joints)
+  RigidBodyProblem(const ModelStats& stats, int M, InertiaStructure structure, double beta, unsigned profile_joints,
+                   unsigned stiffness_joints)
       : stats_(stats) {
     const int P = static_cast<int>(stats.A.rows());
     const int blocks = P - kRigidBodyShared;
@@ -226,6 +228,9 @@ class RigidBodyProblem {
       if (!(profile_joints >> j & 1u))
         for (int k = kCoulombProfileFirst; k < kRigidBodyBlock; ++k)
           T_(rigid_body_block_index(j, k), first_block + kRigidBodyBlock * j + k) = 0.0;
+    for (int j = 0; j < M; ++j)
+      if (!(stiffness_joints >> j & 1u))
+        T_(rigid_body_block_index(j, kStiffnessEntry), first_block + kRigidBodyBlock * j + kStiffnessEntry) = 0.0;
     for (int j = 0; j < M; ++j) {
       // Friction >= 0; with the remote-centre bodies the armatures are
       // inertias (>= 0) and the viscous term may bend a sqrt-viscous one
@@ -267,13 +272,13 @@ class RigidBodyProblem {
 }  // namespace
 
 RigidBodySolution solve_rigid_body_at(const ModelStats& stats, int M, InertiaStructure structure, double beta,
-                                      const Eigen::Vector3d& g, unsigned profile_joints) {
-  return RigidBodyProblem(stats, M, structure, beta, profile_joints).solve_at(g);
+                                      const Eigen::Vector3d& g, unsigned profile_joints, unsigned stiffness_joints) {
+  return RigidBodyProblem(stats, M, structure, beta, profile_joints, stiffness_joints).solve_at(g);
 }
 
 RigidBodySolution solve_rigid_body(const ModelStats& stats, int M, InertiaStructure structure, double beta,
-                                   unsigned profile_joints) {
-  RigidBodyProblem problem(stats, M, structure, beta, profile_joints);
+                                   unsigned profile_joints, unsigned stiffness_joints) {
+  RigidBodyProblem problem(stats, M, structure, beta, profile_joints, stiffness_joints);
   // g and -g give the same span: the upper half sphere is enough.
   RigidBodySolution best;
   double best_polar = 0.0, best_azimuth = 0.0;

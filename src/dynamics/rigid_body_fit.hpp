@@ -21,11 +21,14 @@ struct JointEstimatorChoice {
   double batch_window_s = 0.0;  // the zero-phase qddot regressed on; 0: the causal one
   // The range the Coulomb profile's knots span (the training range).
   double profile_lo = 0.0, profile_hi = 1.0;
+  // Where the stiffness column is zero (the middle of that range, for the
+  // conditioning; the offset takes the difference back).
+  double stiffness_origin = 0.0;
 };
 
 // Normal equations of the weighted rows of every joint, parameters in the order
 // [gravity 17 | inertia 19 | per joint: armature, viscous, coulomb, offset,
-// slow coulomb, sqrt-viscous, Coulomb profile at knots 1..K-1]
+// slow coulomb, sqrt-viscous, stiffness, Coulomb profile at knots 1..K-1]
 // (LinearTorqueParameters, K = kCoulombProfileKnots).
 struct ModelStats {
   Eigen::MatrixXd A;
@@ -37,7 +40,8 @@ struct ModelStats {
   double compute_loss(const Eigen::VectorXd& theta) const;
 };
 constexpr int kRigidBodyShared = 17 + kInertiaTerms;
-constexpr int kCoulombProfileFirst = 6;  // block entry of the profile's knot 1
+constexpr int kStiffnessEntry = 6;       // block entry of the stiffness
+constexpr int kCoulombProfileFirst = 7;  // block entry of the profile's knot 1
 constexpr int kRigidBodyBlock = kCoulombProfileFirst + kCoulombProfileKnots - 1;
 inline int rigid_body_block_index(int joint, int k) { return kRigidBodyShared + kRigidBodyBlock * joint + k; }
 
@@ -80,12 +84,14 @@ struct RigidBodySolution {
 // structure also the sliding mass and the armatures, which are inertias).
 // beta: the instrument-axis angle of the remote-centre structure, rad.
 // profile_joints: bit j set, joint j has a Coulomb profile; the others' are held at 0.
+// stiffness_joints: the same for the stiffness.
 RigidBodySolution solve_rigid_body(const ModelStats& stats, int num_outputs,
                                    InertiaStructure structure = InertiaStructure::free, double beta = 0.0,
-                                   unsigned profile_joints = 0u);
+                                   unsigned profile_joints = 0u, unsigned stiffness_joints = 0u);
 // The same at one gravity direction g.
 RigidBodySolution solve_rigid_body_at(const ModelStats& stats, int num_outputs, InertiaStructure structure,
-                                      double beta, const Eigen::Vector3d& g, unsigned profile_joints = 0u);
+                                      double beta, const Eigen::Vector3d& g, unsigned profile_joints = 0u,
+                                      unsigned stiffness_joints = 0u);
 
 // min |A^(1/2) x - ...|: (A + ridge) x = b with x[i] >= 0 for i in `nonnegative`
 // by an active set; the ridge, relative to each diagonal, picks the small-norm

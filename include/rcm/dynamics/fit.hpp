@@ -85,6 +85,9 @@ struct FitOptions {
   // predicts the validation split and the other speed more than 1 % better
   // than a constant level; false: a constant level always.
   bool coulomb_profile = true;
+  // linear and hybrid, with the rigid-body structure: a stiffness along the
+  // insertion (linear_model.hpp); false: none.
+  bool insertion_stiffness = true;
 
   // Throws InputError when a value is out of range.
   void check() const;

@@ -38,6 +38,14 @@
 // kept per joint when it predicts the validation split and the other speed
 // better by more than 1 %. On the real PSM the insertion's friction changes
 // along the stroke, with the same shape at both speeds and both payloads.
+// And, with the rigid-body structure, the insertion's stiffness: a torque
+// stiffness * q3 from an elastic element along the stroke (cables, harness),
+// which no potential of rigid links holds, since their gravity force along the
+// insertion does not depend on q3. On one periodic path such a spring passes
+// for a negative inertia that grows as the path slows down, so without it a
+// fit at one speed takes the wrong inertia for the other. On yaw and pitch a
+// spring is nearly in the span of the gravity terms, and fitted there it
+// trades places with them.
 
 #include <Eigen/Core>
 #include <cmath>
@@ -116,6 +124,9 @@ struct LinearTorqueParameters {
   // `coulomb` by compute_knot_weights.
   Eigen::MatrixXd coulomb_profile;
   Eigen::MatrixXd coulomb_profile_range;  // M x 2, lo < hi
+  // Per output joint (empty: none): torque per unit of the joint's position
+  // (N m/rad or N/m); `offset` is the torque at q = 0.
+  Eigen::VectorXd stiffness;
 };
 
 class LinearTorqueModel final : public TorqueModel {
