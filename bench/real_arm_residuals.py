@@ -316,7 +316,8 @@ def main():
     # 1. rcm's models.
     out.append(f"**Torque error** (`rcm dynamics fit --model M --seed {args.seed}` on the first, `rcm dynamics eval` on the "
                "second; `linear`: the default fit, inertia tied by the bodies of a remote-centre arm, Coulomb levels "
-               "that vary along the travel where they predict better; `linear, constant Coulomb`: "
+               "that vary along the travel where they predict better, a stiffness along the insertion; `linear, no insertion "
+               "stiffness`: `--no-insertion-stiffness`; `linear, constant Coulomb`: "
                "`--constant-coulomb`, one Coulomb level per joint; `linear, free "
                "inertia`: `--free-inertia`, the 19 inertia coefficients free; `linear, generic`: `--generic-structure`, "
                "the free potential and constant armature; networks "

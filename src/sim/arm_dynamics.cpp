@@ -88,7 +88,8 @@ Eigen::Vector3d compute_inverse_dynamics(const ArmDynamics& m, const Eigen::Vect
   const Eigen::Vector3d L_ins = k.p_ins.cross(F_ins) + I_ins * alpha2 + k.w2.cross(I_ins * k.w2);
 
   Eigen::Vector3d tau;
-  tau[2] = z3.dot(F_ins) + (with_gravity ? P.insertion_counterbalance_n : 0.0);
+  tau[2] = z3.dot(F_ins) +
+           (with_gravity ? P.insertion_counterbalance_n + P.insertion_stiffness_n_per_m * q[2] : 0.0);
   tau[1] = y3.dot(L_pitch + L_ins);
   tau[0] = a1.dot(L_yaw + L_pitch + L_ins);
   return tau;
@@ -126,7 +127,7 @@ double compute_potential_energy(const ArmDynamics& m, const Eigen::Vector3d& q) 
   const Eigen::Vector3d& g = P.gravity_base_m_s2;
   return -(P.yaw_link.mass_kg * g.dot(k.p_yaw) + P.pitch_link.mass_kg * g.dot(k.p_pitch) +
            P.insertion_stage.mass_kg * g.dot(k.p_ins)) +
-         P.insertion_counterbalance_n * q[2];
+         P.insertion_counterbalance_n * q[2] + 0.5 * P.insertion_stiffness_n_per_m * q[2] * q[2];
 }
 
 namespace {

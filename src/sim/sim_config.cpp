@@ -57,6 +57,8 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("arm.gravity_base_m_s2", &c.arm.gravity_base_m_s2, "gravity in the base frame, m/s^2");
   add("arm.insertion_counterbalance_n", &c.arm.insertion_counterbalance_n,
       "insertion counterbalance spring force along -z3, N");
+  add("arm.insertion_stiffness_n_per_m", &c.arm.insertion_stiffness_n_per_m,
+      "stiffness of an elastic element along the insertion (its force along -z3 grows by this per m of q3), N/m");
   add("arm.preset", &c.arm.preset, "rigid | cable: transmissions and effort noise (applied first)");
   for (int j = 0; j < 3; ++j) {
     JointTransmissionParams& t = c.arm.transmission[static_cast<std::size_t>(j)];

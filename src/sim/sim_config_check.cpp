@@ -34,6 +34,8 @@ void validate_config(const SimConfig& c, const std::string& source) {
     require(b->mass_kg >= 0, std::string(name) + ".mass_kg", "expected >= 0");
     positive3(b->inertia_diag_kg_m2, std::string(name) + ".inertia_diag_kg_m2", true);
   }
+  require(std::isfinite(c.arm.insertion_stiffness_n_per_m) && c.arm.insertion_stiffness_n_per_m >= 0,
+          "arm.insertion_stiffness_n_per_m", "expected >= 0");
   require(c.arm.insertion_stage.mass_kg > 0, "arm.insertion_stage.mass_kg",
           "expected > 0 (the insertion axis needs inertia)");
   for (int j = 0; j < 3; ++j) {

@@ -30,6 +30,9 @@ SimConfig make_default_config() {
   c.arm.insertion_stage = {0.85, Eigen::Vector3d(0.0, 0.0, -0.22), Eigen::Vector3d(0.020, 0.020, 0.001)};
   c.arm.gravity_base_m_s2 = Eigen::Vector3d(0.0, 0.0, -9.81);
   c.arm.insertion_counterbalance_n = 7.0;
+  // The elastic element along the real Classic PSM's insertion: rcm's fit
+  // finds 1.6-2.0 N/m on its recordings (docs/dynamics.md).
+  c.arm.insertion_stiffness_n_per_m = 1.8;
   apply_arm_preset(c, "rigid");
   apply_friction_preset(c, "hysteretic");
   apply_tissue_preset(c.tissue, "linear");

@@ -59,6 +59,9 @@ struct ArmParams {
   Eigen::Vector3d gravity_base_m_s2 = Eigen::Vector3d(0.0, 0.0, -9.81);
   // Constant force of the insertion stage's counterbalance spring along -z3 (N).
   double insertion_counterbalance_n = 0.0;
+  // Stiffness of an elastic element along the insertion (cables, harness),
+  // N/m: the stage's force grows by this much per metre of q3 (0 at q3 = 0).
+  double insertion_stiffness_n_per_m = 0.0;
   std::array<JointTransmissionParams, 3> transmission{};  // yaw, pitch, insertion
 };
 
