@@ -104,8 +104,8 @@ static void BM_LinearModelStep(benchmark::State& state) {
 BENCHMARK(BM_LinearModelStep);
 
 // The structure the default fit gives a yaw / pitch / insertion arm: the
-// rigid-body inertia, the slow Dahl state and sqrt-velocity friction, and a
-// Coulomb level along each joint's travel.
+// rigid-body inertia, the slow Dahl state and sqrt-velocity friction, a
+// Coulomb level along each joint's travel and a stiffness.
 static void BM_LinearModelStepFittedStructure(benchmark::State& state) {
   LinearTorqueParameters p{Eigen::VectorXd::Ones(17), Eigen::VectorXd::Ones(6), Eigen::VectorXd::Ones(6),
                            Eigen::VectorXd::Ones(6), Eigen::VectorXd::Ones(6), Eigen::VectorXd::Constant(6, 1e-3)};
@@ -115,6 +115,7 @@ static void BM_LinearModelStepFittedStructure(benchmark::State& state) {
   p.coulomb_profile_range = Eigen::MatrixXd(6, 2);
   p.coulomb_profile_range.col(0).setConstant(-1.0);
   p.coulomb_profile_range.col(1).setConstant(1.0);
+  p.stiffness = Eigen::VectorXd::Constant(6, 0.2);
   LinearTorqueModel m(info6(), p);
   run(state, m);
 }

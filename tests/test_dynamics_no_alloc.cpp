@@ -47,6 +47,7 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
   lp_rigid.coulomb_profile_range = Eigen::MatrixXd(6, 2);
   lp_rigid.coulomb_profile_range.col(0).setConstant(-1.0);
   lp_rigid.coulomb_profile_range.col(1).setConstant(1.0);
+  lp_rigid.stiffness = Eigen::VectorXd::Constant(6, 0.2);
   models.push_back(std::make_unique<LinearTorqueModel>(info, lp_rigid));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(12, 32, 1, 16, 6, 2), norm));
   Normalization with_direction = norm;  // the fitted default: three direction features per joint
