@@ -362,7 +362,7 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
     std::vector<detail::JointEstimatorChoice> estimators(M);
     for (int j = 0; j < M; ++j)
       estimators[j] = {p.dahl_displacement[j], p.acceleration_window_s[j], p.acceleration_filter_s[j],
-                       p.batch_acceleration_window_s[j], lo[j], std::max(hi[j], lo[j] + 1e-6), 0.5 * (lo[j] + hi[j])};
+                       p.batch_acceleration_window_s[j], lo[j], std::max(hi[j], lo[j] + 1e-6)};
     // The time split's training and validation samples, and the same samples
     // cut by speed (split_by_speed: slow, fast), in one pass.
     enum { kTrain, kValidation, kSlow, kFast };
@@ -432,7 +432,7 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
         p.stiffness = Eigen::VectorXd::Zero(M);
         for (int j = 0; j < M; ++j) {
           p.stiffness[j] = rigid.theta(detail::rigid_body_block_index(j, detail::kStiffnessEntry));
-          p.offset[j] -= p.stiffness[j] * estimators[j].stiffness_origin;
+          p.offset[j] -= p.stiffness[j] * estimators[j].get_stiffness_origin();
         }
       }
       p.coulomb_slow.resize(M);

@@ -109,7 +109,7 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
         row(rigid_body_block_index(j, 3)) = w;
         row(rigid_body_block_index(j, 4)) = z_slow[j] * w;
         row(rigid_body_block_index(j, 5)) = compute_sqrt_velocity(rec.velocity(t, j)) * w;
-        row(rigid_body_block_index(j, kStiffnessEntry)) = (rec.position(t, j) - choices[j].stiffness_origin) * w;
+        row(rigid_body_block_index(j, kStiffnessEntry)) = (rec.position(t, j) - choices[j].get_stiffness_origin()) * w;
         int k;
         double u;
         compute_knot_weights(rec.position(t, j), choices[j].profile_lo, choices[j].profile_hi, kCoulombProfileKnots, k,

@@ -21,9 +21,9 @@ struct JointEstimatorChoice {
   double batch_window_s = 0.0;  // the zero-phase qddot regressed on; 0: the causal one
   // The range the Coulomb profile's knots span (the training range).
   double profile_lo = 0.0, profile_hi = 1.0;
-  // Where the stiffness column is zero (the middle of that range, for the
-  // conditioning; the offset takes the difference back).
-  double stiffness_origin = 0.0;
+  // Where the stiffness column is zero: the middle of that range, for the
+  // conditioning (the offset takes the difference back).
+  double get_stiffness_origin() const { return 0.5 * (profile_lo + profile_hi); }
 };
 
 // Normal equations of the weighted rows of every joint, parameters in the order
