@@ -4,6 +4,7 @@
 
 #include <benchmark/benchmark.h>
 
+#include <cmath>
 #include <random>
 
 #include "rcm/dynamics/linear_model.hpp"
@@ -120,5 +121,42 @@ static void BM_LinearModelStepFittedStructure(benchmark::State& state) {
   run(state, m);
 }
 BENCHMARK(BM_LinearModelStepFittedStructure);
+
+// The same structure with the zero-phase qddot live (live_zero_phase): per
+// sample, each joint's cubic fit over the window of the sample the delay points
+// at, as the default fit of a 3-joint arm gives it. Arguments: the stream's
+// rate (Hz) and the zero-phase window (ms); the cost grows with the samples in
+// the window.
+static void BM_LinearModelStepLiveZeroPhase(benchmark::State& state) {
+  const double rate = static_cast<double>(state.range(0)), window = 1e-3 * static_cast<double>(state.range(1));
+  TorqueModelInfo info;
+  info.num_joints = info.num_outputs = 3;
+  info.sample_period_s = 0.005;
+  LinearTorqueParameters p{Eigen::VectorXd::Ones(17), Eigen::VectorXd::Ones(3), Eigen::VectorXd::Ones(3),
+                           Eigen::VectorXd::Ones(3), Eigen::VectorXd::Ones(3), Eigen::VectorXd::Constant(3, 1e-3)};
+  p.inertia = Eigen::VectorXd::Constant(19, 0.1);
+  p.coulomb_slow = p.sqrt_viscous = Eigen::VectorXd::Constant(3, 0.1);
+  p.stiffness = Eigen::VectorXd::Constant(3, 0.2);
+  p.batch_acceleration_window_s = Eigen::VectorXd::Constant(3, window);
+  p.live_zero_phase = true;
+  LinearTorqueModel m(info, p);
+  auto ws = m.create_workspace();
+  double q[3] = {0.1, 0.2, 0.12}, qd[3] = {0.3, -0.2, 0.01}, tau[3];
+  double t = 0;
+  for (auto _ : state) {
+    for (int k = 0; k < 3; ++k) q[k] += 1e-4 * (k + 1);
+    qd[0] = std::sin(t);
+    t += 1.0 / rate;
+    m.compute_step(*ws, t, q, qd, tau);
+    benchmark::DoNotOptimize(tau);
+  }
+}
+BENCHMARK(BM_LinearModelStepLiveZeroPhase)
+    ->ArgNames({"rate_hz", "window_ms"})
+    ->Args({100, 200})
+    ->Args({200, 200})
+    ->Args({200, 400})
+    ->Args({1500, 200})
+    ->Args({1500, 400});
 
 BENCHMARK_MAIN();

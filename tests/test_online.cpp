@@ -311,6 +311,106 @@ TEST(OnlinePipeline, PairsADelayedModelWithTheSampleItsTorqueBelongsTo) {
   }
 }
 
+// An RCM shift declared while the model's torque trails: the estimator takes it
+// when it reaches the samples taken after it, and meanwhile the misalignment is
+// reported relative to the RCM as it is now.
+TEST(OnlinePipeline, ADelayedEstimateTakesAnRcmShiftWithItsSamples) {
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const rcm::OnlineEstimator estimator(incision, linear_tissue(), default_options());
+  const int d = 20, k_shift = 2000;
+  const rcm::OnlinePipeline now(std::make_shared<const TrailingModel>(0), estimator);
+  const rcm::OnlinePipeline late(std::make_shared<const TrailingModel>(d), estimator);
+  auto ws_now = now.create_workspace();
+  auto ws_late = late.create_workspace();
+  std::mt19937 rng(3);
+  const Eigen::Vector3d truth(0.004, -0.003, 0.02), noise(0.02, 0.02, 0.1);
+  const Eigen::Vector3d shift_base(0.002, -0.001, 0.003);
+  const Eigen::Vector3d shift_inc = incision.R_base_inc.transpose() * shift_base;
+  std::vector<rcm::OnlineOutput> reference;
+  for (int k = 0; k < 3000; ++k) {
+    if (k == k_shift) {
+      now.apply_rcm_shift(ws_now, shift_base);
+      late.apply_rcm_shift(ws_late, shift_base);
+    }
+    const PathSample s = path(k / 200.0);
+    const Eigen::Vector3d offset = k < k_shift ? truth : Eigen::Vector3d(truth - shift_inc);
+    const Eigen::Vector3d effort =
+        make_dtau(incision, linear_tissue(), s, offset, noise, rng) + trailing_torque(s.q.data(), s.qd.data());
+    reference.push_back(now.compute_sample(ws_now, s.t, s.q.data(), s.qd.data(), effort.data()));
+    const rcm::OnlineOutput& o = late.compute_sample(ws_late, s.t, s.q.data(), s.qd.data(), effort.data());
+    if (k < d) continue;
+    const rcm::OnlineOutput& r = reference[static_cast<std::size_t>(k - d)];
+    ASSERT_EQ(o.time, r.time) << k;
+    // Samples taken before the shift, reported relative to the shifted RCM.
+    const bool pending = k >= k_shift && k - d < k_shift;
+    ASSERT_LT((o.misalignment_m - (pending ? Eigen::Vector3d(r.misalignment_m - shift_inc) : r.misalignment_m)).norm(),
+              1e-12)
+        << k;
+    ASSERT_EQ(o.sd_m, r.sd_m) << k;
+  }
+  EXPECT_LT((reference.back().misalignment_m - (truth - shift_inc)).norm(), 0.006);
+}
+
+// The linear model with its zero-phase qddot live (LinearTorqueParameters::
+// live_zero_phase) trails by its own delay; the pipeline pairs each output with
+// the effort of the sample it is for, so the stream gives the estimate that the
+// offline torque would, that delay late.
+TEST(OnlinePipeline, PairsTheLinearModelsZeroPhaseTorqueWithItsSample) {
+  rcm::dynamics::TorqueModelInfo info;
+  info.num_joints = info.num_outputs = 3;
+  info.sample_period_s = 0.005;
+  rcm::dynamics::LinearTorqueParameters p;
+  p.gravity = Eigen::VectorXd::LinSpaced(rcm::dynamics::LinearTorqueModel::kGravityTerms, -0.2, 0.3);
+  p.armature = Eigen::Vector3d(0.15, 0.2, 0.8);
+  p.viscous = Eigen::Vector3d(0.05, 0.1, 1.0);
+  p.coulomb = Eigen::Vector3d(0.1, 0.12, 0.4);
+  p.offset = Eigen::Vector3d::Zero();
+  p.dahl_displacement = Eigen::Vector3d(0.01, 0.01, 0.002);
+  p.batch_acceleration_window_s = Eigen::Vector3d(0.1, 0.15, 0.2);
+  p.live_zero_phase = true;
+  const auto model = std::make_shared<const rcm::dynamics::LinearTorqueModel>(info, p);
+  const int d = model->output_delay();
+  ASSERT_EQ(d, 21);  // (0.1 + 0.005) / 0.005
+  const int T = 4000;
+  Eigen::VectorXd time(T);
+  Eigen::MatrixXd q(T, 3), qd(T, 3);
+  for (int k = 0; k < T; ++k) {
+    const PathSample s = path(k / 200.0);
+    time(k) = s.t;
+    q.row(k) = s.q.transpose();
+    qd.row(k) = s.qd.transpose();
+  }
+  const Eigen::MatrixXd offline = rcm::dynamics::predict_torque(*model, time, q, qd);
+
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const rcm::OnlineEstimator estimator(incision, linear_tissue(), default_options());
+  const rcm::OnlinePipeline reference(std::make_shared<const TrailingModel>(0), estimator);
+  const rcm::OnlinePipeline live(model, estimator);
+  auto ws_ref = reference.create_workspace();
+  auto ws_live = live.create_workspace();
+  std::mt19937 rng(3);
+  const Eigen::Vector3d truth(0.004, -0.003, 0.02), noise(0.02, 0.02, 0.1);
+  std::vector<rcm::OnlineOutput> expected;
+  long allocations = 0;
+  for (int k = 0; k < T; ++k) {
+    const PathSample s = path(time(k));
+    const Eigen::Vector3d dtau = make_dtau(incision, linear_tissue(), s, truth, noise, rng);
+    const Eigen::Vector3d effort_ref = dtau + trailing_torque(s.q.data(), s.qd.data());
+    const Eigen::Vector3d effort_live = dtau + offline.row(k).transpose();
+    expected.push_back(reference.compute_sample(ws_ref, s.t, s.q.data(), s.qd.data(), effort_ref.data()));
+    const long a0 = g_allocations;
+    const rcm::OnlineOutput& o = live.compute_sample(ws_live, s.t, s.q.data(), s.qd.data(), effort_live.data());
+    allocations += g_allocations - a0;
+    if (k < d) continue;
+    const rcm::OnlineOutput& r = expected[static_cast<std::size_t>(k - d)];
+    ASSERT_EQ(o.time, r.time) << k;
+    ASSERT_LT((o.misalignment_m - r.misalignment_m).norm(), 1e-9) << k;
+    ASSERT_LT((o.f_inc_base - r.f_inc_base).norm(), 1e-6) << k;
+  }
+  EXPECT_EQ(allocations, 0);
+  EXPECT_LT((expected.back().misalignment_m - truth).norm(), 0.006);
+}
+
 TEST(OnlineEstimator, OptionsAreChecked) {
   const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
   rcm::OnlineEstimatorOptions o;

@@ -129,6 +129,7 @@ PreparedBench prepare_bench(const std::string& tissue, const rcm::test::TempDir&
   const auto written = rcm::sim::simulate_session(b.config, dir.path() / tissue);
   rcm::StudyOptions options;
   options.model_kind = rcm::dynamics::TorqueModelKind::linear;
+  options.fit.live_zero_phase = false;  // as the bench (rcm simulate --experiment closed-loop)
   const rcm::TorqueModelFitter fitter = rcm::get_linear_torque_model_fitter();
   const rcm::MonitorSetup setup = rcm::prepare_monitor(rcm::load_session(written.manifest), options, fitter);
   b.pipeline = std::make_unique<rcm::OnlinePipeline>(

@@ -61,9 +61,16 @@ TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
   EXPECT_NEAR(model.info().sample_period_s, 0.005, 1e-12);
   if (GetParam() == TorqueModelKind::lstm)  // [q, qdot], three direction, one acceleration, three Dahl per joint
     EXPECT_EQ(static_cast<const LstmTorqueModel&>(model).network().input_size(), 27);
-  // The default output delay: 40 ms for the lstm, none for the others.
+  // The default output delay: 40 ms for the lstm, the half zero-phase window
+  // and half a 100 Hz period for the linear model (its zero-phase qddot live),
+  // none for the others.
   const int d = model.output_delay();
-  EXPECT_EQ(d, GetParam() == TorqueModelKind::lstm ? 8 : 0);
+  if (GetParam() == TorqueModelKind::linear) {
+    const double half = 0.5 * static_cast<const LinearTorqueModel&>(model).parameters().batch_acceleration_window_s.maxCoeff();
+    EXPECT_EQ(d, static_cast<int>(std::ceil((half + 0.005) / 0.005 - 1e-9)));
+  } else {
+    EXPECT_EQ(d, GetParam() == TorqueModelKind::lstm ? 8 : 0);
+  }
   EXPECT_EQ(fit.summary.to_json().value("output_delay_samples", 0), d);
   if (GetParam() == TorqueModelKind::mlp)
     EXPECT_EQ(static_cast<const MlpTorqueModel&>(model).networks().front().input_size(), 6);

@@ -38,6 +38,7 @@ struct DynamicsArgs {
   bool free_inertia = false;
   bool constant_coulomb = false;
   bool no_insertion_stiffness = false;
+  bool no_live_zero_phase = false;
   std::string model_path;
   rcm::cli::OptionFlags<rcm::dynamics::FitOptions> fit;  // the flags that are fields of FitOptions
   std::optional<std::string> direction_features;     // unset: the kind's default
@@ -112,6 +113,9 @@ void run_fit(const DynamicsArgs& a) {
   if (a.no_insertion_stiffness && kind != TorqueModelKind::linear && kind != TorqueModelKind::hybrid)
     throw rcm::InputError(rcm::cli::flag_location("--no-insertion-stiffness"), "is for --model linear or hybrid only");
   o.insertion_stiffness = !a.no_insertion_stiffness;
+  if (a.no_live_zero_phase && kind != TorqueModelKind::linear)
+    throw rcm::InputError(rcm::cli::flag_location("--no-live-zero-phase"), "is for --model linear only");
+  o.live_zero_phase = !a.no_live_zero_phase;
   const auto recs = load_all(a.recordings, a.dedupe);
   if (a.output_delay && kind == TorqueModelKind::lstm && !recs.empty()) {
     // Checked here too, so that a delay longer than the burn-in names the flag.
@@ -219,7 +223,7 @@ void run_eval(const DynamicsArgs& a) {
                     fmt::format("{:.4g} {}", e.range, unit)});
   }
   std::cout << "model: " << to_string(model->kind()) << " (" << a.model_path << "), "
-            << (a.streaming ? "streaming (causal, as live)" : "batch (offline)") << "\n"
+            << (a.streaming ? "streaming (as live)" : "batch (offline)") << "\n"
             << rcm::cli::format_table({"joint", "RMSE", "NRMSE %", "range"}, rows);
   for (std::size_t r = 0; r < recs.size(); ++r)
     std::cout << "regime: " << (recs.size() > 1 ? recs[r].source + ": " : std::string()) << regimes[r].to_text() << "\n";
@@ -326,6 +330,9 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
                 "(kept when it predicts better)");
   fit->add_flag("--no-insertion-stiffness", args->no_insertion_stiffness,
                 "linear, hybrid: no stiffness along the insertion (an elastic element no rigid link's weight gives)");
+  fit->add_flag("--no-live-zero-phase", args->no_live_zero_phase,
+                "linear: live torque from a causal qddot, without delay, instead of the fit's zero-phase qddot with "
+                "the torque trailing by about half its window");
   fit->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   fit->add_flag("--json", args->json, "print the fit summary as one JSON object");
   fit->callback([args] { run_fit(*args); });

@@ -72,6 +72,10 @@ void run_closed_loop(const SimulateOptions& o, const rcm::sim::SimConfig& config
   const rcm::Session session = rcm::load_session(written.manifest);
   rcm::StudyOptions study = rcm::cli::make_study_options(o.free_space);
   study.verbose = true;
+  // The loop moves the RCM on the estimate: a model whose torque trails by its
+  // zero-phase half window would act on where the incision was that long
+  // before, which a breathing incision has left (docs/compensation.md).
+  study.fit.live_zero_phase = false;
   const rcm::MonitorSetup setup = rcm::prepare_monitor(session, study, rcm::cli::get_torque_model_fitter());
   const rcm::OnlinePipeline pipeline(
       setup.free_space.model,

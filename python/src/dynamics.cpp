@@ -146,6 +146,9 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_property_readonly("output_delay", &TorqueModel::output_delay,
                              "samples by which compute_step's torque trails its input (0: the torque of the sample "
                              "passed); predict_torque and predict_torque_streaming align it")
+      .def_property_readonly("output_delay_s", &TorqueModel::get_output_delay_s,
+                             "the same in seconds (output_delay periods of the training rate): a caller streaming "
+                             "at another rate pairs the torque with its sample that long before")
       .def("create_workspace", [](std::shared_ptr<TorqueModel> self) {
         return TorqueWorkspace{self, self->create_workspace()};
       }, "A workspace for this model, in the reset state")
@@ -167,8 +170,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
         return tau;
       }, py::arg("workspace"), py::arg("t"), py::arg("q"), py::arg("qd"),
            "Advance by one sample at time t (s) and return tau_fs of joints 1..num_outputs (N m, N for joint 3).\n"
-           "q, qd: at least num_joints values. Causal: the same as predict_torque_streaming, sample by sample;\n"
-           "with output_delay d > 0, the torque of the sample d calls earlier.")
+           "q, qd: at least num_joints values. The same as predict_torque_streaming, sample by sample;\n"
+           "with output_delay d > 0, the torque of the sample output_delay_s earlier (d calls at the model's rate).")
       .def("to_json", [](const TorqueModel& self) { return to_python(torque_model_to_json(self)); },
            "The model file's content (rcm-torque-model/1) as a dict")
       .def("__repr__", [](const TorqueModel& self) {
@@ -198,7 +201,9 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("coulomb_profile_range", &LinearTorqueParameters::coulomb_profile_range,
                     "the range [lo, hi] the knots span, per joint")
       .def_readonly("stiffness", &LinearTorqueParameters::stiffness,
-                    "torque per unit of each joint's position (the insertion's elastic element; empty: none)");
+                    "torque per unit of each joint's position (the insertion's elastic element; empty: none)")
+      .def_readonly("live_zero_phase", &LinearTorqueParameters::live_zero_phase,
+                    "compute_step takes the zero-phase qddot, its torque trailing by output_delay samples");
   py::class_<LinearTorqueModel, TorqueModel, std::shared_ptr<LinearTorqueModel>>(
       d, "LinearTorqueModel", "Rigid-body terms linear in parameters plus friction with a Dahl state")
       .def_property_readonly("parameters", &LinearTorqueModel::parameters);
@@ -239,7 +244,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
     py::gil_scoped_release release;
     return predict_torque_streaming(model, rec);
   }, py::arg("model"), py::arg("recording"),
-        "compute_step() on every sample from the reset state (causal whatever the model), (T, num_outputs)");
+        "compute_step() on every sample from the reset state, as live (row t: the torque of sample t, a delayed "
+        "model's output paired with it), (T, num_outputs)");
   d.def("predict_torque_streaming", [](const TorqueModel& model, py::handle time, py::handle position, py::handle velocity) {
     const Trajectory t = to_trajectory(model, time, position, velocity, "rcm.dynamics.predict_torque_streaming");
     py::gil_scoped_release release;

@@ -148,22 +148,35 @@ class TestDynamics(unittest.TestCase):
         ws = model.create_workspace()
         steps = np.array([model.compute_step(ws, rec.time[t], rec.position[t], rec.velocity[t]) for t in range(T)])
         self.assertEqual(steps.shape, (T, model.num_outputs))
-        self.assertEqual(model.output_delay, 0)  # so step t is row t
-        self.assertTrue(np.array_equal(steps, streamed))
-        # reset_state forgets the friction memory: the first steps repeat exactly.
+        # The default fit runs its zero-phase qddot live: step t is the torque of sample t - d.
+        d = model.output_delay
+        self.assertTrue(model.parameters.live_zero_phase)
+        self.assertGreater(d, 0)
+        self.assertAlmostEqual(model.output_delay_s, d * model.info.sample_period_s)
+        self.assertTrue(np.array_equal(steps[d:], streamed[:T - d]))
+        # reset_state forgets the friction memory and the window: the first steps repeat exactly.
         model.reset_state(ws)
-        again = np.array([model.compute_step(ws, rec.time[t], rec.position[t], rec.velocity[t]) for t in range(20)])
-        self.assertTrue(np.array_equal(again, steps[:20]))
-        # Offline, the fitted model's qddot is zero-phase (uses later samples): not the causal stream.
+        again = np.array([model.compute_step(ws, rec.time[t], rec.position[t], rec.velocity[t]) for t in range(d + 20)])
+        self.assertTrue(np.array_equal(again, steps[:d + 20]))
+        # Away from the stream's ends, the live torque is the offline one.
         offline = rcm.dynamics.predict_torque(model, rec.time[:T], rec.position[:T], rec.velocity[:T])
-        self.assertGreater(np.max(np.abs(offline - streamed)), 1e-6)
-        # With the zero-phase window off, whole-sequence prediction is the step loop.
+        inner = slice(d, T - d)
+        self.assertLess(np.max(np.abs(offline[inner] - streamed[inner])), 1e-9 * np.max(np.abs(offline)))
+        # Without the flag, the step is causal (no delay) and differs from the offline torque.
         document = model.to_json()
+        del document["parameters"]["live_zero_phase"]
+        causal = rcm.dynamics.torque_model_from_json(document)
+        self.assertEqual(causal.output_delay, 0)
+        causal_stream = rcm.dynamics.predict_torque_streaming(causal, rec.time[:T], rec.position[:T], rec.velocity[:T])
+        self.assertGreater(np.max(np.abs(offline - causal_stream)), 1e-6)
+        # With the zero-phase window off too, whole-sequence prediction is the step loop.
         zeros = base64.b64encode(np.zeros(model.num_outputs, dtype="<f8").tobytes()).decode()
         document["parameters"]["batch_acceleration_window_s"]["data"] = zeros
-        causal = rcm.dynamics.torque_model_from_json(document)
-        self.assertTrue(np.array_equal(rcm.dynamics.predict_torque(causal, rec.time[:T], rec.position[:T],
-                                                                   rec.velocity[:T]), streamed))
+        plain = rcm.dynamics.torque_model_from_json(document)
+        self.assertTrue(np.array_equal(rcm.dynamics.predict_torque(plain, rec.time[:T], rec.position[:T],
+                                                                   rec.velocity[:T]),
+                                       rcm.dynamics.predict_torque_streaming(plain, rec.time[:T], rec.position[:T],
+                                                                             rec.velocity[:T])))
 
     def test_workspace_and_step_checks(self):
         model = self.model()

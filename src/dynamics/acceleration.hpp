@@ -4,6 +4,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 
@@ -53,6 +54,59 @@ struct QuadraticMoments {
   // c1: the slope at s = 0.
   double get_slope() const { return get_normal_matrix().ldlt().solve(Eigen::Vector3d(v0, v1, v2))(1); }
 };
+
+// The normal equations of a least-squares cubic v = c0 + c1 s + c2 s^2 + c3 s^3,
+// summed as moments (as QuadraticMoments).
+struct CubicMoments {
+  double s[7] = {};  // sums of s^k
+  double v[4] = {};  // sums of v s^k
+  void add(double x, double y) {
+    double p = 1.0;
+    for (int k = 0; k < 7; ++k, p *= x) {
+      s[k] += p;
+      if (k < 4) v[k] += y * p;
+    }
+  }
+  // The slope c1, or false when the samples cannot pin a cubic down.
+  bool compute_slope(double& slope) const {
+    Eigen::Matrix4d A;
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) A(r, c) = s[r + c];
+    const double n = s[0];
+    if (!(A.determinant() > 1e-12 * n * n * n * n)) return false;
+    slope = A.ldlt().solve(Eigen::Vector4d(v[0], v[1], v[2], v[3]))(1);
+    return true;
+  }
+};
+
+// A sample belongs to the zero-phase window of half-width h about t_c when it
+// lies within h of it, with this relative slack for stamps that are sums of
+// periods.
+constexpr double kWindowSlack = 1e-9;
+
+// The zero-phase qddot at t_c from the samples k in [lo, hi) of one window
+// (time_at(k), velocity_at(k)): the slope at t_c of the least-squares
+// polynomial of `degree` (2 or 3) through them; with too few distinct times for
+// the cubic, the quadratic; for the quadratic, the difference across the
+// window. The one home of the estimate, over a recording
+// (compute_zero_phase_acceleration) and over the live model's ring of samples.
+template <class TimeAt, class VelocityAt>
+double compute_local_slope(Eigen::Index lo, Eigen::Index hi, double t_c, double h, int degree, TimeAt time_at,
+                           VelocityAt velocity_at) {
+  if (degree == 3 && hi - lo >= 5) {
+    CubicMoments m;
+    for (Eigen::Index k = lo; k < hi; ++k) m.add((time_at(k) - t_c) / h, velocity_at(k));
+    double slope;
+    if (m.compute_slope(slope)) return slope / h;
+  }
+  const double n = static_cast<double>(hi - lo);
+  QuadraticMoments m;
+  for (Eigen::Index k = lo; k < hi; ++k) m.add((time_at(k) - t_c) / h, velocity_at(k));
+  if (hi - lo >= 3 && m.get_normal_matrix().determinant() > 1e-9 * n * n * n) return m.get_slope() / h;
+  if (hi - lo >= 2 && time_at(hi - 1) > time_at(lo))
+    return (velocity_at(hi - 1) - velocity_at(lo)) / (time_at(hi - 1) - time_at(lo));
+  return 0.0;
+}
 
 // Causal qddot of one joint from its measured qdot (velocity is itself a filtered
 // difference of quantized encoders, so differentiating it again is mostly noise

@@ -164,7 +164,7 @@ nlohmann::json FitSummary::to_json() const {
   j["best_validation_loss"] = best_validation_loss;
   if (interrupted) j["interrupted"] = true;
   if (kind == TorqueModelKind::lstm || kind == TorqueModelKind::hybrid) j["loss_balance"] = loss_balance;
-  if (kind == TorqueModelKind::lstm) j["output_delay_samples"] = output_delay_samples;
+  if (kind == TorqueModelKind::lstm || output_delay_samples > 0) j["output_delay_samples"] = output_delay_samples;
   j["seconds"] = seconds;
   j["device"] = device;
   if (!structure.empty()) j["structure"] = structure;
@@ -255,6 +255,9 @@ const OptionTable<FitOptions>& get_option_table(OptionTag<FitOptions>) {
           .add("insertion_stiffness", &FitOptions::insertion_stiffness,
                "linear, hybrid, with the rigid-body structure: a stiffness along the insertion, an elastic element "
                "that no rigid link's weight gives (false: none)")
+          .add("live_zero_phase", &FitOptions::live_zero_phase,
+               "linear: live torque from the fit's zero-phase qddot, trailing by about half its window (false: "
+               "causal qddot, no delay)")
           .add_check([](const FitOptions& o) { o.check(); });
   return table;
 }

@@ -491,7 +491,9 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
   info.num_outputs = M;
   info.sample_period_s = sample_period;
   info.regime = compute_training_regime(recordings, N);
+  p.live_zero_phase = options.live_zero_phase;
   auto model_for_test = std::make_unique<LinearTorqueModel>(info, p);
+  summary.output_delay_samples = model_for_test->output_delay();
   if (!split.test.empty()) summary.test_errors = evaluate_on_segments(*model_for_test, recordings, split.test);
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   info.training = summary.to_json();

@@ -8,6 +8,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <iostream>
 #include <limits>
 #include <memory>
@@ -35,7 +36,17 @@ struct LinearWorkspace final : TorqueModelWorkspace {
   bool has_previous = false;
   Eigen::Matrix<double, 3, G> Y;
   Eigen::Matrix<double, 3, kInertiaTerms> Y_inertia;
+  // live_zero_phase: the last samples [time, q 1..M, qd 1..M], sample number c
+  // at row c % capacity; `pushed` samples since the stream (re)started, the
+  // first `done` of them run; the torque of the last one run.
+  std::vector<double> ring;
+  std::int64_t capacity = 0, pushed = 0, done = 0;
+  Eigen::VectorXd delayed_tau;
 };
+
+// Rows of the ring: the delay and the half window after it at the model's rate
+// or at 2 kHz, whichever is faster (as the causal estimator's ring), bounded.
+constexpr double kMaxRingSamples = 16384.0;
 
 }  // namespace
 
@@ -94,6 +105,11 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
     throw std::invalid_argument("linear model: the acceleration windows and filters must be >= 0");
   if (q.batch_acceleration_degree != 2 && q.batch_acceleration_degree != 3)
     throw std::invalid_argument("linear model: batch_acceleration_degree must be 2 or 3");
+  const double half_window = 0.5 * q.batch_acceleration_window_s.maxCoeff();
+  const double period = TorqueModel::info().sample_period_s;
+  if (q.live_zero_phase && half_window > 0 && period > 0)
+    live_delay_samples_ =
+        static_cast<int>(std::ceil((half_window + 0.5 * kSlowestStreamPeriod) / period * (1.0 - 1e-12)));
 }
 
 std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() const {
@@ -107,6 +123,13 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
   for (int j = 0; j < M; ++j)
     ws->qdd.emplace_back(parameters_.acceleration_window_s[j], parameters_.acceleration_filter_s[j],
                          info().sample_period_s);
+  ws->delayed_tau = Eigen::VectorXd::Zero(M);
+  if (live_delay_samples_ > 0) {
+    const double span = get_output_delay_s() + 0.5 * parameters_.batch_acceleration_window_s.maxCoeff();
+    const double period = std::min(info().sample_period_s, detail::kFastestSamplePeriod);
+    ws->capacity = static_cast<std::int64_t>(std::min(std::ceil(span / period) + 4.0, kMaxRingSamples));
+    ws->ring.assign(static_cast<std::size_t>(ws->capacity * (1 + 2 * M)), 0.0);
+  }
   return ws;
 }
 
@@ -116,16 +139,83 @@ void LinearTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   ws.z_slow.setZero();
   for (auto& e : ws.qdd) e.reset();
   ws.has_previous = false;
+  ws.pushed = ws.done = 0;
+  ws.delayed_tau.setZero();
 }
 
 void LinearTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                                      double* tau) const {
-  compute_step_with_acceleration(workspace, t, q, qd, nullptr, tau);
+  if (live_delay_samples_ > 0)
+    compute_delayed_step(workspace, t, q, qd, tau);
+  else
+    compute_step_with_acceleration(workspace, t, q, qd, nullptr, tau);
 }
 
 void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& workspace, double t, const double* q,
                                                        const double* qd, const double* qdd_batch,
                                                        double* tau) const {
+  auto& ws = static_cast<LinearWorkspace&>(workspace);
+  for (int j = 0; j < num_outputs(); ++j) {
+    ws.acceleration[j] = ws.qdd[j].update(t, qd[j]);
+    if (qdd_batch && parameters_.batch_acceleration_window_s[j] > 0) ws.acceleration[j] = qdd_batch[j];
+  }
+  compute_torque(workspace, q, qd, tau);
+}
+
+void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, double t, const double* q,
+                                             const double* qd, double* tau) const {
+  auto& ws = static_cast<LinearWorkspace&>(workspace);
+  const auto& p = parameters_;
+  const int M = num_outputs();
+  const std::int64_t stride = 1 + 2 * M, cap = ws.capacity;
+  auto row = [&](std::int64_t c) { return ws.ring.data() + (c % cap) * stride; };
+  // Runs the samples not yet run up to sample `last`, each with the samples
+  // within its half windows (those the stream has: cut at its ends).
+  auto run_up_to = [&](std::int64_t last) {
+    const std::int64_t oldest = std::max<std::int64_t>(0, ws.pushed - cap);
+    for (std::int64_t c = std::max(ws.done, oldest); c <= last; ++c) {
+      const double* r = row(c);
+      const double t_c = r[0];
+      for (int j = 0; j < M; ++j) {
+        const double h = 0.5 * p.batch_acceleration_window_s[j];
+        if (!(h > 0)) {
+          ws.acceleration[j] = ws.qdd[j].update(t_c, r[1 + M + j]);
+          continue;
+        }
+        std::int64_t lo = c, hi = c + 1;
+        while (lo > oldest && row(lo - 1)[0] >= t_c - h * (1.0 + detail::kWindowSlack)) --lo;
+        while (hi < ws.pushed && row(hi)[0] <= t_c + h * (1.0 + detail::kWindowSlack)) ++hi;
+        ws.acceleration[j] = detail::compute_local_slope(
+            lo, hi, t_c, h, p.batch_acceleration_degree, [&](std::int64_t k) { return row(k)[0]; },
+            [&](std::int64_t k) { return row(k)[1 + M + j]; });
+      }
+      compute_torque(workspace, r + 1, r + 1 + M, ws.delayed_tau.data());
+      ws.done = c + 1;
+    }
+  };
+  // As the causal estimate: a repeated stamp is the same sample; an earlier one
+  // ends the stream (its last samples run with their windows cut, as at the end
+  // of a recording) and starts another, the friction states carried on.
+  if (ws.pushed > 0 && t < row(ws.pushed - 1)[0]) {
+    run_up_to(ws.pushed - 1);
+    ws.pushed = ws.done = 0;
+    for (auto& e : ws.qdd) e.reset();
+  }
+  if (ws.pushed == 0 || t > row(ws.pushed - 1)[0]) {
+    double* r = row(ws.pushed);
+    r[0] = t;
+    std::copy(q, q + M, r + 1);
+    std::copy(qd, qd + M, r + 1 + M);
+    ++ws.pushed;
+  }
+  const int back = find_delayed_sample(static_cast<int>(std::min(ws.pushed, cap)), t - get_output_delay_s(),
+                                       [&](int b) { return row(ws.pushed - b)[0]; });
+  if (back > 0) run_up_to(ws.pushed - back);
+  std::copy(ws.delayed_tau.data(), ws.delayed_tau.data() + M, tau);
+}
+
+void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, const double* q, const double* qd,
+                                       double* tau) const {
   auto& ws = static_cast<LinearWorkspace&>(workspace);
   const auto& p = parameters_;
   compute_gravity_regressor(q, ws.Y);
@@ -135,15 +225,13 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
       if (has_extra_friction_)
         ws.z_slow[j] = compute_dahl_state(ws.z_slow[j], q[j] - ws.prev_q[j], kSlowDahlFactor * p.dahl_displacement[j]);
     }
-    double qdd = ws.qdd[j].update(t, qd[j]);
-    if (qdd_batch && p.batch_acceleration_window_s[j] > 0) qdd = qdd_batch[j];
+    const double qdd = ws.acceleration[j];
     double value =
         p.armature[j] * qdd + p.viscous[j] * qd[j] + get_coulomb_level(j, q[j]) * ws.z[j] + p.offset[j];
     if (j < 3) value += ws.Y.row(j).dot(p.gravity);
     if (has_extra_friction_) value += p.coulomb_slow[j] * ws.z_slow[j] + p.sqrt_viscous[j] * compute_sqrt_velocity(qd[j]);
     if (p.stiffness.size()) value += p.stiffness[j] * q[j];
     tau[j] = value;
-    ws.acceleration[j] = qdd;
     ws.prev_q[j] = q[j];
   }
   if (p.inertia.size() == kInertiaTerms) {
@@ -208,6 +296,7 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
     j["coulomb_profile_range"] = detail::encode_array(p.coulomb_profile_range);
   }
   if (p.stiffness.size()) j["stiffness"] = detail::encode_vector(p.stiffness);
+  if (p.live_zero_phase) j["live_zero_phase"] = true;
   return j;
 }
 
@@ -278,6 +367,10 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
       fail(source, f + ".coulomb_profile_range", "expected lo < hi on every row");
   }
   if (j.contains("stiffness")) p.stiffness = decode_vector_d(j["stiffness"], source, f + ".stiffness", M);
+  if (j.contains("live_zero_phase")) {
+    if (!j["live_zero_phase"].is_boolean()) fail(source, f + ".live_zero_phase", "expected true or false");
+    p.live_zero_phase = j["live_zero_phase"].get<bool>();
+  }
   if (!(p.acceleration_filter_s.array() >= 0).all())
     fail(source, f + ".acceleration_filter_s", "expected values >= 0");
   if (!(p.acceleration_window_s.array() >= 0).all())

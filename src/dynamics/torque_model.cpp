@@ -222,23 +222,38 @@ Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::
   Eigen::MatrixXd out(T, model.num_outputs());
   if (T == 0) return out;
   // The recording's period (the model's own when they agree within 1 %): the
-  // delay in its samples, and the step of the held last sample (a repeated
-  // stamp would be read as the same sample).
+  // step of the held last sample (a repeated stamp would be read as the same
+  // sample).
   const double model_dt = model.info().sample_period_s;
   double dt = T > 1 && time(T - 1) > time(0) ? (time(T - 1) - time(0)) / static_cast<double>(T - 1)
               : model_dt > 0                  ? model_dt
                                               : 1.0;
   if (model_dt > 0 && std::abs(dt / model_dt - 1.0) < 0.01) dt = model_dt;
-  const Eigen::Index d =
-      model.output_delay() == 0 ? 0 : static_cast<Eigen::Index>(std::lround(model.get_output_delay_s() / dt));
-  for (Eigen::Index k = 0; k < T + d; ++k) {
+  const double delay_s = model.get_output_delay_s();
+  auto time_of_call = [&](Eigen::Index k) {
+    return k < T ? time(k) : time(T - 1) + static_cast<double>(k - T + 1) * dt;
+  };
+  // Row r gets the output of the call whose torque is for sample r, picked by
+  // find_delayed_sample as a live caller pairs it; a row that no call picks
+  // (stamps jittered across the delay) takes the next picked output.
+  Eigen::Index filled = 0;  // rows 0..filled-1 written
+  const Eigen::Index max_calls = T + static_cast<Eigen::Index>(std::ceil(delay_s / dt)) + 2;
+  for (Eigen::Index k = 0; filled < T && k < max_calls; ++k) {
     const Eigen::Index t = std::min(k, T - 1);
     q = position.row(t).head(N).transpose();
     qd = velocity.row(t).head(N).transpose();
-    const double tk = k < T ? time(t) : time(T - 1) + static_cast<double>(k - T + 1) * dt;
-    model.compute_step(*ws, tk, q.data(), qd.data(), tau.data());
-    if (k >= d) out.row(k - d) = tau.transpose();
+    model.compute_step(*ws, time_of_call(k), q.data(), qd.data(), tau.data());
+    Eigen::Index row = k;
+    if (delay_s > 0) {
+      const int back = find_delayed_sample(static_cast<int>(k + 1),
+                                           time_of_call(k) - delay_s,
+                                           [&](int b) { return time_of_call(k + 1 - b); });
+      if (back == 0) continue;
+      row = std::min(k + 1 - back, T - 1);
+    }
+    for (; filled <= row; ++filled) out.row(filled) = tau.transpose();
   }
+  for (; filled < T; ++filled) out.row(filled) = tau.transpose();
   return out;
 }
 

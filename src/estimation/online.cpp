@@ -245,12 +245,9 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
 }
 
 namespace {
-constexpr std::ptrdiff_t kDelayStride = 10;  // time, q 1-3, qd 1-3, effort 1-3
+constexpr std::ptrdiff_t kDelayStride = 13;  // time, q 1-3, qd 1-3, effort 1-3, RCM shift 1-3
 // The fastest stream the delay line is sized for (the dVRK streams up to 1.5 kHz).
 constexpr double kFastestRateHz = 2000.0;
-// A sample this close after the delayed time is the delayed sample (stamps at
-// the model's own rate differ from it by rounding only).
-constexpr double kDelayTolerance_s = 1e-6;
 }  // namespace
 
 OnlinePipeline::OnlinePipeline(std::shared_ptr<const dynamics::TorqueModel> model, OnlineEstimator estimator,
@@ -284,6 +281,8 @@ void OnlinePipeline::reset(Workspace& ws) const {
   estimator_.reset(ws.estimator);
   regime_.reset(ws.regime);
   ws.delay_next = ws.delay_filled = 0;
+  ws.shift_declared_base.setZero();
+  ws.shift_applied_base.setZero();
   ws.residual_since = std::numeric_limits<double>::quiet_NaN();
 }
 
@@ -299,29 +298,25 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
     std::copy(q, q + 3, slot + 1);
     std::copy(qd, qd + 3, slot + 4);
     std::copy(effort, effort + 3, slot + 7);
+    std::copy(ws.shift_declared_base.data(), ws.shift_declared_base.data() + 3, slot + 10);
     ws.delay_next = (ws.delay_next + 1) % capacity;
     ws.delay_filled = std::min(ws.delay_filled + 1, capacity);
-    const double target = time - model_->get_output_delay_s();
-    int pick = -1;
-    for (int back = 1; back <= ws.delay_filled; ++back) {
-      const int i = (ws.delay_next - back + capacity) % capacity;
-      const double t_i = ws.delay_line[static_cast<std::size_t>(i) * kDelayStride];
-      if (t_i <= target + kDelayTolerance_s) {
-        pick = i;
-        // The newer neighbour may be nearer the target.
-        if (back > 1) {
-          const int newer = (i + 1) % capacity;
-          if (ws.delay_line[static_cast<std::size_t>(newer) * kDelayStride] - target < target - t_i) pick = newer;
-        }
-        break;
-      }
-    }
-    if (pick < 0) return get_online_output(ws.estimator);  // not yet that much stream
+    const int back = dynamics::find_delayed_sample(
+        ws.delay_filled, time - model_->get_output_delay_s(), [&](int b) {
+          return ws.delay_line[static_cast<std::size_t>((ws.delay_next - b + capacity) % capacity) * kDelayStride];
+        });
+    if (back == 0) return get_online_output(ws.estimator);  // not yet that much stream
+    const int pick = (ws.delay_next - back + capacity) % capacity;
     const double* paired = ws.delay_line.data() + static_cast<std::ptrdiff_t>(pick) * kDelayStride;
     time = paired[0];
     q = paired + 1;
     qd = paired + 4;
     effort = paired + 7;
+    const Eigen::Map<const Eigen::Vector3d> paired_shift(paired + 10);
+    if (paired_shift != ws.shift_applied_base) {
+      estimator_.apply_rcm_shift(ws.estimator, paired_shift - ws.shift_applied_base);
+      ws.shift_applied_base = paired_shift;
+    }
   }
   const Eigen::Vector3d dtau(effort[0] - ws.tau_fs[0], effort[1] - ws.tau_fs[1], effort[2] - ws.tau_fs[2]);
   estimator_.compute_update(ws.estimator, time, Eigen::Vector3d(q[0], q[1], q[2]), Eigen::Vector3d(qd[0], qd[1], qd[2]),
@@ -336,7 +331,19 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
     if (time - ws.residual_since >= residual_persistence_s_) out.regime_flags |= dynamics::get_residual_regime_flag();
   }
   out.out_of_regime = out.regime_flags != 0;
+  // Relative to the RCM as it is now (rebuilt from the filters at the next update).
+  if (ws.shift_declared_base != ws.shift_applied_base)
+    out.misalignment_m -= estimator_.incision().R_base_inc.transpose() * (ws.shift_declared_base - ws.shift_applied_base);
   return out;
+}
+
+void OnlinePipeline::apply_rcm_shift(Workspace& ws, const Eigen::Vector3d& shift_base) const {
+  if (ws.delay_line.empty()) {
+    estimator_.apply_rcm_shift(ws.estimator, shift_base);
+    return;
+  }
+  ws.shift_declared_base += shift_base;
+  ws.estimator.output.misalignment_m -= estimator_.incision().R_base_inc.transpose() * shift_base;
 }
 
 OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, const OnlineReplayOptions& options,

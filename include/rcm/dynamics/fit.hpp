@@ -88,6 +88,11 @@ struct FitOptions {
   // linear and hybrid, with the rigid-body structure: a stiffness along the
   // insertion (linear_model.hpp); false: none.
   bool insertion_stiffness = true;
+  // linear: the live path (compute_step) takes qddot from the zero-phase
+  // estimate the fit regressed on, its torque trailing by about half that
+  // window (linear_model.hpp), so that live and offline torques agree; false:
+  // the causal estimate, no delay. The hybrid's model-based part is causal.
+  bool live_zero_phase = true;
 
   // Throws InputError when a value is out of range.
   void check() const;
@@ -105,7 +110,7 @@ struct FitSummary {
   // RMSE-weighted.
   double best_validation_loss = 0.0;
   double loss_balance = 0.0;  // networks: the p the loss was balanced with
-  int output_delay_samples = 0;  // lstm: see FitOptions::output_delay_s
+  int output_delay_samples = 0;  // the model's output_delay(): FitOptions::output_delay_s, live_zero_phase
   double seconds = 0.0;
   std::string device = "cpu";
   std::string structure;  // linear (and hybrid's base): "remote-center", "rigid-body" or "generic"

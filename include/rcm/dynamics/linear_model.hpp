@@ -21,7 +21,12 @@
 // recording moves in, so the inertia carries to other speeds) through the
 // samples within +- batch_acceleration_window_s / 2 of each sample (0: the
 // causal estimate); the fit then regresses on that estimate, so the armature is
-// not biased by the causal lag. compute_step() stays causal.
+// not biased by the causal lag. compute_step() takes the causal estimate, or,
+// with live_zero_phase, the same zero-phase one as offline: its torque then
+// trails its input by output_delay(), the largest half window plus half the
+// period of the slowest stream the dVRK sends (100 Hz), so that the window of
+// the sample it is for has arrived at any rate from 100 Hz up, and the live
+// torque is the offline one (but for the first half window of the stream).
 // Friction per joint: viscous v, an offset, and Coulomb/stiction through a Dahl
 // state z in [-1, 1] that moves toward sign(dq) over a characteristic
 // displacement x_c and stays put at rest, so the holding torque remembers the
@@ -127,7 +132,16 @@ struct LinearTorqueParameters {
   // Per output joint (empty: none): torque per unit of the joint's position
   // (N m/rad or N/m); `offset` is the torque at q = 0.
   Eigen::VectorXd stiffness;
+  // compute_step() takes the zero-phase qddot of the joints whose
+  // batch_acceleration_window_s > 0, its torque trailing by output_delay()
+  // (above); false: the causal estimate, no delay (model files without the
+  // field).
+  bool live_zero_phase = false;
 };
+
+// The slowest stream the live zero-phase qddot keeps its whole window at (the
+// dVRK's slowest rate, 100 Hz).
+constexpr double kSlowestStreamPeriod = 0.01;
 
 class LinearTorqueModel final : public TorqueModel {
  public:
@@ -138,6 +152,7 @@ class LinearTorqueModel final : public TorqueModel {
   void reset_state(TorqueModelWorkspace& workspace) const override;
   void compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                     double* tau) const override;
+  int output_delay() const override { return live_delay_samples_; }
   nlohmann::json save_parameters() const override;
   // compute_step() over the recording, with the zero-phase qddot for the joints
   // whose batch_acceleration_window_s > 0 (and a time axis that never decreases).
@@ -153,11 +168,20 @@ class LinearTorqueModel final : public TorqueModel {
 
  private:
   // compute_step() with qddot taken from `qdd` (num_outputs values) for the
-  // joints whose batch_acceleration_window_s > 0, when `qdd` is not null.
+  // joints whose batch_acceleration_window_s > 0, when `qdd` is not null, and
+  // from the causal estimate otherwise.
   void compute_step_with_acceleration(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                                       const double* qdd, double* tau) const;
+  // compute_step() with live_zero_phase: the sample joins the workspace's ring,
+  // and the samples up to the one the delay points at are run in order.
+  void compute_delayed_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
+                            double* tau) const;
+  // The torque of one sample whose qddot is in the workspace; advances the
+  // friction states.
+  void compute_torque(TorqueModelWorkspace& workspace, const double* q, const double* qd, double* tau) const;
   LinearTorqueParameters parameters_;
   bool has_extra_friction_ = false;  // coulomb_slow and sqrt_viscous present
+  int live_delay_samples_ = 0;       // output_delay()
 };
 
 // Least squares on the training split; x_c and the causal and zero-phase qddot

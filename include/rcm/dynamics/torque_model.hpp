@@ -73,10 +73,12 @@ class TorqueModel {
   virtual void compute_step(TorqueModelWorkspace& workspace, double t, const double* q,
                             const double* qd, double* tau) const = 0;
   // Samples by which compute_step's torque trails its input: 0, or d for a
-  // fixed-lag network that also sees the d samples after the one it predicts
-  // (the inertial torque needs qddot, which a causal estimate gets late). A live
-  // caller pairs it with the effort and joint state of d samples before
-  // (OnlinePipeline does); predict_torque and predict_torque_streaming align it.
+  // model that also sees the d samples after the one it predicts (the inertial
+  // torque needs qddot, which a causal estimate gets late): a fixed-lag
+  // network, or the linear model with its zero-phase qddot live. A live caller
+  // pairs it with the effort and joint state of that sample (OnlinePipeline
+  // does, by find_delayed_sample); predict_torque and predict_torque_streaming
+  // align it.
   virtual int output_delay() const { return 0; }
   // The same in seconds, d samples of the training period: what a caller
   // streaming at another rate pairs by (the networks step on their own clock).
@@ -97,6 +99,29 @@ class TorqueModel {
   TorqueModelInfo info_;
 };
 
+// Which of the last `count` samples of a stream (time_at(1) the newest,
+// time_at(count) the oldest) the output of a model whose torque trails by
+// get_output_delay_s() is for, `target` being the newest sample's time less
+// that delay: the newest sample no later than the target, or the next newer
+// one if that is nearer, both within kDelayedSampleTolerance_s (which stamps at
+// the model's own rate differ from the target by; a tie, as at 100 Hz behind a
+// delay of an odd number of 5 ms, goes to the older sample whatever the
+// rounding, so that consecutive calls pick consecutive samples). Returns its
+// `back` (1 = newest), or 0 while the stream is shorter than the delay. The
+// model and the caller that pairs its output pick by this one rule.
+constexpr double kDelayedSampleTolerance_s = 1e-6;
+template <class TimeAt>
+int find_delayed_sample(int count, double target, TimeAt time_at) {
+  for (int back = 1; back <= count; ++back) {
+    const double t = time_at(back);
+    if (t <= target + kDelayedSampleTolerance_s) {
+      if (back > 1 && time_at(back - 1) - target < target - t - kDelayedSampleTolerance_s) return back - 1;
+      return back;
+    }
+  }
+  return 0;
+}
+
 // Runs the model over a whole recording from the reset state: T x num_outputs
 // (model.predict_sequence: compute_step() per sample, or a model's non-causal
 // batch estimate; see docs/dynamics.md). Throws InputError if the recording has
@@ -106,11 +131,13 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& 
                                const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);
 
 // What the live robot gets over a recording: compute_step() on every sample
-// from the reset state, causal whatever the model (predict_torque may use later
-// samples). Row t is the torque of sample t: for a model whose torque trails by
-// get_output_delay_s(), the output of call t + s, s that delay in samples of the
-// recording (d at the training rate), the last s rows from s more calls that
-// repeat the last sample (a zero-order hold), time advancing. Same size checks.
+// from the reset state, as a live caller would (predict_torque may instead use
+// a model's offline estimate). Row t is the torque of sample t: for a model
+// whose torque trails by get_output_delay_s(), the output of the call that
+// find_delayed_sample pairs with sample t (a row no call is paired with, when
+// jittered stamps straddle the delay, takes the next paired output), the last
+// rows from more calls that repeat the last sample (a zero-order hold), time
+// advancing. Same size checks.
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::VectorXd& time,
                                          const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity);
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Recording& recording);

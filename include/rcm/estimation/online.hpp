@@ -206,8 +206,14 @@ class OnlinePipeline {
     // The last samples [time, q 1-3, qd 1-3, effort 1-3] for a model whose
     // torque trails its input (get_output_delay_s() > 0): as many as that
     // delay spans at 2 kHz, and at least d + 1; empty without a delay.
+    // [..., RCM shift in effect 1-3] also, the shift being what apply_rcm_shift
+    // declared before that sample.
     std::vector<double> delay_line;
     int delay_next = 0, delay_filled = 0;
+    // With a delay: the RCM shifts declared so far, and those the estimator
+    // has taken (it reaches a shift with the first sample taken after it).
+    Eigen::Vector3d shift_declared_base = Eigen::Vector3d::Zero();
+    Eigen::Vector3d shift_applied_base = Eigen::Vector3d::Zero();
     dynamics::RegimeMonitor::Workspace regime;
     // Since when the fit cost has been above the regime's max_fit_cost (NaN: not).
     double residual_since = std::numeric_limits<double>::quiet_NaN();
@@ -228,10 +234,13 @@ class OnlinePipeline {
   const OnlineOutput& compute_sample(Workspace& workspace, double time, const double* q, const double* qd,
                                      const double* effort) const;
 
-  // See OnlineEstimator::apply_rcm_shift.
-  void apply_rcm_shift(Workspace& workspace, const Eigen::Vector3d& shift_base) const {
-    estimator_.apply_rcm_shift(workspace.estimator, shift_base);
-  }
+  // The RCM moved by shift_base before the next sample (OnlineEstimator::
+  // apply_rcm_shift). With a model whose torque trails, the estimate is for a
+  // sample taken that long before, with the RCM where it was then: the
+  // estimator takes the shift when it reaches the first sample taken after it,
+  // and until then each output's misalignment_m is given relative to the RCM
+  // as it is now (less the shifts still to come).
+  void apply_rcm_shift(Workspace& workspace, const Eigen::Vector3d& shift_base) const;
   const dynamics::TorqueModel& model() const { return *model_; }
   const OnlineEstimator& estimator() const { return estimator_; }
   // Built from the model's training regime; known() is false when it has none.

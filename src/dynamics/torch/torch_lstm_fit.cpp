@@ -262,6 +262,7 @@ FitResult fit_hybrid_torque_model(const std::vector<Recording>& recs, const FitO
   resolve_output_delay_samples(TorqueModelKind::hybrid, o, median_sample_period(recs));
   FitOptions lo = o;
   lo.verbose = false;
+  lo.live_zero_phase = false;  // the network beside it steps without delay
   FitResult base_fit = fit_linear_torque_model(recs, lo);
   std::shared_ptr<const LinearTorqueModel> base(
       static_cast<const LinearTorqueModel*>(base_fit.model.release()));
