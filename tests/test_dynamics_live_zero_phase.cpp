@@ -116,6 +116,26 @@ TEST(LiveZeroPhase, StreamedTorqueIsTheOfflineTorque) {
   }
 }
 
+// A model that predicts fewer joints than it reads keeps every joint read in
+// its ring: the potential reads the positions of joints 1-3.
+TEST(LiveZeroPhase, FewerOutputsThanJointsRead) {
+  TorqueModelInfo info = make_info(0.005);
+  info.num_outputs = 2;
+  LinearTorqueParameters p = make_parameters(true);
+  for (Eigen::VectorXd* v : {&p.armature, &p.viscous, &p.coulomb, &p.offset, &p.dahl_displacement,
+                             &p.acceleration_window_s, &p.acceleration_filter_s, &p.batch_acceleration_window_s,
+                             &p.stiffness})
+    v->conservativeResize(2);
+  p.inertia.resize(0);
+  const LinearTorqueModel live(info, p);
+  const Stream s = make_stream(0.005, 4.0, 0.0);
+  const Eigen::MatrixXd offline = predict_torque(live, s.time, s.position, s.velocity);
+  const Eigen::MatrixXd streamed = predict_torque_streaming(live, s.time, s.position, s.velocity);
+  const auto inner = Eigen::seq(40, s.time.size() - 41);
+  EXPECT_LT((streamed(inner, Eigen::all) - offline(inner, Eigen::all)).cwiseAbs().maxCoeff(),
+            1e-9 * offline.cwiseAbs().maxCoeff());
+}
+
 // A repeated stamp is the same sample; a stamp that goes back restarts the
 // windows: the torque is then again the offline torque of the new stream, with
 // the friction states carried over.

@@ -66,6 +66,11 @@ void run(const Options& o) {
   std::cerr << fmt::format("[rcm] tissue model ({}): k1 {:.1f} N/m, k3 {:.3g} N/m^3, c {:.2f} N s/m, F {:.2f} N\n",
                            setup.tissue.family, setup.tissue.parameters[0], setup.tissue.parameters[1],
                            setup.tissue.parameters[2], setup.tissue.parameters[3]);
+  if (setup.free_space.model->get_output_delay_s() > 0)
+    std::cerr << fmt::format("[rcm] free-space model {}: its torque, and so each estimate, trails the stream by "
+                             "{:.3f} s (the time column says which sample an estimate is for)\n",
+                             rcm::dynamics::to_string(setup.free_space.model->kind()),
+                             setup.free_space.model->get_output_delay_s());
 
   // Printing happens in the callback: events at once, the estimate at a cadence.
   double next_print = rec.time(0);

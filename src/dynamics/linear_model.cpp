@@ -36,7 +36,7 @@ struct LinearWorkspace final : TorqueModelWorkspace {
   bool has_previous = false;
   Eigen::Matrix<double, 3, G> Y;
   Eigen::Matrix<double, 3, kInertiaTerms> Y_inertia;
-  // live_zero_phase: the last samples [time, q 1..M, qd 1..M], sample number c
+  // live_zero_phase: the last samples [time, q 1..N, qd 1..N], sample number c
   // at row c % capacity; `pushed` samples since the stream (re)started, the
   // first `done` of them run; the torque of the last one run.
   std::vector<double> ring;
@@ -128,7 +128,7 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
     const double span = get_output_delay_s() + 0.5 * parameters_.batch_acceleration_window_s.maxCoeff();
     const double period = std::min(info().sample_period_s, detail::kFastestSamplePeriod);
     ws->capacity = static_cast<std::int64_t>(std::min(std::ceil(span / period) + 4.0, kMaxRingSamples));
-    ws->ring.assign(static_cast<std::size_t>(ws->capacity * (1 + 2 * M)), 0.0);
+    ws->ring.assign(static_cast<std::size_t>(ws->capacity * (1 + 2 * num_joints())), 0.0);
   }
   return ws;
 }
@@ -166,8 +166,9 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
                                              const double* qd, double* tau) const {
   auto& ws = static_cast<LinearWorkspace&>(workspace);
   const auto& p = parameters_;
-  const int M = num_outputs();
-  const std::int64_t stride = 1 + 2 * M, cap = ws.capacity;
+  // Rows hold every joint read: the regressors read q and qd of joints 1-3.
+  const int M = num_outputs(), N = num_joints();
+  const std::int64_t stride = 1 + 2 * N, cap = ws.capacity;
   auto row = [&](std::int64_t c) { return ws.ring.data() + (c % cap) * stride; };
   // Runs the samples not yet run up to sample `last`, each with the samples
   // within its half windows (those the stream has: cut at its ends).
@@ -179,7 +180,7 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
       for (int j = 0; j < M; ++j) {
         const double h = 0.5 * p.batch_acceleration_window_s[j];
         if (!(h > 0)) {
-          ws.acceleration[j] = ws.qdd[j].update(t_c, r[1 + M + j]);
+          ws.acceleration[j] = ws.qdd[j].update(t_c, r[1 + N + j]);
           continue;
         }
         std::int64_t lo = c, hi = c + 1;
@@ -187,9 +188,9 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
         while (hi < ws.pushed && row(hi)[0] <= t_c + h * (1.0 + detail::kWindowSlack)) ++hi;
         ws.acceleration[j] = detail::compute_local_slope(
             lo, hi, t_c, h, p.batch_acceleration_degree, [&](std::int64_t k) { return row(k)[0]; },
-            [&](std::int64_t k) { return row(k)[1 + M + j]; });
+            [&](std::int64_t k) { return row(k)[1 + N + j]; });
       }
-      compute_torque(workspace, r + 1, r + 1 + M, ws.delayed_tau.data());
+      compute_torque(workspace, r + 1, r + 1 + N, ws.delayed_tau.data());
       ws.done = c + 1;
     }
   };
@@ -204,8 +205,8 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
   if (ws.pushed == 0 || t > row(ws.pushed - 1)[0]) {
     double* r = row(ws.pushed);
     r[0] = t;
-    std::copy(q, q + M, r + 1);
-    std::copy(qd, qd + M, r + 1 + M);
+    std::copy(q, q + N, r + 1);
+    std::copy(qd, qd + N, r + 1 + N);
     ++ws.pushed;
   }
   const int back = find_delayed_sample(static_cast<int>(std::min(ws.pushed, cap)), t - get_output_delay_s(),

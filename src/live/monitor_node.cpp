@@ -89,6 +89,9 @@ std::unique_ptr<OnlinePipeline> make_monitor_pipeline(const MonitorNodeParameter
                           dynamics::to_string(setup.free_space.model->kind()).c_str(),
                           setup.free_space.model->num_joints(), setup.tissue.family.c_str(), setup.tissue.parameters[0],
                           setup.tissue.parameters[1], setup.tissue.parameters[2], setup.tissue.parameters[3]);
+  if (description && setup.free_space.model->get_output_delay_s() > 0)
+    *description += format("; the model's torque, and so each estimate, trails the stream by %.3f s",
+                           setup.free_space.model->get_output_delay_s());
   return std::make_unique<OnlinePipeline>(setup.free_space.model,
                                           OnlineEstimator(setup.incision, setup.tissue, online));
 }
