@@ -203,11 +203,10 @@ class OnlinePipeline {
     std::unique_ptr<dynamics::TorqueModelWorkspace> model;
     OnlineEstimator::Workspace estimator;
     std::vector<double> tau_fs;  // num_outputs
-    // The last samples [time, q 1-3, qd 1-3, effort 1-3] for a model whose
+    // The last samples [time, q 1-3, qd 1-3, effort 1-3, RCM shift 1-3 (what
+    // apply_rcm_shift had declared before the sample)] for a model whose
     // torque trails its input (get_output_delay_s() > 0): as many as that
     // delay spans at 2 kHz, and at least d + 1; empty without a delay.
-    // [..., RCM shift in effect 1-3] also, the shift being what apply_rcm_shift
-    // declared before that sample.
     std::vector<double> delay_line;
     int delay_next = 0, delay_filled = 0;
     // With a delay: the RCM shifts declared so far, and those the estimator
