@@ -105,6 +105,18 @@ static void BM_OnlinePipelineLinear(benchmark::State& state) {
 }
 BENCHMARK(BM_OnlinePipelineLinear);
 
+// The same with the zero-phase qddot live, as `rcm dynamics fit` gives it by
+// default (a 0.2 s window): the model's ring and the pipeline's delay line, at
+// 1.5 kHz.
+static void BM_OnlinePipelineLinearLiveZeroPhase(benchmark::State& state) {
+  rcm::dynamics::LinearTorqueParameters p = linear_model(6)->parameters();
+  p.batch_acceleration_window_s = Eigen::VectorXd::Constant(6, 0.2);
+  p.live_zero_phase = true;
+  run_pipeline(state, rcm::OnlinePipeline(std::make_shared<const rcm::dynamics::LinearTorqueModel>(info(6), p),
+                                          make_estimator()));
+}
+BENCHMARK(BM_OnlinePipelineLinearLiveZeroPhase);
+
 static void BM_OnlinePipelineHybrid(benchmark::State& state) {
   const rcm::dynamics::Normalization norm{Eigen::VectorXf::Zero(12), Eigen::VectorXf::Ones(12), Eigen::VectorXf::Zero(6),
                                           Eigen::VectorXf::Ones(6)};
