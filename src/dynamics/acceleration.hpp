@@ -7,6 +7,7 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 
 namespace rcm::dynamics::detail {
 
@@ -55,58 +56,118 @@ struct QuadraticMoments {
   double get_slope() const { return get_normal_matrix().ldlt().solve(Eigen::Vector3d(v0, v1, v2))(1); }
 };
 
-// The normal equations of a least-squares cubic v = c0 + c1 s + c2 s^2 + c3 s^3,
-// summed as moments (as QuadraticMoments).
-struct CubicMoments {
-  double s[7] = {};  // sums of s^k
-  double v[4] = {};  // sums of v s^k
-  void add(double x, double y) {
-    double p = 1.0;
-    for (int k = 0; k < 7; ++k, p *= x) {
-      s[k] += p;
-      if (k < 4) v[k] += y * p;
-    }
-  }
-  // The slope c1, or false when the samples cannot pin a cubic down.
-  bool compute_slope(double& slope) const {
+// The slope at s = 0 of the least-squares polynomial v(s) of `degree` (2 or 3)
+// from the moments about that point, m[p] = sum s^p (p <= 6) and w[p] = sum
+// v s^p (p <= 3) over m[0] samples; false when the samples cannot pin the
+// polynomial down (too few, or too few distinct times).
+inline bool compute_moment_slope(const double* m, const double* w, int degree, double& slope) {
+  const double n = m[0];
+  if (degree == 3) {
+    if (n < 5) return false;
     Eigen::Matrix4d A;
     for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) A(r, c) = s[r + c];
-    const double n = s[0];
+      for (int c = 0; c < 4; ++c) A(r, c) = m[r + c];
     if (!(A.determinant() > 1e-12 * n * n * n * n)) return false;
-    slope = A.ldlt().solve(Eigen::Vector4d(v[0], v[1], v[2], v[3]))(1);
+    slope = A.ldlt().solve(Eigen::Vector4d(w[0], w[1], w[2], w[3]))(1);
     return true;
   }
-};
+  if (n < 3) return false;
+  Eigen::Matrix3d A;
+  A << m[0], m[1], m[2], m[1], m[2], m[3], m[2], m[3], m[4];
+  if (!(A.determinant() > 1e-9 * n * n * n)) return false;
+  slope = A.ldlt().solve(Eigen::Vector3d(w[0], w[1], w[2]))(1);
+  return true;
+}
 
 // A sample belongs to the zero-phase window of half-width h about t_c when it
 // lies within h of it, with this relative slack for stamps that are sums of
 // periods.
 constexpr double kWindowSlack = 1e-9;
 
-// The zero-phase qddot at t_c from the samples k in [lo, hi) of one window
-// (time_at(k), velocity_at(k)): the slope at t_c of the least-squares
-// polynomial of `degree` (2 or 3) through them; with too few distinct times for
-// the cubic, the quadratic; for the quadratic, the difference across the
-// window. The one home of the estimate, over a recording
+// The zero-phase qddot of one joint at successive samples c of a stream whose
+// time never decreases: the slope at sample c of the least-squares polynomial
+// of `degree` (2 or 3) through the samples within +- window / 2 of it, cut
+// where the stream begins or ends (one-sided there); with too few distinct
+// times for the cubic, the quadratic; for the quadratic, the difference across
+// the window. The one home of that estimate, over a recording
 // (compute_zero_phase_acceleration) and over the live model's ring of samples.
-template <class TimeAt, class VelocityAt>
-double compute_local_slope(Eigen::Index lo, Eigen::Index hi, double t_c, double h, int degree, TimeAt time_at,
-                           VelocityAt velocity_at) {
-  if (degree == 3 && hi - lo >= 5) {
-    CubicMoments m;
-    for (Eigen::Index k = lo; k < hi; ++k) m.add((time_at(k) - t_c) / h, velocity_at(k));
+// The window's moments are kept about an anchor time as samples enter and
+// leave, so that a slope costs the same however many samples the window holds
+// (600 in 0.4 s at 1.5 kHz). The anchor moves to the sample, the sums
+// recomputed from the window's samples, once the sample is more than half a
+// half-window from it: the powers of (t - anchor) / h then stay within 1.5^6,
+// and the shift of the moments to the sample loses no more than a few hundred
+// ulps. Calls with c not increasing, or a window reaching below `begin` (the
+// oldest sample kept), recompute the sums. No allocation.
+class ZeroPhaseSlope {
+ public:
+  ZeroPhaseSlope(double window_s, int degree) : h_(0.5 * window_s), degree_(degree) {}
+  void reset() { valid_ = false; }
+  // The samples k in [begin, end) are the stream's (time_at(k), velocity_at(k)),
+  // c among them.
+  template <class TimeAt, class VelocityAt>
+  double compute(Eigen::Index c, Eigen::Index begin, Eigen::Index end, TimeAt time_at, VelocityAt velocity_at) {
+    const double t_c = time_at(c);
+    const double lower = t_c - h_ * (1.0 + kWindowSlack), upper = t_c + h_ * (1.0 + kWindowSlack);
+    if (!valid_ || c < last_ || lo_ < begin || std::abs(t_c - anchor_) > 0.5 * h_) {
+      anchor_ = t_c;
+      velocity_ref_ = velocity_at(c);
+      std::fill(std::begin(s_), std::end(s_), 0.0);
+      std::fill(std::begin(w_), std::end(w_), 0.0);
+      lo_ = c;
+      while (lo_ > begin && time_at(lo_ - 1) >= lower) --lo_;
+      for (hi_ = lo_; hi_ <= c || (hi_ < end && time_at(hi_) <= upper); ++hi_) add(time_at(hi_), velocity_at(hi_), 1.0);
+      valid_ = true;
+    } else {
+      for (; hi_ < end && time_at(hi_) <= upper; ++hi_) add(time_at(hi_), velocity_at(hi_), 1.0);
+      for (; lo_ < c && time_at(lo_) < lower; ++lo_) add(time_at(lo_), velocity_at(lo_), -1.0);
+    }
+    last_ = c;
+    // The moments about t_c from those about the anchor (binomial shift).
+    static constexpr double kBinomial[7][7] = {{1}, {1, 1}, {1, 2, 1}, {1, 3, 3, 1}, {1, 4, 6, 4, 1},
+                                               {1, 5, 10, 10, 5, 1}, {1, 6, 15, 20, 15, 6, 1}};
+    double power[7] = {1.0};  // (-delta)^p
+    const double delta = (t_c - anchor_) / h_;
+    for (int p = 1; p < 7; ++p) power[p] = -delta * power[p - 1];
+    double m[7], w[4];
+    for (int p = 0; p < 7; ++p) {
+      m[p] = 0.0;
+      for (int i = 0; i <= p; ++i) m[p] += kBinomial[p][i] * s_[i] * power[p - i];
+      if (p < 4) {
+        w[p] = 0.0;
+        for (int i = 0; i <= p; ++i) w[p] += kBinomial[p][i] * w_[i] * power[p - i];
+      }
+    }
+    m[0] = static_cast<double>(hi_ - lo_);
     double slope;
-    if (m.compute_slope(slope)) return slope / h;
+    if (degree_ == 3 && compute_moment_slope(m, w, 3, slope)) return slope / h_;
+    if (compute_moment_slope(m, w, 2, slope)) return slope / h_;
+    const Eigen::Index last = hi_ - 1;
+    if (last > lo_ && time_at(last) > time_at(lo_))
+      return (velocity_at(last) - velocity_at(lo_)) / (time_at(last) - time_at(lo_));
+    return 0.0;
   }
-  const double n = static_cast<double>(hi - lo);
-  QuadraticMoments m;
-  for (Eigen::Index k = lo; k < hi; ++k) m.add((time_at(k) - t_c) / h, velocity_at(k));
-  if (hi - lo >= 3 && m.get_normal_matrix().determinant() > 1e-9 * n * n * n) return m.get_slope() / h;
-  if (hi - lo >= 2 && time_at(hi - 1) > time_at(lo))
-    return (velocity_at(hi - 1) - velocity_at(lo)) / (time_at(hi - 1) - time_at(lo));
-  return 0.0;
-}
+
+ private:
+  void add(double t, double v, double sign) {
+    const double x = (t - anchor_) / h_, dv = v - velocity_ref_;
+    double p = sign;
+    for (int k = 0; k < 7; ++k, p *= x) {
+      s_[k] += p;
+      if (k < 4) w_[k] += dv * p;
+    }
+  }
+
+  double h_;
+  int degree_;
+  bool valid_ = false;
+  Eigen::Index lo_ = 0, hi_ = 0, last_ = 0;  // the window [lo_, hi_) of sample last_
+  // Sums of x^k and (v - velocity_ref_) x^k, x = (t - anchor_) / h_: the
+  // velocity at the anchor taken out, which the slope does not depend on, so
+  // that an offset far above the velocity's swing costs no digits.
+  double anchor_ = 0.0, velocity_ref_ = 0.0;
+  double s_[7] = {}, w_[4] = {};
+};
 
 // Causal qddot of one joint from its measured qdot (velocity is itself a filtered
 // difference of quantized encoders, so differentiating it again is mostly noise

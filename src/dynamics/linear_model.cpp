@@ -41,6 +41,7 @@ struct LinearWorkspace final : TorqueModelWorkspace {
   // first `done` of them run; the torque of the last one run.
   std::vector<double> ring;
   std::int64_t capacity = 0, pushed = 0, done = 0;
+  std::vector<detail::ZeroPhaseSlope> zero_phase;  // per output joint
   Eigen::VectorXd delayed_tau;
 };
 
@@ -129,6 +130,8 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
     const double period = std::min(info().sample_period_s, detail::kFastestSamplePeriod);
     ws->capacity = static_cast<std::int64_t>(std::min(std::ceil(span / period) + 4.0, kMaxRingSamples));
     ws->ring.assign(static_cast<std::size_t>(ws->capacity * (1 + 2 * num_joints())), 0.0);
+    for (int j = 0; j < M; ++j)
+      ws->zero_phase.emplace_back(parameters_.batch_acceleration_window_s[j], parameters_.batch_acceleration_degree);
   }
   return ws;
 }
@@ -140,6 +143,7 @@ void LinearTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   for (auto& e : ws.qdd) e.reset();
   ws.has_previous = false;
   ws.pushed = ws.done = 0;
+  for (auto& z : ws.zero_phase) z.reset();
   ws.delayed_tau.setZero();
 }
 
@@ -183,11 +187,8 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
           ws.acceleration[j] = ws.qdd[j].update(t_c, r[1 + N + j]);
           continue;
         }
-        std::int64_t lo = c, hi = c + 1;
-        while (lo > oldest && row(lo - 1)[0] >= t_c - h * (1.0 + detail::kWindowSlack)) --lo;
-        while (hi < ws.pushed && row(hi)[0] <= t_c + h * (1.0 + detail::kWindowSlack)) ++hi;
-        ws.acceleration[j] = detail::compute_local_slope(
-            lo, hi, t_c, h, p.batch_acceleration_degree, [&](std::int64_t k) { return row(k)[0]; },
+        ws.acceleration[j] = ws.zero_phase[static_cast<std::size_t>(j)].compute(
+            c, oldest, ws.pushed, [&](std::int64_t k) { return row(k)[0]; },
             [&](std::int64_t k) { return row(k)[1 + N + j]; });
       }
       compute_torque(workspace, r + 1, r + 1 + N, ws.delayed_tau.data());
@@ -201,6 +202,7 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
     run_up_to(ws.pushed - 1);
     ws.pushed = ws.done = 0;
     for (auto& e : ws.qdd) e.reset();
+    for (auto& z : ws.zero_phase) z.reset();
   }
   if (ws.pushed == 0 || t > row(ws.pushed - 1)[0]) {
     double* r = row(ws.pushed);
