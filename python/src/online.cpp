@@ -127,7 +127,10 @@ void bind_online(py::module_& m) {
         const std::string fn = "OnlinePipeline.apply_rcm_shift";
         if (ws.owner.get() != &self) throw InputError(argument_location(fn, "workspace"), "was created by another pipeline");
         self.apply_rcm_shift(ws.workspace, to_vector3(shift, argument_location(fn, "shift_base")));
-      }, py::arg("workspace"), py::arg("shift_base"), "See OnlineEstimator.apply_rcm_shift");
+      }, py::arg("workspace"), py::arg("shift_base"),
+           "The RCM moved by shift_base (base frame) before the next sample. With a model whose torque trails\n"
+           "(output_delay_s > 0) the filters take the shift when they reach the first sample taken after it;\n"
+           "meanwhile each output's misalignment_m is relative to the RCM as it is now.");
 
   // ---- from estimate to action ----
   py::enum_<CorrectionAction>(m, "CorrectionAction")
