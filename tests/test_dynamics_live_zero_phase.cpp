@@ -184,6 +184,20 @@ TEST(LiveZeroPhase, ModelFileKeepsTheFlag) {
     EXPECT_NE(std::string(e.what()).find("m.json"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("parameters.live_zero_phase"), std::string::npos) << e.what();
   }
+  // A window too long to run live (its delay and window beyond the ring).
+  doc["parameters"]["live_zero_phase"] = true;
+  auto p = make_parameters(false);
+  p.batch_acceleration_window_s(1) = 1e300;
+  doc["parameters"]["batch_acceleration_window_s"] =
+      torque_model_to_json(LinearTorqueModel(make_info(0.005), p))["parameters"]["batch_acceleration_window_s"];
+  try {
+    torque_model_from_json(doc, "m.json");
+    ADD_FAILURE() << "a 1e300 s window was run live";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("parameters.live_zero_phase"), std::string::npos) << e.what();
+  }
+  p.live_zero_phase = true;
+  EXPECT_THROW(LinearTorqueModel(make_info(0.005), p), std::invalid_argument);
   doc["parameters"].erase("live_zero_phase");
   EXPECT_EQ(torque_model_from_json(doc, "m.json")->output_delay(), 0);
   EXPECT_FALSE(torque_model_to_json(LinearTorqueModel(make_info(0.005), make_parameters(false)))["parameters"]

@@ -107,6 +107,8 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
   if (q.batch_acceleration_degree != 2 && q.batch_acceleration_degree != 3)
     throw std::invalid_argument("linear model: batch_acceleration_degree must be 2 or 3");
   const double half_window = 0.5 * q.batch_acceleration_window_s.maxCoeff();
+  if (q.live_zero_phase && !(half_window <= 0.5 * kMaxLiveZeroPhaseWindow))
+    throw std::invalid_argument("linear model: live_zero_phase needs zero-phase windows of at most 4 s");
   const double period = TorqueModel::info().sample_period_s;
   if (q.live_zero_phase && half_window > 0 && period > 0)
     live_delay_samples_ =
@@ -373,6 +375,10 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
   if (j.contains("live_zero_phase")) {
     if (!j["live_zero_phase"].is_boolean()) fail(source, f + ".live_zero_phase", "expected true or false");
     p.live_zero_phase = j["live_zero_phase"].get<bool>();
+    if (p.live_zero_phase && !(p.batch_acceleration_window_s.maxCoeff() <= kMaxLiveZeroPhaseWindow))
+      fail(source, f + ".live_zero_phase",
+           fmt::format("the zero-phase windows run live must be at most {} s (batch_acceleration_window_s)",
+                       kMaxLiveZeroPhaseWindow));
   }
   if (!(p.acceleration_filter_s.array() >= 0).all())
     fail(source, f + ".acceleration_filter_s", "expected values >= 0");

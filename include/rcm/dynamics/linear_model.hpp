@@ -142,6 +142,9 @@ struct LinearTorqueParameters {
 // The slowest stream the live zero-phase qddot keeps its whole window at (the
 // dVRK's slowest rate, 100 Hz).
 constexpr double kSlowestStreamPeriod = 0.01;
+// The longest zero-phase window run live (s): its delay and window then fit
+// the workspace's ring at 2 kHz. Fits choose at most 0.4 s.
+constexpr double kMaxLiveZeroPhaseWindow = 4.0;
 
 class LinearTorqueModel final : public TorqueModel {
  public:
