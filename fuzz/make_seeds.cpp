@@ -124,8 +124,11 @@ void write_model_seeds(const rcm::Recording& rec, const fs::path& linear_path, c
   with_profile.coulomb_profile_range.col(0).setConstant(-0.5);
   with_profile.coulomb_profile_range.col(1).setConstant(0.5);
   save_torque_model(dir / "linear_profile.json", LinearTorqueModel(info, with_profile));
+  LinearTorqueParameters causal = base->parameters();  // the hybrid's base steps without delay
+  causal.live_zero_phase = false;
   save_torque_model(dir / "hybrid.json",
-                    HybridTorqueModel(info, base, make_random_lstm_network(2 * N, 3, 1, 3, M, 3), norm));
+                    HybridTorqueModel(info, std::make_shared<const LinearTorqueModel>(info, causal),
+                                      make_random_lstm_network(2 * N, 3, 1, 3, M, 3), norm));
   (void)rec;
 }
 

@@ -18,6 +18,7 @@
 #include "../src/dynamics/acceleration.hpp"
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/dynamics/linear_model.hpp"
+#include "rcm/dynamics/networks.hpp"
 #include "rcm/dynamics/rigid_body.hpp"
 
 using rcm::test::g_allocations;
@@ -202,6 +203,30 @@ TEST(LiveZeroPhase, ModelFileKeepsTheFlag) {
   EXPECT_EQ(torque_model_from_json(doc, "m.json")->output_delay(), 0);
   EXPECT_FALSE(torque_model_to_json(LinearTorqueModel(make_info(0.005), make_parameters(false)))["parameters"]
                    .contains("live_zero_phase"));
+}
+
+// The hybrid steps its base beside its network, both without delay: a base
+// with its zero-phase qddot live is refused, in memory and in a file.
+TEST(LiveZeroPhase, TheHybridsBaseStaysCausal) {
+  const TorqueModelInfo info = make_info(0.005);
+  Normalization norm;
+  norm.input_mean = Eigen::VectorXf::Zero(6);
+  norm.input_scale = Eigen::VectorXf::Ones(6);
+  norm.output_mean = Eigen::VectorXf::Zero(3);
+  norm.output_scale = Eigen::VectorXf::Ones(3);
+  const auto causal = std::make_shared<const LinearTorqueModel>(info, make_parameters(false));
+  const auto live = std::make_shared<const LinearTorqueModel>(info, make_parameters(true));
+  const HybridTorqueModel hybrid(info, causal, make_random_lstm_network(6, 3, 1, 3, 3, 3), norm);
+  EXPECT_EQ(hybrid.output_delay(), 0);
+  EXPECT_THROW(HybridTorqueModel(info, live, make_random_lstm_network(6, 3, 1, 3, 3, 3), norm), std::invalid_argument);
+  nlohmann::json doc = torque_model_to_json(hybrid);
+  doc["parameters"]["base"]["live_zero_phase"] = true;
+  try {
+    torque_model_from_json(doc, "h.json");
+    ADD_FAILURE() << "a hybrid with a delayed base was loaded";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("parameters.base.live_zero_phase"), std::string::npos) << e.what();
+  }
 }
 
 // The ring is sized by create_workspace for streams up to 2 kHz: no allocation

@@ -198,6 +198,9 @@ std::unique_ptr<TorqueModel> detail::load_network_parameters(TorqueModelInfo inf
     std::shared_ptr<const TorqueModel> base =
         load_linear_parameters(base_info, require(p, "base", source, "parameters"), source);
     auto linear = std::dynamic_pointer_cast<const LinearTorqueModel>(base);
+    if (linear->output_delay() != 0)
+      fail(source, "parameters.base.live_zero_phase",
+           "the hybrid's model-based part steps beside its network without delay: expected false or absent");
     auto net = load_lstm(require(p, "residual", source, "parameters"), source, "parameters.residual");
     auto norm = load_normalization(require(p, "normalization", source, "parameters"), source,
                                    "parameters.normalization", 2 * N, M);

@@ -252,6 +252,9 @@ HybridTorqueModel::HybridTorqueModel(TorqueModelInfo info, std::shared_ptr<const
       normalization_(std::move(residual_normalization)) {
   if (!base_ || base_->num_joints() != num_joints() || base_->num_outputs() != num_outputs())
     throw std::invalid_argument("hybrid model: base model joints differ");
+  if (base_->output_delay() != 0)
+    throw std::invalid_argument(
+        "hybrid model: the model-based part steps beside the network without delay (live_zero_phase off)");
   check_normalization(normalization_, num_joints(), num_outputs());
   if (residual.input_size() != normalization_.network_inputs(num_joints()) || residual.output_size() != num_outputs())
     throw std::invalid_argument("hybrid model: residual network sizes do not match");
