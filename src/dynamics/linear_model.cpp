@@ -41,6 +41,7 @@ struct LinearWorkspace final : TorqueModelWorkspace {
   // first `done` of them run; the torque of the last one run.
   std::vector<double> ring;
   std::int64_t capacity = 0, pushed = 0, done = 0;
+  int back = 1;  // the last pick's distance from the newest sample (find_delayed_sample's hint)
   std::vector<detail::ZeroPhaseSlope> zero_phase;  // per output joint
   Eigen::VectorXd delayed_tau;
 };
@@ -145,6 +146,7 @@ void LinearTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   for (auto& e : ws.qdd) e.reset();
   ws.has_previous = false;
   ws.pushed = ws.done = 0;
+  ws.back = 1;
   for (auto& z : ws.zero_phase) z.reset();
   ws.delayed_tau.setZero();
 }
@@ -203,6 +205,7 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
   if (ws.pushed > 0 && t < row(ws.pushed - 1)[0]) {
     run_up_to(ws.pushed - 1);
     ws.pushed = ws.done = 0;
+    ws.back = 1;
     for (auto& e : ws.qdd) e.reset();
     for (auto& z : ws.zero_phase) z.reset();
   }
@@ -212,10 +215,14 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
     std::copy(q, q + N, r + 1);
     std::copy(qd, qd + N, r + 1 + N);
     ++ws.pushed;
+    ++ws.back;  // the last pick is one sample further back
   }
   const int back = find_delayed_sample(static_cast<int>(std::min(ws.pushed, cap)), t - get_output_delay_s(),
-                                       [&](int b) { return row(ws.pushed - b)[0]; });
-  if (back > 0) run_up_to(ws.pushed - back);
+                                       [&](int b) { return row(ws.pushed - b)[0]; }, ws.back);
+  if (back > 0) {
+    ws.back = back;
+    run_up_to(ws.pushed - back);
+  }
   std::copy(ws.delayed_tau.data(), ws.delayed_tau.data() + M, tau);
 }
 

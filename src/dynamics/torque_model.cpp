@@ -237,6 +237,7 @@ Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::
   // find_delayed_sample as a live caller pairs it; a row that no call picks
   // (stamps jittered across the delay) takes the next picked output.
   Eigen::Index filled = 0;  // rows 0..filled-1 written
+  int last_back = 0;         // the last pick's distance from the newest call (find_delayed_sample's hint)
   const Eigen::Index max_calls = T + static_cast<Eigen::Index>(std::ceil(delay_s / dt)) + 2;
   for (Eigen::Index k = 0; filled < T && k < max_calls; ++k) {
     const Eigen::Index t = std::min(k, T - 1);
@@ -245,10 +246,11 @@ Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::
     model.compute_step(*ws, time_of_call(k), q.data(), qd.data(), tau.data());
     Eigen::Index row = k;
     if (delay_s > 0) {
-      const int back = find_delayed_sample(static_cast<int>(k + 1),
-                                           time_of_call(k) - delay_s,
-                                           [&](int b) { return time_of_call(k + 1 - b); });
+      const int back = find_delayed_sample(
+          static_cast<int>(k + 1), time_of_call(k) - delay_s, [&](int b) { return time_of_call(k + 1 - b); },
+          last_back + 1);
       if (back == 0) continue;
+      last_back = back;
       row = std::min(k + 1 - back, T - 1);
     }
     for (; filled <= row; ++filled) out.row(filled) = tau.transpose();

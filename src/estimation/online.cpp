@@ -281,6 +281,7 @@ void OnlinePipeline::reset(Workspace& ws) const {
   estimator_.reset(ws.estimator);
   regime_.reset(ws.regime);
   ws.delay_next = ws.delay_filled = 0;
+  ws.delay_back = 1;
   ws.shift_declared_base.setZero();
   ws.shift_applied_base.setZero();
   ws.residual_since = std::numeric_limits<double>::quiet_NaN();
@@ -302,10 +303,13 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
     ws.delay_next = (ws.delay_next + 1) % capacity;
     ws.delay_filled = std::min(ws.delay_filled + 1, capacity);
     const int back = dynamics::find_delayed_sample(
-        ws.delay_filled, time - model_->get_output_delay_s(), [&](int b) {
+        ws.delay_filled, time - model_->get_output_delay_s(),
+        [&](int b) {
           return ws.delay_line[static_cast<std::size_t>((ws.delay_next - b + capacity) % capacity) * kDelayStride];
-        });
+        },
+        ws.delay_back + 1);
     if (back == 0) return get_online_output(ws.estimator);  // not yet that much stream
+    ws.delay_back = back;
     const int pick = (ws.delay_next - back + capacity) % capacity;
     const double* paired = ws.delay_line.data() + static_cast<std::ptrdiff_t>(pick) * kDelayStride;
     time = paired[0];

@@ -12,6 +12,7 @@
 // rcm::core. Training of the networks lives in rcm::torch (training.hpp).
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -108,18 +109,25 @@ class TorqueModel {
 // delay of an odd number of 5 ms, goes to the older sample whatever the
 // rounding, so that consecutive calls pick consecutive samples). Returns its
 // `back` (1 = newest), or 0 while the stream is shorter than the delay. The
-// model and the caller that pairs its output pick by this one rule.
+// model and the caller that pairs its output pick by this one rule. The search
+// starts at `hint` (the last call's answer plus the samples added since), so
+// that a caller streaming at 1.5 kHz behind hundreds of samples of delay
+// walks one or two of them per call, not all; on times that never decrease
+// the answer does not depend on the hint (1: a walk from the newest).
 constexpr double kDelayedSampleTolerance_s = 1e-6;
 template <class TimeAt>
-int find_delayed_sample(int count, double target, TimeAt time_at) {
-  for (int back = 1; back <= count; ++back) {
-    const double t = time_at(back);
-    if (t <= target + kDelayedSampleTolerance_s) {
-      if (back > 1 && time_at(back - 1) - target < target - t - kDelayedSampleTolerance_s) return back - 1;
-      return back;
-    }
+int find_delayed_sample(int count, double target, TimeAt time_at, int hint = 1) {
+  if (count < 1) return 0;
+  auto at_or_before = [&](int b) { return time_at(b) <= target + kDelayedSampleTolerance_s; };
+  int back = std::clamp(hint, 1, count);
+  if (at_or_before(back)) {
+    while (back > 1 && at_or_before(back - 1)) --back;
+  } else {
+    while (back <= count && !at_or_before(back)) ++back;
+    if (back > count) return 0;
   }
-  return 0;
+  if (back > 1 && time_at(back - 1) - target < target - time_at(back) - kDelayedSampleTolerance_s) return back - 1;
+  return back;
 }
 
 // Runs the model over a whole recording from the reset state: T x num_outputs

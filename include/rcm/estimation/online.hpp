@@ -209,6 +209,7 @@ class OnlinePipeline {
     // delay spans at 2 kHz, and at least d + 1; empty without a delay.
     std::vector<double> delay_line;
     int delay_next = 0, delay_filled = 0;
+    int delay_back = 1;  // the last pick's distance from the newest sample (find_delayed_sample's hint)
     // With a delay: the RCM shifts declared so far, and those the estimator
     // has taken (it reaches a shift with the first sample taken after it).
     Eigen::Vector3d shift_declared_base = Eigen::Vector3d::Zero();
