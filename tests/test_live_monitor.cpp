@@ -7,6 +7,7 @@
 
 #include "counting_new.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -374,6 +375,57 @@ TEST(MonitorNodeCore, PublishesEveryNthEstimateFlagsOnChangeAndCountsRejections)
   EXPECT_EQ(rcm::parse_joint_names("[outer_yaw, 'outer_pitch']", where("joint_names")),
             (std::vector<std::string>{"outer_yaw", "outer_pitch"}));
   EXPECT_THROW(rcm::parse_joint_names("a,,b", where("joint_names")), rcm::InputError);
+}
+
+// With a model whose torque trails, an estimate is for the sample that long
+// before: the node publishes nothing until the stream is that long, then each
+// estimate once, stamped with its own sample's stamp, not the newest message's.
+TEST(MonitorNodeCore, StampsADelayedEstimateWithItsSamplesStamp) {
+  rcm::dynamics::TorqueModelInfo info;
+  info.num_joints = info.num_outputs = 3;
+  info.sample_period_s = 0.005;
+  rcm::dynamics::LinearTorqueParameters lp{Eigen::VectorXd::Constant(17, 0.01), Eigen::VectorXd::Constant(3, 0.02),
+                                           Eigen::VectorXd::Constant(3, 0.01),  Eigen::VectorXd::Constant(3, 0.01),
+                                           Eigen::VectorXd::Constant(3, 0.0),   Eigen::VectorXd::Constant(3, 1e-3)};
+  lp.batch_acceleration_window_s = Eigen::Vector3d(0.1, 0.1, 0.1);
+  lp.live_zero_phase = true;
+  const auto model = std::make_shared<const rcm::dynamics::LinearTorqueModel>(info, lp);
+  const double delay_s = model->get_output_delay_s();
+  ASSERT_NEAR(delay_s, 0.055, 1e-12);  // half the window and 5 ms
+  rcm::JointTissueModel tissue;
+  tissue.parameters = Eigen::Vector4d(875.0, 0.0, 2.0, 0.3);
+  rcm::MonitorNodeParameters p;
+  p.session = "s.json";
+  p.model_file = "m.json";
+  p.status_period_s = 0;
+  RecordingSink sink;
+  rcm::MonitorNode node(p,
+                        std::make_unique<rcm::OnlinePipeline>(
+                            model, rcm::OnlineEstimator(rcm::make_incision_frame(kQ0), tissue, rcm::OnlineEstimatorOptions{})),
+                        rcm::LiveMonitor::ZeroStamp::invalid, sink);
+  node.start("rt/PSM1/measured_js");
+  constexpr std::int64_t kBase = 1700000000000000000;
+  std::vector<std::int64_t> sent;
+  for (int k = 0; k < 200; ++k) {  // 500 Hz
+    const Message m = make_message(make_sample(k), {0, 1, 2, 3}, kBase);
+    node.compute_message(rcm::view_joint_state(m), m.stamp_ns, 0);
+    sent.push_back(m.stamp_ns);
+    // The newest estimate is for the newest sample at least the delay old
+    // (within the pairing's microsecond; a tie goes to the older sample).
+    std::int64_t expected = -1;
+    for (const std::int64_t s : sent)
+      if (static_cast<double>(m.stamp_ns - s) * 1e-9 >= delay_s - 1e-6) expected = s;
+    if (expected < 0) {
+      ASSERT_TRUE(sink.estimate_stamps.empty()) << k;
+      continue;
+    }
+    ASSERT_EQ(sink.estimate_stamps.size(), static_cast<std::size_t>(std::count_if(
+                                               sent.begin(), sent.end(), [&](std::int64_t s) { return s <= expected; })))
+        << k;
+    ASSERT_EQ(sink.estimate_stamps.back(), expected) << k;
+  }
+  EXPECT_EQ(sink.correction_stamps, sink.estimate_stamps);
+  EXPECT_EQ(sink.estimate_stamps.front(), kBase);
 }
 
 // The node's path per message: checks, estimate and the sink's calls, without

@@ -351,11 +351,10 @@ TEST(OnlinePipeline, ADelayedEstimateTakesAnRcmShiftWithItsSamples) {
   EXPECT_LT((reference.back().misalignment_m - (truth - shift_inc)).norm(), 0.006);
 }
 
-// The linear model with its zero-phase qddot live (LinearTorqueParameters::
-// live_zero_phase) trails by its own delay; the pipeline pairs each output with
-// the effort of the sample it is for, so the stream gives the estimate that the
-// offline torque would, that delay late.
-TEST(OnlinePipeline, PairsTheLinearModelsZeroPhaseTorqueWithItsSample) {
+// A linear model with its zero-phase qddot live (LinearTorqueParameters::
+// live_zero_phase): its torque trails by 21 samples of 5 ms.
+namespace {
+std::shared_ptr<const rcm::dynamics::LinearTorqueModel> make_live_zero_phase_model() {
   rcm::dynamics::TorqueModelInfo info;
   info.num_joints = info.num_outputs = 3;
   info.sample_period_s = 0.005;
@@ -368,7 +367,15 @@ TEST(OnlinePipeline, PairsTheLinearModelsZeroPhaseTorqueWithItsSample) {
   p.dahl_displacement = Eigen::Vector3d(0.01, 0.01, 0.002);
   p.batch_acceleration_window_s = Eigen::Vector3d(0.1, 0.15, 0.2);
   p.live_zero_phase = true;
-  const auto model = std::make_shared<const rcm::dynamics::LinearTorqueModel>(info, p);
+  return std::make_shared<const rcm::dynamics::LinearTorqueModel>(info, p);
+}
+}  // namespace
+
+// The linear model with its zero-phase qddot live trails by its own delay; the
+// pipeline pairs each output with the effort of the sample it is for, so the
+// stream gives the estimate that the offline torque would, that delay late.
+TEST(OnlinePipeline, PairsTheLinearModelsZeroPhaseTorqueWithItsSample) {
+  const auto model = make_live_zero_phase_model();
   const int d = model->output_delay();
   ASSERT_EQ(d, 21);  // (0.1 + 0.005) / 0.005
   const int T = 4000;
@@ -409,6 +416,41 @@ TEST(OnlinePipeline, PairsTheLinearModelsZeroPhaseTorqueWithItsSample) {
   }
   EXPECT_EQ(allocations, 0);
   EXPECT_LT((expected.back().misalignment_m - truth).norm(), 0.006);
+}
+
+// A gap in the stream longer than the delay: until the stream has moved on
+// that long, the delay points at the last sample before the gap, which is
+// estimated already. Each sample is estimated once (OnlineOutput::updates
+// counts them), in order, and all but the delay's last ones are.
+TEST(OnlinePipeline, AGapLongerThanTheDelayEstimatesNoSampleTwice) {
+  const auto model = make_live_zero_phase_model();
+  const double delay_s = model->get_output_delay_s();
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const rcm::OnlinePipeline pipeline(model, rcm::OnlineEstimator(incision, linear_tissue(), default_options()));
+  auto ws = pipeline.create_workspace();
+  std::vector<double> times;
+  for (int k = 0; k < 600; ++k) times.push_back(k / 200.0);
+  for (int k = 0; k < 600; ++k) times.push_back(4.0 + k / 200.0);  // 1 s of silence, 10x the delay
+  std::vector<double> estimated;
+  std::uint64_t updates = 0;
+  for (const double t : times) {
+    const PathSample s = path(t);
+    const Eigen::Vector3d effort = trailing_torque(s.q.data(), s.qd.data());
+    const rcm::OnlineOutput& o = pipeline.compute_sample(ws, t, s.q.data(), s.qd.data(), effort.data());
+    ASSERT_TRUE(o.updates == updates || o.updates == updates + 1) << t;
+    if (o.updates == updates) continue;
+    updates = o.updates;
+    estimated.push_back(o.time);
+  }
+  // Before the gap, the samples up to the delay before its start; after it,
+  // the last sample before the gap (the model has run those between, but
+  // gives the torque of that one), then the new ones.
+  std::vector<double> expected;
+  for (const double t : times)
+    if ((t < 3.5 && t <= 2.995 - delay_s + 1e-9) || t == 2.995 || (t > 3.5 && t <= times.back() - delay_s + 1e-9))
+      expected.push_back(t);
+  ASSERT_EQ(estimated.size(), expected.size());
+  for (std::size_t i = 0; i < expected.size(); ++i) ASSERT_EQ(estimated[i], expected[i]) << i;
 }
 
 TEST(OnlineEstimator, OptionsAreChecked) {

@@ -138,6 +138,8 @@ void run(const Options& o) {
     nlohmann::json j;
     j["recording"] = rec.source;
     j["samples"] = T;
+    j["estimates"] = replay.estimates;
+    j["output_delay_s"] = model.get_output_delay_s();
     j["duration_s"] = rec.time(T - 1) - rec.time(0);
     j["free_space_model"] = rcm::dynamics::to_string(model.kind());
     j["tissue"] = {{"family", setup.tissue.family},

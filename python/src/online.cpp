@@ -39,7 +39,10 @@ void bind_online(py::module_& m) {
   m.def("make_online_options", &make_online_options, py::arg("joint"),
         "Online options agreeing with a batch estimate's bounds and scales");
   py::class_<OnlineOutput>(m, "OnlineOutput", "What the online estimator says after a sample")
-      .def_readonly("time", &OnlineOutput::time)
+      .def_readonly("updates", &OnlineOutput::updates,
+                    "samples estimated since the reset; 0: none yet (a model whose torque trails fills its delay "
+                    "first); a call that brought no new estimate leaves it as it was")
+      .def_readonly("time", &OnlineOutput::time, "of the sample the estimate is for")
       .def_readonly("used", &OnlineOutput::used, "False: the pivot was beyond max_theta_rad")
       .def_readonly("at_rest", &OnlineOutput::at_rest)
       .def_readonly("hypothesis", &OnlineOutput::hypothesis)
@@ -230,6 +233,8 @@ void bind_online(py::module_& m) {
   def_options<OnlineReplayOptions>(m, "OnlineReplayOptions", "What replay_online measures");
   py::class_<OnlineReplay>(m, "OnlineReplay", "A recording streamed through a pipeline (rcm monitor)")
       .def_readonly("samples", &OnlineReplay::samples)
+      .def_readonly("estimates", &OnlineReplay::estimates,
+                    "samples estimated, each once: all but the last output_delay_s of the model's")
       .def_readonly("final_output", &OnlineReplay::final_output)
       .def_property_readonly("motion_start_s", [](const OnlineReplay& r) { return optional_double(r.motion_start_s); })
       .def_property_readonly("onset_s", [](const OnlineReplay& r) { return optional_double(r.onset_s); })

@@ -109,6 +109,8 @@ class TestOnline(unittest.TestCase):
         self.assertAlmostEqual(self.setup.tissue.parameters[0] / cli["tissue"]["k1"], 1.0, places=10)
         replay = rcm.replay_online(self.make_pipeline(), self.trial)
         self.assertEqual(replay.samples, cli["samples"])
+        self.assertEqual(replay.estimates, cli["estimates"])
+        self.assertEqual(self.setup.free_space.model.output_delay_s, cli["output_delay_s"])
         np.testing.assert_allclose(replay.final_output.misalignment_m, cli["final"]["misalignment_m"], rtol=1e-9,
                                    atol=1e-12)
         np.testing.assert_allclose(replay.final_output.sd_m, cli["final"]["sd_m"], rtol=1e-9)
@@ -162,18 +164,34 @@ class TestOnline(unittest.TestCase):
         pipeline = self.make_pipeline()
         seen = []
         replay = rcm.replay_online(pipeline, self.trial, on_sample=lambda out: seen.append(out.misalignment_m.copy()))
-        self.assertEqual(len(seen), self.trial.num_samples)
-        ws = pipeline.create_workspace()
         rec = self.trial
+        # One call per estimate: every sample but those of the model's delay at the end.
+        self.assertEqual(len(seen), replay.estimates)
+        delay = pipeline.model.output_delay_s
+        period = float(np.median(np.diff(rec.time)))
+        self.assertLessEqual(rec.num_samples - replay.estimates, int(np.ceil(delay / period)) + 1)
+        if delay > 0:
+            self.assertLess(replay.estimates, rec.num_samples)
+        ws = pipeline.create_workspace()
+        updates = 0
         for t in range(rec.num_samples):
             out = pipeline.compute_sample(ws, rec.time[t], rec.position[t], rec.velocity[t], rec.effort[t])
-            if t % 500 == 0:
-                self.assertTrue(np.array_equal(out.misalignment_m, seen[t]), t)
+            self.assertIn(out.updates, (updates, updates + 1))
+            if out.updates == updates:  # no new estimate: the delay is filling
+                continue
+            updates = out.updates
+            if updates % 500 == 1:
+                self.assertTrue(np.array_equal(out.misalignment_m, seen[updates - 1]), t)
+        self.assertEqual(updates, replay.estimates)
         self.assertTrue(np.array_equal(out.misalignment_m, replay.final_output.misalignment_m))
         self.assertEqual(out.onset, replay.final_output.onset)
         # reset: the stream starts over.
         pipeline.reset(ws)
+        t = 0
         first = pipeline.compute_sample(ws, rec.time[0], rec.position[0], rec.velocity[0], rec.effort[0])
+        while first.updates == 0:
+            t += 1
+            first = pipeline.compute_sample(ws, rec.time[t], rec.position[t], rec.velocity[t], rec.effort[t])
         self.assertTrue(np.array_equal(first.misalignment_m, seen[0]))
         with self.assertRaises(rcm.InputError):
             self.make_pipeline().compute_sample(ws, 0.0, rec.position[0], rec.velocity[0], rec.effort[0])

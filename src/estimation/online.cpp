@@ -119,6 +119,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
   ws.started = true;
   ws.last_time = time;
   OnlineOutput& out = ws.output;
+  ++out.updates;
   out.time = time;
   out.alarm_raised = out.alarm_cleared = false;
 
@@ -282,6 +283,8 @@ void OnlinePipeline::reset(Workspace& ws) const {
   regime_.reset(ws.regime);
   ws.delay_next = ws.delay_filled = 0;
   ws.delay_back = 1;
+  ws.delay_pushed = 0;
+  ws.delay_estimated = -1;
   ws.shift_declared_base.setZero();
   ws.shift_applied_base.setZero();
   ws.residual_since = std::numeric_limits<double>::quiet_NaN();
@@ -302,6 +305,7 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
     std::copy(ws.shift_declared_base.data(), ws.shift_declared_base.data() + 3, slot + 10);
     ws.delay_next = (ws.delay_next + 1) % capacity;
     ws.delay_filled = std::min(ws.delay_filled + 1, capacity);
+    ++ws.delay_pushed;
     const int back = dynamics::find_delayed_sample(
         ws.delay_filled, time - model_->get_output_delay_s(),
         [&](int b) {
@@ -310,6 +314,10 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
         ws.delay_back + 1);
     if (back == 0) return get_online_output(ws.estimator);  // not yet that much stream
     ws.delay_back = back;
+    // After a gap longer than the delay, the delay points at the last sample
+    // before it until the stream has moved on that long: estimated already.
+    if (ws.delay_pushed - back == ws.delay_estimated) return get_online_output(ws.estimator);
+    ws.delay_estimated = ws.delay_pushed - back;
     const int pick = (ws.delay_next - back + capacity) % capacity;
     const double* paired = ws.delay_line.data() + static_cast<std::ptrdiff_t>(pick) * kDelayStride;
     time = paired[0];
@@ -368,6 +376,7 @@ OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, c
   std::vector<Eigen::Vector3d> trace(static_cast<std::size_t>(T));
   auto ws = pipeline.create_workspace();
   double total = 0.0;
+  std::uint64_t updates = 0;
   for (Eigen::Index t = 0; t < T; ++t) {
     const auto start = std::chrono::steady_clock::now();
     const OnlineOutput& o = pipeline.compute_sample(ws, r.time(t), q.row(t).data(), qd.row(t).data(), effort.row(t).data());
@@ -377,6 +386,11 @@ OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, c
     trace[static_cast<std::size_t>(t)] = o.misalignment_m;
     if (!out.motion_start_s && std::hypot(r.velocity(t, 0), r.velocity(t, 1)) > options.motion_speed)
       out.motion_start_s = r.time(t);
+    // What follows counts estimates, each once (a model whose torque trails
+    // brings none for its delay's first samples, or after a long gap).
+    if (o.updates == updates) continue;
+    updates = o.updates;
+    ++out.estimates;
     if (o.onset && !out.onset_s) out.onset_s = o.onset_time;
     if (o.alarm_raised) out.alarms.push_back({o.time, std::nullopt, o.force_norm_n});
     if (o.alarm && !out.alarms.empty()) out.alarms.back().peak_force_n = std::max(out.alarms.back().peak_force_n, o.force_norm_n);

@@ -24,7 +24,7 @@
 // not biased by the causal lag. compute_step() takes the causal estimate, or,
 // with live_zero_phase, the same zero-phase one as offline: its torque then
 // trails its input by output_delay(), the largest half window plus half the
-// period of the slowest stream the dVRK sends (100 Hz), so that the window of
+// period of the slowest stream the dVRK sends (kSlowestStreamPeriod), so that the window of
 // the sample it is for has arrived at any rate from 100 Hz up, and the live
 // torque is the offline one (but for the first half window of the stream).
 // Friction per joint: viscous v, an offset, and Coulomb/stiction through a Dahl
@@ -139,9 +139,6 @@ struct LinearTorqueParameters {
   bool live_zero_phase = false;
 };
 
-// The slowest stream the live zero-phase qddot keeps its whole window at (the
-// dVRK's slowest rate, 100 Hz).
-constexpr double kSlowestStreamPeriod = 0.01;
 // The longest zero-phase window run live (s): its delay and window then fit
 // the workspace's ring at 2 kHz. Fits choose at most 0.4 s.
 constexpr double kMaxLiveZeroPhaseWindow = 4.0;

@@ -100,12 +100,19 @@ class TorqueModel {
   TorqueModelInfo info_;
 };
 
+// The period of the slowest stream the dVRK sends (100 Hz): a model whose
+// torque trails keeps half of it in hand, so that the sample nearest the
+// delay's target may be up to that much newer than the target.
+constexpr double kSlowestStreamPeriod = 0.01;
+
 // Which of the last `count` samples of a stream (time_at(1) the newest,
 // time_at(count) the oldest) the output of a model whose torque trails by
 // get_output_delay_s() is for, `target` being the newest sample's time less
 // that delay: the newest sample no later than the target, or the next newer
-// one if that is nearer, both within kDelayedSampleTolerance_s (which stamps at
-// the model's own rate differ from the target by; a tie, as at 100 Hz behind a
+// one if that is nearer and less than half of kSlowestStreamPeriod after it
+// (after a gap in the stream the sample after it is far newer: the older one
+// is taken); all within kDelayedSampleTolerance_s (which stamps at the
+// model's own rate differ from the target by; a tie, as at 100 Hz behind a
 // delay of an odd number of 5 ms, goes to the older sample whatever the
 // rounding, so that consecutive calls pick consecutive samples). Returns its
 // `back` (1 = newest), or 0 while the stream is shorter than the delay. The
@@ -126,7 +133,9 @@ int find_delayed_sample(int count, double target, TimeAt time_at, int hint = 1) 
     while (back <= count && !at_or_before(back)) ++back;
     if (back > count) return 0;
   }
-  if (back > 1 && time_at(back - 1) - target < target - time_at(back) - kDelayedSampleTolerance_s) return back - 1;
+  if (back > 1 && time_at(back - 1) - target < target - time_at(back) - kDelayedSampleTolerance_s &&
+      time_at(back - 1) - target < 0.5 * kSlowestStreamPeriod)
+    return back - 1;
   return back;
 }
 

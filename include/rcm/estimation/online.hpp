@@ -45,6 +45,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <cstdint>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -108,7 +109,15 @@ const OptionTable<OnlineEstimatorOptions>& get_option_table(OptionTag<OnlineEsti
 
 // What the estimator says after a sample.
 struct OnlineOutput {
-  double time = 0.0;
+  // Samples estimated since the reset. 0: the reset output (the prior's
+  // estimate, `time` no sample's), which a pipeline whose model's torque
+  // trails returns until the stream is that long. A caller streaming through
+  // OnlinePipeline tells a new estimate from a repeated one by this count: a
+  // call may bring none (the delay's first samples, or a gap in the stream
+  // longer than the delay, after which the sample the delay points at is one
+  // already estimated).
+  std::uint64_t updates = 0;
+  double time = 0.0;  // of the sample the estimate is for
   bool used = false;                 // false: the pivot was beyond max_theta_rad
   bool at_rest = false;
   int hypothesis = 0;                // index of the reported filter
@@ -210,6 +219,9 @@ class OnlinePipeline {
     std::vector<double> delay_line;
     int delay_next = 0, delay_filled = 0;
     int delay_back = 1;  // the last pick's distance from the newest sample (find_delayed_sample's hint)
+    // Samples pushed since the reset, and the number of the last one estimated
+    // (-1: none), so that no sample is estimated twice.
+    std::int64_t delay_pushed = 0, delay_estimated = -1;
     // With a delay: the RCM shifts declared so far, and those the estimator
     // has taken (it reaches a shift with the first sample taken after it).
     Eigen::Vector3d shift_declared_base = Eigen::Vector3d::Zero();
@@ -262,6 +274,9 @@ struct OnlineAlarm {
 };
 struct OnlineReplay {
   std::size_t samples = 0;
+  // Samples estimated, each once: all but the last of a delay (a model whose
+  // torque trails estimates the sample that long before the newest).
+  std::size_t estimates = 0;
   OnlineOutput final_output;
   std::optional<double> motion_start_s;  // first sample with |qd_1,2| > motion_speed
   std::optional<double> onset_s;

@@ -27,6 +27,7 @@
 // No allocation per message once the first message has been accepted (the
 // joint order and the buffers are set up then).
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -88,8 +89,13 @@ class LiveMonitor {
   bool started() const { return started_; }
   bool uses_receive_time() const { return receive_time_; }
   std::int64_t get_time_origin_ns() const { return origin_ns_; }
-  // The absolute time (ns) of the last accepted sample: the stamp to publish with.
+  // The absolute time (ns) of the last accepted sample.
   std::int64_t get_last_time_ns() const { return origin_ns_ + last_ns_; }
+  // The absolute time (ns) of the sample get_output() is for, the stamp to
+  // publish it with: the last accepted one's, or, with a model whose torque
+  // trails, that of the sample that long before (exact to the nanosecond for
+  // streams up to weeks long).
+  std::int64_t get_output_time_ns() const { return origin_ns_ + std::llround(get_output().time * 1e9); }
   const JointStateMap& get_joint_map() const { return map_; }
   const JointStateDefect& get_last_defect() const { return defect_; }
 

@@ -70,7 +70,8 @@ enum class LogLevel { info, warn, error };
 class MonitorSink {
  public:
   virtual ~MonitorSink() = default;
-  // misalignment, misalignment_sd and incision_force, all with `stamp_ns`.
+  // misalignment, misalignment_sd and incision_force, all with `stamp_ns`, the
+  // time of the sample the estimate is for (LiveMonitor::get_output_time_ns).
   virtual void publish_estimate(std::int64_t stamp_ns, const OnlineOutput& output) = 0;
   virtual void publish_flag(MonitorFlag flag, bool value) = 0;
   virtual void publish_rejected(std::uint64_t total) = 0;
@@ -117,6 +118,7 @@ class MonitorNode {
   MonitorSink& sink_;
   bool onset_ = false, alarm_ = false, out_of_regime_ = false;
   std::uint64_t retimed_ = 0;
+  std::uint64_t updates_ = 0;  // OnlineOutput::updates of the last estimate handled
   dynamics::RegimeSummary regime_;
   int since_publish_ = 0;
   double next_status_s_ = 0.0;
