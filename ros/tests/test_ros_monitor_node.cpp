@@ -235,7 +235,7 @@ TEST(MonitorNode, EndToEndAgreesWithRcmMonitor) {
   std::lock_guard<std::mutex> lock(got.mutex);
   std::cout << "[ node     ] " << T << " samples + " << injected << " bad messages published and answered in " << seconds
             << " s\n";
-  rcm::test::print_node_log_lines(node_log, {"samples accepted", "per sample:"});
+  rcm::test::print_node_log_lines(node_log, {"samples accepted", "per sample:", "rcm: regime:", "samples estimated"});
   // Every sample answered once, the bad ones rejected and counted.
   rcm::test::expect_every_sample_answered(node_log, expected, static_cast<std::size_t>(T), injected, got.estimates, got.sds,
                                           got.forces, got.rejected);
