@@ -99,11 +99,13 @@ TEST(LiveZeroPhase, DelayCoversTheLargestHalfWindow) {
 
 // Streamed sample by sample, the torque of every sample whose windows lie
 // inside the stream is the offline one (predict_torque), at the model's rate
-// with jittered stamps and at 100 Hz and 1 kHz; the causal model is not.
+// and at 100 Hz and 1 kHz, with regular and jittered stamps; the causal model
+// is not.
 TEST(LiveZeroPhase, StreamedTorqueIsTheOfflineTorque) {
   const LinearTorqueModel live(make_info(0.005), make_parameters(true));
   const LinearTorqueModel causal(make_info(0.005), make_parameters(false));
-  for (const auto& [period, jitter] : {std::pair{0.005, 0.1}, std::pair{0.01, 0.0}, std::pair{0.001, 0.0}}) {
+  for (const auto& [period, jitter] : {std::pair{0.005, 0.1}, std::pair{0.01, 0.0}, std::pair{0.001, 0.0},
+                                      std::pair{0.01, 0.1}, std::pair{0.001, 0.1}}) {
     const Stream s = make_stream(period, 8.0, jitter);
     const Eigen::MatrixXd offline = predict_torque(live, s.time, s.position, s.velocity);
     EXPECT_EQ(offline, predict_torque(causal, s.time, s.position, s.velocity));  // one offline estimate

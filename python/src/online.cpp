@@ -41,7 +41,7 @@ void bind_online(py::module_& m) {
   py::class_<OnlineOutput>(m, "OnlineOutput", "What the online estimator says after a sample")
       .def_readonly("updates", &OnlineOutput::updates,
                     "samples estimated since the reset; 0: none yet (a model whose torque trails fills its delay "
-                    "first); a call that brought no new estimate leaves it as it was")
+                    "first); a call brings none (it is unchanged) or more (after a gap: the output is the last's)")
       .def_readonly("time", &OnlineOutput::time, "of the sample the estimate is for")
       .def_readonly("used", &OnlineOutput::used, "False: the pivot was beyond max_theta_rad")
       .def_readonly("at_rest", &OnlineOutput::at_rest)

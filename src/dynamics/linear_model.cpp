@@ -44,6 +44,9 @@ struct LinearWorkspace final : TorqueModelWorkspace {
   int back = 1;  // the last pick's distance from the newest sample (find_delayed_sample's hint)
   std::vector<detail::ZeroPhaseSlope> zero_phase;  // per output joint
   Eigen::VectorXd delayed_tau;
+  // The samples the last call ran: their times, and their torques (row-major).
+  std::vector<double> run_time, run_tau;
+  int run_count = 0;
 };
 
 // Rows of the ring: the delay and the half window after it at the model's rate
@@ -133,6 +136,9 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
     const double period = std::min(info().sample_period_s, detail::kFastestSamplePeriod);
     ws->capacity = static_cast<std::int64_t>(std::min(std::ceil(span / period) + 4.0, kMaxRingSamples));
     ws->ring.assign(static_cast<std::size_t>(ws->capacity * (1 + 2 * num_joints())), 0.0);
+    // A call runs at most the ring's samples and the new one.
+    ws->run_time.assign(static_cast<std::size_t>(ws->capacity + 1), 0.0);
+    ws->run_tau.assign(static_cast<std::size_t>((ws->capacity + 1) * M), 0.0);
     for (int j = 0; j < M; ++j)
       ws->zero_phase.emplace_back(parameters_.batch_acceleration_window_s[j], parameters_.batch_acceleration_degree);
   }
@@ -149,6 +155,13 @@ void LinearTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   ws.back = 1;
   for (auto& z : ws.zero_phase) z.reset();
   ws.delayed_tau.setZero();
+  ws.run_count = 0;
+}
+
+TorqueModel::StepRuns LinearTorqueModel::get_step_runs(const TorqueModelWorkspace& workspace) const {
+  if (live_delay_samples_ == 0) return {};
+  const auto& ws = static_cast<const LinearWorkspace&>(workspace);
+  return {ws.run_count, ws.run_time.data(), ws.run_tau.data()};
 }
 
 void LinearTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
@@ -197,8 +210,15 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
       }
       compute_torque(workspace, r + 1, r + 1 + N, ws.delayed_tau.data());
       ws.done = c + 1;
+      if (ws.run_count < static_cast<int>(ws.run_time.size())) {
+        ws.run_time[static_cast<std::size_t>(ws.run_count)] = t_c;
+        std::copy(ws.delayed_tau.data(), ws.delayed_tau.data() + M,
+                  ws.run_tau.data() + static_cast<std::ptrdiff_t>(ws.run_count) * M);
+        ++ws.run_count;
+      }
     }
   };
+  ws.run_count = 0;
   // As the causal estimate: a repeated stamp is the same sample; an earlier one
   // ends the stream (its last samples run with their windows cut, as at the end
   // of a recording) and starts another, the friction states carried on.

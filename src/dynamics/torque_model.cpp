@@ -233,9 +233,11 @@ Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::
   auto time_of_call = [&](Eigen::Index k) {
     return k < T ? time(k) : time(T - 1) + static_cast<double>(k - T + 1) * dt;
   };
-  // Row r gets the output of the call whose torque is for sample r, picked by
-  // find_delayed_sample as a live caller pairs it; a row that no call picks
-  // (stamps jittered across the delay) takes the next picked output.
+  // Row r gets the torque of sample r: from the samples each call ran
+  // (get_step_runs), in order, or else the output of the call whose torque is
+  // for sample r, picked by find_delayed_sample as a live caller pairs it; a
+  // row that no call picks (stamps jittered across the delay) takes the next
+  // picked output.
   Eigen::Index filled = 0;  // rows 0..filled-1 written
   int last_back = 0;         // the last pick's distance from the newest call (find_delayed_sample's hint)
   const Eigen::Index max_calls = T + static_cast<Eigen::Index>(std::ceil(delay_s / dt)) + 2;
@@ -244,6 +246,13 @@ Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::
     q = position.row(t).head(N).transpose();
     qd = velocity.row(t).head(N).transpose();
     model.compute_step(*ws, time_of_call(k), q.data(), qd.data(), tau.data());
+    const TorqueModel::StepRuns runs = model.get_step_runs(*ws);
+    if (runs.count >= 0) {
+      for (int i = 0; i < runs.count && filled < T; ++i, ++filled)
+        out.row(filled) = Eigen::Map<const Eigen::RowVectorXd>(runs.torque + static_cast<std::ptrdiff_t>(i) * tau.size(),
+                                                                tau.size());
+      continue;
+    }
     Eigen::Index row = k;
     if (delay_s > 0) {
       const int back = find_delayed_sample(

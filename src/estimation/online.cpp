@@ -293,44 +293,78 @@ void OnlinePipeline::reset(Workspace& ws) const {
 const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, const double* q, const double* qd,
                                                    const double* effort) const {
   model_->compute_step(*ws.model, time, q, qd, ws.tau_fs.data());
-  if (!ws.delay_line.empty()) {
-    // The torque is that of the sample get_output_delay_s() before: pair it
-    // with the recent sample nearest that time (d calls ago at the model's rate).
-    const int capacity = static_cast<int>(ws.delay_line.size() / kDelayStride);
-    double* slot = ws.delay_line.data() + static_cast<std::ptrdiff_t>(ws.delay_next) * kDelayStride;
-    slot[0] = time;
-    std::copy(q, q + 3, slot + 1);
-    std::copy(qd, qd + 3, slot + 4);
-    std::copy(effort, effort + 3, slot + 7);
-    std::copy(ws.shift_declared_base.data(), ws.shift_declared_base.data() + 3, slot + 10);
-    ws.delay_next = (ws.delay_next + 1) % capacity;
-    ws.delay_filled = std::min(ws.delay_filled + 1, capacity);
-    ++ws.delay_pushed;
+  if (ws.delay_line.empty()) {
+    update_estimate(ws, time, q, qd, effort, ws.tau_fs.data());
+    return finish_output(ws);
+  }
+  // The torque is that of a sample get_output_delay_s() before: pair it with
+  // that sample's joint state and effort, kept in the delay line.
+  const int capacity = static_cast<int>(ws.delay_line.size() / kDelayStride);
+  double* slot = ws.delay_line.data() + static_cast<std::ptrdiff_t>(ws.delay_next) * kDelayStride;
+  slot[0] = time;
+  std::copy(q, q + 3, slot + 1);
+  std::copy(qd, qd + 3, slot + 4);
+  std::copy(effort, effort + 3, slot + 7);
+  std::copy(ws.shift_declared_base.data(), ws.shift_declared_base.data() + 3, slot + 10);
+  ws.delay_next = (ws.delay_next + 1) % capacity;
+  ws.delay_filled = std::min(ws.delay_filled + 1, capacity);
+  ++ws.delay_pushed;
+  auto entry = [&](int b) {
+    return ws.delay_line.data() + static_cast<std::ptrdiff_t>((ws.delay_next - b + capacity) % capacity) * kDelayStride;
+  };
+  const dynamics::TorqueModel::StepRuns runs = model_->get_step_runs(*ws.model);
+  if (runs.count < 0) {
+    // One torque per call: that of the recent sample nearest the delay's
+    // target (d calls ago at the model's rate).
     const int back = dynamics::find_delayed_sample(
-        ws.delay_filled, time - model_->get_output_delay_s(),
-        [&](int b) {
-          return ws.delay_line[static_cast<std::size_t>((ws.delay_next - b + capacity) % capacity) * kDelayStride];
-        },
-        ws.delay_back + 1);
+        ws.delay_filled, time - model_->get_output_delay_s(), [&](int b) { return entry(b)[0]; }, ws.delay_back + 1);
     if (back == 0) return get_online_output(ws.estimator);  // not yet that much stream
     ws.delay_back = back;
     // After a gap longer than the delay, the delay points at the last sample
     // before it until the stream has moved on that long: estimated already.
     if (ws.delay_pushed - back == ws.delay_estimated) return get_online_output(ws.estimator);
     ws.delay_estimated = ws.delay_pushed - back;
-    const int pick = (ws.delay_next - back + capacity) % capacity;
-    const double* paired = ws.delay_line.data() + static_cast<std::ptrdiff_t>(pick) * kDelayStride;
-    time = paired[0];
-    q = paired + 1;
-    qd = paired + 4;
-    effort = paired + 7;
-    const Eigen::Map<const Eigen::Vector3d> paired_shift(paired + 10);
+    const double* paired = entry(back);
+    update_estimate(ws, paired[0], paired + 1, paired + 4, paired + 7, ws.tau_fs.data(), paired + 10);
+    return finish_output(ws);
+  }
+  // Every sample the model ran this call, in order, each with its own torque;
+  // the events of the call's updates are kept together in the output.
+  const int M = model_->num_outputs();
+  bool updated = false, raised = false, cleared = false;
+  int back = std::min(ws.delay_back + 1, ws.delay_filled);
+  for (int i = 0; i < runs.count; ++i) {
+    const double t = runs.time[i];
+    if (ws.estimator.started && !(t > ws.estimator.last_time)) continue;  // a restarted stream's old samples
+    // Find the sample with that time from the last one paired (hint) on.
+    while (back > 1 && entry(back)[0] < t) --back;
+    while (back < ws.delay_filled && entry(back)[0] > t) ++back;
+    if (back < 1 || entry(back)[0] != t) continue;  // no longer in the delay line
+    ws.delay_back = back;
+    const double* paired = entry(back);
+    update_estimate(ws, t, paired + 1, paired + 4, paired + 7, runs.torque + static_cast<std::ptrdiff_t>(i) * M,
+                    paired + 10);
+    updated = true;
+    raised |= ws.estimator.output.alarm_raised;
+    cleared |= ws.estimator.output.alarm_cleared;
+  }
+  if (!updated) return get_online_output(ws.estimator);  // the delay is still filling
+  OnlineOutput& out = ws.estimator.output;
+  out.alarm_raised = raised;
+  out.alarm_cleared = cleared;
+  return finish_output(ws);
+}
+
+void OnlinePipeline::update_estimate(Workspace& ws, double time, const double* q, const double* qd,
+                                     const double* effort, const double* tau_fs, const double* shift_base) const {
+  if (shift_base) {
+    const Eigen::Map<const Eigen::Vector3d> paired_shift(shift_base);
     if (paired_shift != ws.shift_applied_base) {
       estimator_.apply_rcm_shift(ws.estimator, paired_shift - ws.shift_applied_base);
       ws.shift_applied_base = paired_shift;
     }
   }
-  const Eigen::Vector3d dtau(effort[0] - ws.tau_fs[0], effort[1] - ws.tau_fs[1], effort[2] - ws.tau_fs[2]);
+  const Eigen::Vector3d dtau(effort[0] - tau_fs[0], effort[1] - tau_fs[1], effort[2] - tau_fs[2]);
   estimator_.compute_update(ws.estimator, time, Eigen::Vector3d(q[0], q[1], q[2]), Eigen::Vector3d(qd[0], qd[1], qd[2]),
                             dtau);
   // The regime of the sample the estimate is for (the delayed one, if any).
@@ -343,6 +377,10 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
     if (time - ws.residual_since >= residual_persistence_s_) out.regime_flags |= dynamics::get_residual_regime_flag();
   }
   out.out_of_regime = out.regime_flags != 0;
+}
+
+const OnlineOutput& OnlinePipeline::finish_output(Workspace& ws) const {
+  OnlineOutput& out = ws.estimator.output;
   // Relative to the RCM as it is now (rebuilt from the filters at the next update).
   if (ws.shift_declared_base != ws.shift_applied_base)
     out.misalignment_m -= estimator_.incision().R_base_inc.transpose() * (ws.shift_declared_base - ws.shift_applied_base);
@@ -389,8 +427,8 @@ OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, c
     // What follows counts estimates, each once (a model whose torque trails
     // brings none for its delay's first samples, or after a long gap).
     if (o.updates == updates) continue;
+    out.estimates += static_cast<std::size_t>(o.updates - updates);
     updates = o.updates;
-    ++out.estimates;
     if (o.onset && !out.onset_s) out.onset_s = o.onset_time;
     if (o.alarm_raised) out.alarms.push_back({o.time, std::nullopt, o.force_norm_n});
     if (o.alarm && !out.alarms.empty()) out.alarms.back().peak_force_n = std::max(out.alarms.back().peak_force_n, o.force_norm_n);

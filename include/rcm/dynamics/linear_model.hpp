@@ -153,6 +153,8 @@ class LinearTorqueModel final : public TorqueModel {
   void compute_step(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                     double* tau) const override;
   int output_delay() const override { return live_delay_samples_; }
+  // With live_zero_phase, every sample a call ran, in order; -1 otherwise.
+  StepRuns get_step_runs(const TorqueModelWorkspace& workspace) const override;
   nlohmann::json save_parameters() const override;
   // compute_step() over the recording, with the zero-phase qddot for the joints
   // whose batch_acceleration_window_s > 0 (and a time axis that never decreases).

@@ -78,9 +78,22 @@ class TorqueModel {
   // torque needs qddot, which a causal estimate gets late): a fixed-lag
   // network, or the linear model with its zero-phase qddot live. A live caller
   // pairs it with the effort and joint state of that sample (OnlinePipeline
-  // does, by find_delayed_sample); predict_torque and predict_torque_streaming
-  // align it.
+  // does, by get_step_runs, or by find_delayed_sample for a model that gives
+  // one torque per call); predict_torque and predict_torque_streaming align it.
   virtual int output_delay() const { return 0; }
+  // The samples the last compute_step() ran through, for a model whose torque
+  // trails and that may run several in one call (after a gap in the stream, or
+  // when jittered stamps move the delay's target past two samples), so that a
+  // caller can pair every one of them: `count` samples (0: none this call),
+  // oldest first, each with its time and its num_outputs torques (row-major).
+  // count -1 (the default): the model gives one torque per call, that of the
+  // sample find_delayed_sample picks.
+  struct StepRuns {
+    int count = -1;
+    const double* time = nullptr;
+    const double* torque = nullptr;
+  };
+  virtual StepRuns get_step_runs(const TorqueModelWorkspace& /*workspace*/) const { return {}; }
   // The same in seconds, d samples of the training period: what a caller
   // streaming at another rate pairs by (the networks step on their own clock).
   double get_output_delay_s() const { return output_delay() * info_.sample_period_s; }

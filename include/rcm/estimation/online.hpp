@@ -113,9 +113,10 @@ struct OnlineOutput {
   // estimate, `time` no sample's), which a pipeline whose model's torque
   // trails returns until the stream is that long. A caller streaming through
   // OnlinePipeline tells a new estimate from a repeated one by this count: a
-  // call may bring none (the delay's first samples, or a gap in the stream
-  // longer than the delay, after which the sample the delay points at is one
-  // already estimated).
+  // call may bring none (the delay's first samples, or the delay after a gap
+  // in the stream), or several (the samples left before a gap, or two when
+  // jittered stamps move the delay's target past both); the output is then
+  // the last one's, with the alarm events of all.
   std::uint64_t updates = 0;
   double time = 0.0;  // of the sample the estimate is for
   bool used = false;                 // false: the pivot was beyond max_theta_rad
@@ -263,6 +264,13 @@ class OnlinePipeline {
   OnlineEstimator estimator_;
   dynamics::RegimeMonitor regime_;
   double max_fit_cost_, residual_persistence_s_;
+
+  // One estimator update for a sample with the model's torque tau_fs; with a
+  // delay line, shift_base is the RCM shift declared before that sample.
+  void update_estimate(Workspace& workspace, double time, const double* q, const double* qd, const double* effort,
+                       const double* tau_fs, const double* shift_base = nullptr) const;
+  // The output of the call, its misalignment relative to the RCM as it is now.
+  const OnlineOutput& finish_output(Workspace& workspace) const;
 };
 
 // A whole recording streamed through a pipeline, as `rcm monitor` and the study
