@@ -370,6 +370,14 @@ std::shared_ptr<const rcm::dynamics::LinearTorqueModel> make_live_zero_phase_mod
   p.live_zero_phase = true;
   return std::make_shared<const rcm::dynamics::LinearTorqueModel>(info, p);
 }
+
+// One sample of the path at time t, its effort the free-space torque alone.
+const rcm::OnlineOutput& compute_path_sample(const rcm::OnlinePipeline& pipeline, rcm::OnlinePipeline::Workspace& ws,
+                                             double t) {
+  const PathSample s = path(t);
+  const Eigen::Vector3d effort = trailing_torque(s.q.data(), s.qd.data());
+  return pipeline.compute_sample(ws, t, s.q.data(), s.qd.data(), effort.data());
+}
 }  // namespace
 
 // The linear model with its zero-phase qddot live trails by its own delay; the
@@ -437,9 +445,7 @@ TEST(OnlinePipeline, AGapLongerThanTheDelayEstimatesNoSampleTwice) {
   std::uint64_t updates = 0;
   double last = -1.0;
   for (const double t : times) {
-    const PathSample s = path(t);
-    const Eigen::Vector3d effort = trailing_torque(s.q.data(), s.qd.data());
-    const rcm::OnlineOutput& o = pipeline.compute_sample(ws, t, s.q.data(), s.qd.data(), effort.data());
+    const rcm::OnlineOutput& o = compute_path_sample(pipeline, ws, t);
     if (o.updates == updates) continue;
     // Several at once only at the gap: the 21 samples of the delay before it,
     // the last of them 2.995 s.
@@ -488,9 +494,7 @@ TEST(OnlinePipeline, EveryStreamEstimatesEachSampleOnceAndInOrder) {
     std::uint64_t updates = 0;
     double last = -1.0;
     for (const double s_t : times) {
-      const PathSample s = path(s_t);
-      const Eigen::Vector3d effort = trailing_torque(s.q.data(), s.qd.data());
-      const rcm::OnlineOutput& o = pipeline.compute_sample(ws, s_t, s.q.data(), s.qd.data(), effort.data());
+      const rcm::OnlineOutput& o = compute_path_sample(pipeline, ws, s_t);
       ASSERT_GE(o.updates, updates) << stream;
       if (o.updates == updates) continue;
       updates = o.updates;
