@@ -172,6 +172,22 @@ void bind_dynamics(py::module_& m, py::module_& d) {
            "Advance by one sample at time t (s) and return tau_fs of joints 1..num_outputs (N m, N for joint 3).\n"
            "q, qd: at least num_joints values. The same as predict_torque_streaming, sample by sample;\n"
            "with output_delay d > 0, the torque of the sample output_delay_s earlier (d calls at the model's rate).")
+      .def("get_step_runs", [](const TorqueModel& self, const TorqueWorkspace& ws) -> py::object {
+        check_owner(self, ws, "TorqueModel.get_step_runs");
+        const TorqueModel::StepRuns runs = self.get_step_runs(*ws.workspace);
+        if (runs.count < 0) return py::none();
+        const int M = self.num_outputs();
+        Eigen::VectorXd time(runs.count);
+        Eigen::MatrixXd torque(runs.count, M);
+        for (int i = 0; i < runs.count; ++i) {
+          time[i] = runs.time[i];
+          for (int j = 0; j < M; ++j) torque(i, j) = runs.torque[static_cast<std::ptrdiff_t>(i) * M + j];
+        }
+        return py::make_tuple(time, torque);
+      }, py::arg("workspace"),
+           "The samples the last compute_step ran, oldest first: (times, torques num_runs x num_outputs), for the\n"
+           "linear model with its zero-phase qddot live (after a gap in the stream, or on jittered stamps, a call\n"
+           "may run several, or none); None for a model that gives one torque per call (compute_step's).")
       .def("to_json", [](const TorqueModel& self) { return to_python(torque_model_to_json(self)); },
            "The model file's content (rcm-torque-model/1) as a dict")
       .def("__repr__", [](const TorqueModel& self) {

@@ -154,6 +154,22 @@ class TestDynamics(unittest.TestCase):
         self.assertGreater(d, 0)
         self.assertAlmostEqual(model.output_delay_s, d * model.info.sample_period_s)
         self.assertTrue(np.array_equal(steps[d:], streamed[:T - d]))
+        # The samples each step ran: with a gap in the stream, several at once; every one with its own torque.
+        ws = model.create_workspace()
+        gap = 1.0
+        times = np.concatenate([rec.time[:600], rec.time[600:T] + gap])
+        ran_times, ran_torques = [], []
+        for t in range(T):
+            model.compute_step(ws, times[t], rec.position[t], rec.velocity[t])
+            ran_t, ran_tau = model.get_step_runs(ws)
+            ran_times.extend(ran_t)
+            ran_torques.extend(ran_tau)
+        self.assertEqual(len(ran_times), len(ran_torques))
+        self.assertTrue(np.all(np.diff(ran_times) > 0))
+        self.assertTrue(np.array_equal(ran_times, times[:len(ran_times)]))  # each sample once, in order
+        self.assertGreater(len(ran_times), T - 2 * d)
+        gapped = rcm.dynamics.predict_torque_streaming(model, times, rec.position[:T], rec.velocity[:T])
+        self.assertTrue(np.array_equal(np.array(ran_torques), gapped[:len(ran_torques)]))
         # reset_state forgets the friction memory and the window: the first steps repeat exactly.
         model.reset_state(ws)
         again = np.array([model.compute_step(ws, rec.time[t], rec.position[t], rec.velocity[t]) for t in range(d + 20)])
@@ -167,6 +183,7 @@ class TestDynamics(unittest.TestCase):
         del document["parameters"]["live_zero_phase"]
         causal = rcm.dynamics.torque_model_from_json(document)
         self.assertEqual(causal.output_delay, 0)
+        self.assertIsNone(causal.get_step_runs(causal.create_workspace()))  # one torque per call
         causal_stream = rcm.dynamics.predict_torque_streaming(causal, rec.time[:T], rec.position[:T], rec.velocity[:T])
         self.assertGreater(np.max(np.abs(offline - causal_stream)), 1e-6)
         # With the zero-phase window off too, whole-sequence prediction is the step loop.
