@@ -465,6 +465,27 @@ TEST(OnlinePipeline, AGapLongerThanTheDelayEstimatesNoSampleTwice) {
   EXPECT_EQ(updates, expected);
 }
 
+// A time that goes back ends the stream and starts another (as the model
+// does): the first stream's last samples are estimated at once, and the new
+// stream's from its own delay on, none left out.
+TEST(OnlinePipeline, ATimeThatGoesBackStartsAnotherStream) {
+  const auto model = make_live_zero_phase_model();
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const rcm::OnlinePipeline pipeline(model, rcm::OnlineEstimator(incision, linear_tissue(), default_options()));
+  auto ws = pipeline.create_workspace();
+  std::uint64_t updates = 0;
+  for (int k = 0; k < 600; ++k) updates = compute_path_sample(pipeline, ws, k / 200.0).updates;
+  EXPECT_EQ(updates, 600u - 21u);  // all but the delay's 21 samples
+  const rcm::OnlineOutput& first = compute_path_sample(pipeline, ws, 0.0);  // back to the start
+  EXPECT_EQ(first.updates, 600u);
+  EXPECT_EQ(first.time, 599 / 200.0);
+  for (int k = 1; k < 600; ++k) {
+    const rcm::OnlineOutput& o = compute_path_sample(pipeline, ws, k / 200.0);
+    ASSERT_EQ(o.updates, 600u + static_cast<std::uint64_t>(std::max(0, k - 21 + 1))) << k;
+    if (k >= 21) ASSERT_EQ(o.time, (k - 21) / 200.0) << k;
+  }
+}
+
 // The same on streams as they come: rates from 100 Hz to 1.5 kHz, stamps
 // jittered by 10 % of the period, gaps from a few periods to a second. Each
 // call's estimate is for a sample of the stream at least the delay old (less

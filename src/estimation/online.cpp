@@ -285,6 +285,7 @@ void OnlinePipeline::reset(Workspace& ws) const {
   ws.delay_back = 1;
   ws.delay_pushed = 0;
   ws.delay_estimated = -1;
+  ws.delay_last_time = std::numeric_limits<double>::quiet_NaN();
   ws.shift_declared_base.setZero();
   ws.shift_applied_base.setZero();
   ws.residual_since = std::numeric_limits<double>::quiet_NaN();
@@ -300,6 +301,11 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
   // The torque is that of a sample get_output_delay_s() before: pair it with
   // that sample's joint state and effort, kept in the delay line.
   const int capacity = static_cast<int>(ws.delay_line.size() / kDelayStride);
+  // A time that goes back ends the stream (the model runs its last samples
+  // now) and starts another: the line then keeps the new sample only.
+  const bool restarted =
+      ws.delay_filled > 0 &&
+      time < ws.delay_line[static_cast<std::size_t>((ws.delay_next - 1 + capacity) % capacity) * kDelayStride];
   double* slot = ws.delay_line.data() + static_cast<std::ptrdiff_t>(ws.delay_next) * kDelayStride;
   slot[0] = time;
   std::copy(q, q + 3, slot + 1);
@@ -335,7 +341,7 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
   int back = std::min(ws.delay_back + 1, ws.delay_filled);
   for (int i = 0; i < runs.count; ++i) {
     const double t = runs.time[i];
-    if (ws.estimator.started && !(t > ws.estimator.last_time)) continue;  // a restarted stream's old samples
+    if (t <= ws.delay_last_time) continue;  // estimated already
     // Find the sample with that time from the last one paired (hint) on.
     while (back > 1 && entry(back)[0] < t) --back;
     while (back < ws.delay_filled && entry(back)[0] > t) ++back;
@@ -344,9 +350,15 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
     const double* paired = entry(back);
     update_estimate(ws, t, paired + 1, paired + 4, paired + 7, runs.torque + static_cast<std::ptrdiff_t>(i) * M,
                     paired + 10);
+    ws.delay_last_time = t;
     updated = true;
     raised |= ws.estimator.output.alarm_raised;
     cleared |= ws.estimator.output.alarm_cleared;
+  }
+  if (restarted) {
+    ws.delay_filled = 1;
+    ws.delay_back = 1;
+    ws.delay_last_time = std::numeric_limits<double>::quiet_NaN();
   }
   if (!updated) return get_online_output(ws.estimator);  // the delay is still filling
   OnlineOutput& out = ws.estimator.output;

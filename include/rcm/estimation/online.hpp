@@ -223,6 +223,9 @@ class OnlinePipeline {
     // Samples pushed since the reset, and the number of the last one estimated
     // (-1: none), so that no sample is estimated twice.
     std::int64_t delay_pushed = 0, delay_estimated = -1;
+    // The time of the last sample estimated since the stream (re)started
+    // (NaN: none): a time that goes back ends the stream and starts another.
+    double delay_last_time = std::numeric_limits<double>::quiet_NaN();
     // With a delay: the RCM shifts declared so far, and those the estimator
     // has taken (it reaches a shift with the first sample taken after it).
     Eigen::Vector3d shift_declared_base = Eigen::Vector3d::Zero();
