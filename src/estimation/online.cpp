@@ -283,8 +283,6 @@ void OnlinePipeline::reset(Workspace& ws) const {
   regime_.reset(ws.regime);
   ws.delay_next = ws.delay_filled = 0;
   ws.delay_back = 1;
-  ws.delay_pushed = 0;
-  ws.delay_estimated = -1;
   ws.delay_last_time = std::numeric_limits<double>::quiet_NaN();
   ws.shift_declared_base.setZero();
   ws.shift_applied_base.setZero();
@@ -314,53 +312,52 @@ const OnlineOutput& OnlinePipeline::compute_sample(Workspace& ws, double time, c
   std::copy(ws.shift_declared_base.data(), ws.shift_declared_base.data() + 3, slot + 10);
   ws.delay_next = (ws.delay_next + 1) % capacity;
   ws.delay_filled = std::min(ws.delay_filled + 1, capacity);
-  ++ws.delay_pushed;
   auto entry = [&](int b) {
     return ws.delay_line.data() + static_cast<std::ptrdiff_t>((ws.delay_next - b + capacity) % capacity) * kDelayStride;
+  };
+  // Each sample estimated once, in order; the events of the call's updates
+  // are kept together in the output.
+  bool updated = false, raised = false, cleared = false;
+  auto estimate = [&](const double* paired, const double* tau) {
+    update_estimate(ws, paired[0], paired + 1, paired + 4, paired + 7, tau, paired + 10);
+    ws.delay_last_time = paired[0];
+    updated = true;
+    raised |= ws.estimator.output.alarm_raised;
+    cleared |= ws.estimator.output.alarm_cleared;
   };
   const dynamics::TorqueModel::StepRuns runs = model_->get_step_runs(*ws.model);
   if (runs.count < 0) {
     // One torque per call: that of the recent sample nearest the delay's
-    // target (d calls ago at the model's rate).
+    // target (d calls ago at the model's rate). After a gap longer than the
+    // delay it stays the last sample before the gap until the stream has
+    // moved on that long: estimated already.
     const int back = dynamics::find_delayed_sample(
         ws.delay_filled, time - model_->get_output_delay_s(), [&](int b) { return entry(b)[0]; }, ws.delay_back + 1);
-    if (back == 0) return get_online_output(ws.estimator);  // not yet that much stream
-    ws.delay_back = back;
-    // After a gap longer than the delay, the delay points at the last sample
-    // before it until the stream has moved on that long: estimated already.
-    if (ws.delay_pushed - back == ws.delay_estimated) return get_online_output(ws.estimator);
-    ws.delay_estimated = ws.delay_pushed - back;
-    const double* paired = entry(back);
-    update_estimate(ws, paired[0], paired + 1, paired + 4, paired + 7, ws.tau_fs.data(), paired + 10);
-    return finish_output(ws);
-  }
-  // Every sample the model ran this call, in order, each with its own torque;
-  // the events of the call's updates are kept together in the output.
-  const int M = model_->num_outputs();
-  bool updated = false, raised = false, cleared = false;
-  int back = std::min(ws.delay_back + 1, ws.delay_filled);
-  for (int i = 0; i < runs.count; ++i) {
-    const double t = runs.time[i];
-    if (t <= ws.delay_last_time) continue;  // estimated already
-    // Find the sample with that time from the last one paired (hint) on.
-    while (back > 1 && entry(back)[0] < t) --back;
-    while (back < ws.delay_filled && entry(back)[0] > t) ++back;
-    if (back < 1 || entry(back)[0] != t) continue;  // no longer in the delay line
-    ws.delay_back = back;
-    const double* paired = entry(back);
-    update_estimate(ws, t, paired + 1, paired + 4, paired + 7, runs.torque + static_cast<std::ptrdiff_t>(i) * M,
-                    paired + 10);
-    ws.delay_last_time = t;
-    updated = true;
-    raised |= ws.estimator.output.alarm_raised;
-    cleared |= ws.estimator.output.alarm_cleared;
+    if (back > 0) {
+      ws.delay_back = back;
+      if (!(entry(back)[0] <= ws.delay_last_time)) estimate(entry(back), ws.tau_fs.data());
+    }
+  } else {
+    // Every sample the model ran this call, each with its own torque.
+    const int M = model_->num_outputs();
+    int back = std::min(ws.delay_back + 1, ws.delay_filled);
+    for (int i = 0; i < runs.count; ++i) {
+      const double t = runs.time[i];
+      if (t <= ws.delay_last_time) continue;  // estimated already
+      // Find the sample with that time from the last one paired (hint) on.
+      while (back > 1 && entry(back)[0] < t) --back;
+      while (back < ws.delay_filled && entry(back)[0] > t) ++back;
+      if (back < 1 || entry(back)[0] != t) continue;  // no longer in the delay line
+      ws.delay_back = back;
+      estimate(entry(back), runs.torque + static_cast<std::ptrdiff_t>(i) * M);
+    }
   }
   if (restarted) {
     ws.delay_filled = 1;
     ws.delay_back = 1;
     ws.delay_last_time = std::numeric_limits<double>::quiet_NaN();
   }
-  if (!updated) return get_online_output(ws.estimator);  // the delay is still filling
+  if (!updated) return get_online_output(ws.estimator);  // not yet that much stream, or nothing new
   OnlineOutput& out = ws.estimator.output;
   out.alarm_raised = raised;
   out.alarm_cleared = cleared;

@@ -220,11 +220,9 @@ class OnlinePipeline {
     std::vector<double> delay_line;
     int delay_next = 0, delay_filled = 0;
     int delay_back = 1;  // the last pick's distance from the newest sample (find_delayed_sample's hint)
-    // Samples pushed since the reset, and the number of the last one estimated
-    // (-1: none), so that no sample is estimated twice.
-    std::int64_t delay_pushed = 0, delay_estimated = -1;
     // The time of the last sample estimated since the stream (re)started
-    // (NaN: none): a time that goes back ends the stream and starts another.
+    // (NaN: none), so that no sample is estimated twice; a time that goes
+    // back ends the stream and starts another.
     double delay_last_time = std::numeric_limits<double>::quiet_NaN();
     // With a delay: the RCM shifts declared so far, and those the estimator
     // has taken (it reaches a shift with the first sample taken after it).
