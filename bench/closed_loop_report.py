@@ -5,7 +5,7 @@ closed-loop` (the default session and free-space model unless told otherwise),
 and the closed runs of the same bench on other seeds (each seed simulates its
 own session, teleoperation and noise), so that one seed does not speak for all.
 
-    /usr/bin/python3 bench/closed_loop_report.py --build build [--seed 1] [--other-seeds 2,3,4,5]
+    /usr/bin/python3 bench/closed_loop_report.py --build build [--seed 1] [--other-seeds 2,3,4,5,6,7,8]
                                                  [--model KIND] [--quick]
 """
 import argparse
@@ -35,7 +35,7 @@ def main():
     ap.add_argument("--seed", default="1")
     ap.add_argument("--model", default=None, help="free-space model kind (default: rcm monitor's)")
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--other-seeds", default="2,3,4,5", help="comma-separated; empty: none")
+    ap.add_argument("--other-seeds", default="2,3,4,5,6,7,8", help="comma-separated; empty: none")
     a = ap.parse_args()
     rcm = os.path.join(a.build, "bin", "rcm")
 
@@ -49,13 +49,14 @@ def main():
 
     with tempfile.TemporaryDirectory() as tmp:
         cmd, j = simulate(a.seed, tmp)
+        out_dir = tmp
         for name in FIGURES:
             shutil.copyfile(os.path.join(tmp, name + ".png"), os.path.join(ROOT, "docs", "figures", name + ".png"))
     others = []
     for seed in [x for x in a.other_seeds.split(",") if x]:
         with tempfile.TemporaryDirectory() as tmp:
             others.append((seed, simulate(seed, tmp)[1]))
-    shown = " ".join(os.path.relpath(c, ROOT) if c == rcm else c for c in cmd if c != tmp).replace(" --out", " --out DIR")
+    shown = " ".join(os.path.relpath(c, ROOT) if c == rcm else c for c in cmd if c != out_dir).replace(" --out", " --out DIR")
     lines = [f"Measured {datetime.date.today().isoformat()} on {cpu_model()} ({os.cpu_count()} cores): `{shown}` "
              f"(`/usr/bin/python3 bench/closed_loop_report.py`), {j['free_space_model']} free-space model, "
              f"{j['elapsed_s']:.0f} s in all.", "",
@@ -82,6 +83,31 @@ def main():
                 cells.append(f"{fmt_time(c['time_to_below_2n_s'])} / {c['rms_force_after_settle_n']:.2f} against "
                              f"{op['rms_force_after_settle_n']:.2f} / {c['wrong_direction_moves']}")
             lines.append(f"| {seed} | " + " | ".join(cells) + " |")
+        runs = [(a.seed, j)] + others
+
+        def seeds_where(test):
+            hit = [seed for seed, o in runs if test(o["scenarios"])]
+            return f"{len(hit)} of {len(runs)} seeds" + (f" ({', '.join(hit)})" if hit else "")
+
+        def step_met(sc):
+            c = sc["step"]["closed"]
+            t = c["time_to_below_2n_s"]
+            return (t is not None and t <= 5.0 and c["rms_force_after_settle_n"] < 1.0
+                    and c["wrong_direction_moves"] == 0)
+
+        def halved(sc):
+            return sc["breathing"]["closed"]["rms_force_after_settle_n"] <= \
+                0.5 * sc["breathing"]["open"]["rms_force_after_settle_n"]
+
+        def closes(sc):
+            return sc["drift"]["closed"]["time_to_below_2n_s"] is not None
+
+        if {"step", "drift", "breathing"} <= set(names):
+            lines += ["", f"Step (force below 2 N for good within 5 s of the onset, RMS force after settling below "
+                      f"1 N, no wrong-direction move): {seeds_where(step_met)}. Step, RMS force after settling below "
+                      f"1 N: {seeds_where(lambda sc: sc['step']['closed']['rms_force_after_settle_n'] < 1.0)}. "
+                      f"Drift, force below 2 N for good: {seeds_where(closes)}. Breathing, closed-loop RMS force at "
+                      f"most half the open loop's: {seeds_where(halved)}."]
     for doc, begin, end in DOCS:
         write_block(doc, begin, end, "\n".join(lines))
     print("\n".join(lines))

@@ -195,15 +195,40 @@ TEST(Correction, RepositionsBeyondTheLimitAndCountsTheShiftInEffect) {
 
 TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
   const RcmCorrector corrector(make_frame(), {});
-  auto ws = corrector.create_workspace();
-  int changes = 0;
-  for (int k = 0; k < 1000; ++k) {
-    const double d = (k % 2 ? 0.0021 : 0.0019);  // flickers across the 2 mm tolerance
-    const auto& c = corrector.compute_correction(ws, make_estimate(k * 0.01, Eigen::Vector3d(d, 0, 0), 0.0001));
-    if (k == 0) EXPECT_EQ(c.reason, HoldReason::not_confident);  // neither sure within nor beyond
-    changes += k > 0 && c.changed ? 1 : 0;
+  // An estimate that flickers across the 2 mm tolerance changes the advice at
+  // most once: a wide interval (2.1 mm +- 2.0 mm, wider than the move) holds
+  // throughout; a narrow one (+- 0.2 mm) acts from the first 2.1 mm on and
+  // keeps acting, the estimate never falling under half the tolerance.
+  for (const double sd : {0.001, 0.0001}) {
+    auto ws = corrector.create_workspace();
+    int changes = 0;
+    for (int k = 0; k < 1000; ++k) {
+      const double d = (k % 2 ? 0.0021 : 0.0019);
+      const auto& c = corrector.compute_correction(ws, make_estimate(k * 0.01, Eigen::Vector3d(d, 0, 0), sd));
+      if (k == 0) EXPECT_EQ(c.reason, HoldReason::not_confident);  // neither sure within nor beyond
+      if (k == 1) EXPECT_EQ(c.action, sd > 0.0005 ? CorrectionAction::hold : CorrectionAction::compensate);
+      changes += k > 0 && c.changed ? 1 : 0;
+    }
+    EXPECT_EQ(changes, sd > 0.0005 ? 0 : 1) << "sd " << sd;
   }
-  EXPECT_EQ(changes, 0);
+  // Out of tolerance, the lower bound under it, the interval narrower than the
+  // move (2.5 mm, 1.5 to 3.5 mm): a shift, by no more than the lower bound.
+  {
+    CorrectionOptions fast;
+    fast.max_rate_m_per_s = 1.0;  // the rate limit out of the way
+    const RcmCorrector quick(make_frame(), fast);
+    auto ws = quick.create_workspace();
+    const double sd = 0.0005;
+    const auto& c = quick.compute_correction(ws, make_estimate(0, Eigen::Vector3d(0.0025, 0, 0), sd));
+    EXPECT_EQ(c.action, CorrectionAction::compensate);
+    const auto& next = quick.compute_correction(ws, make_estimate(0.1, Eigen::Vector3d(0.0025, 0, 0), sd));
+    EXPECT_NEAR(next.step_base.norm(), 0.0025 - 1.96 * sd, 1e-12) << "the step is capped by the lower bound";
+    // An interval wider than the move (a restarted estimate, 43 mm +- 42 mm) holds.
+    auto ws2 = corrector.create_workspace();
+    const auto& wide = corrector.compute_correction(ws2, make_estimate(0, Eigen::Vector3d(0, 0, 0.043), 0.0215));
+    EXPECT_EQ(wide.action, CorrectionAction::hold);
+    EXPECT_EQ(wide.reason, HoldReason::not_confident);
+  }
   // Sure within (upper bound 1.7 mm); a wider interval (upper bound 3 mm) keeps it so, 4.2 mm does not.
   auto ws3 = corrector.create_workspace();
   EXPECT_EQ(corrector.compute_correction(ws3, make_estimate(0, Eigen::Vector3d(0.0015, 0, 0), 0.0001)).reason,

@@ -82,6 +82,18 @@ MoveBounds compute_move_bounds(const Eigen::Vector3d& move, const Eigen::Vector3
   return b;
 }
 
+// An action starts once the estimate is sure to be out of tolerance (its lower
+// bound is), or once it is out of tolerance and its 95 % interval is narrower
+// than the move: the estimate then knows the direction, and a shift by at most
+// its lower bound does not overshoot. Waiting for the lower bound to clear the
+// tolerance instead leaves a remaining offset between the tolerance and about
+// twice it uncorrected for good, since the evidence a misalignment leaves
+// falls with its square near zero.
+bool starts_action(const MoveBounds& b, double tolerance) {
+  const double interval = 2.0 * (b.distance - b.low);
+  return b.low > tolerance || (b.distance > tolerance && b.low > 0 && interval < b.distance);
+}
+
 }  // namespace
 
 const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const OnlineOutput& estimate,
@@ -126,7 +138,7 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
     hold(HoldReason::no_onset);
   } else if (!(estimate.fit_cost <= o.max_fit_cost)) {
     hold(HoldReason::model_mismatch);
-  } else if (previous == CorrectionAction::hold && b.low <= o.tolerance_m) {
+  } else if (previous == CorrectionAction::hold && !starts_action(b, o.tolerance_m)) {
     hold(settled);
   } else if (previous != CorrectionAction::hold && b.low <= 0.0) {
     hold(HoldReason::not_confident);  // the interval outgrew the move

@@ -12,9 +12,10 @@
 //   misses a payload or a tool makes the estimate confidently wrong, and a
 //   shift on it would stretch the tissue further.
 // - hold: the RCM is within tolerance of the incision (the 95 % upper bound of
-//   the distance is), or the estimate is not sure either way: no advice while
-//   the interval along the move is wider than the move (|p| <= z sd_u, sd_u the
-//   standard deviation along p).
+//   the distance is), or the estimate is not sure either way: its lower bound
+//   is within tolerance, and the estimate is too, or its interval along the
+//   move is wider than the move (2 z sd_u >= |p|, sd_u the standard deviation
+//   along p): no advice then.
 // - compensate: a software RCM shift toward the incision, for misalignments up
 //   to a limit; rate-limited, and never beyond the estimate's lower confidence
 //   bound |p| - z sd_u (a shift the estimate is 97.5 % sure does not overshoot).
@@ -22,12 +23,13 @@
 //   manual re-docking advice, the move in the arm's own words.
 //
 // Hysteresis: hold turns into an action once the lower bound exceeds the
-// tolerance, and an action returns to hold once the estimate falls below
-// release_fraction of it; reposition turns back into compensate only once the
-// upper bound is within the limit; a hold "within tolerance" lasts until the
-// upper bound exceeds tolerance / release_fraction. The decisions are made on the lower and
-// upper bounds, not on the estimate, so a noisy estimate near a threshold does
-// not flip the advice at every sample.
+// tolerance, or the estimate exceeds it with an interval narrower than the
+// move; an action returns to hold once the estimate falls below
+// release_fraction of the tolerance, or its lower bound reaches zero;
+// reposition turns back into compensate only once the upper bound is within
+// the limit; a hold "within tolerance" lasts until the upper bound exceeds
+// tolerance / release_fraction. The thresholds to start and to stop differ,
+// so a noisy estimate near one does not flip the advice at every sample.
 //
 // The corrector (RcmCorrector) is immutable; its state lives in a fixed-size
 // Workspace, and compute_correction() does not allocate. The software shift in
