@@ -223,11 +223,30 @@ TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
     EXPECT_EQ(c.action, CorrectionAction::compensate);
     const auto& next = quick.compute_correction(ws, make_estimate(0.1, Eigen::Vector3d(0.0025, 0, 0), sd));
     EXPECT_NEAR(next.step_base.norm(), 0.0025 - 1.96 * sd, 1e-12) << "the step is capped by the lower bound";
-    // An interval wider than the move (a restarted estimate, 43 mm +- 42 mm) holds.
+    // An interval wider than the move holds, its lower bound past the
+    // tolerance or not (a restarted estimate: 43 mm, 3.8 to 82 mm).
     auto ws2 = corrector.create_workspace();
-    const auto& wide = corrector.compute_correction(ws2, make_estimate(0, Eigen::Vector3d(0, 0, 0.043), 0.0215));
+    const auto& wide = corrector.compute_correction(ws2, make_estimate(0, Eigen::Vector3d(0, 0, 0.043), 0.02));
+    EXPECT_GT(wide.distance_low_m, corrector.options().tolerance_m);
     EXPECT_EQ(wide.action, CorrectionAction::hold);
     EXPECT_EQ(wide.reason, HoldReason::not_confident);
+  }
+  // A restart of the estimate ends the action: the restarted estimate (3 mm,
+  // 1 to 5 mm: a lower bound past zero, an interval wider than the move) must
+  // earn a new one.
+  {
+    auto ws = corrector.create_workspace();
+    EXPECT_EQ(corrector.compute_correction(ws, make_estimate(0, Eigen::Vector3d(0.005, 0, 0), 0.0001)).action,
+              CorrectionAction::compensate);
+    OnlineOutput restarted = make_estimate(0.01, Eigen::Vector3d(0.003, 0, 0), 0.001);
+    EXPECT_EQ(corrector.compute_correction(ws, restarted).action, CorrectionAction::compensate)
+        << "without a restart, the action goes on while the lower bound is past zero";
+    restarted.time = 0.02;
+    restarted.jumps = 1;
+    const auto& c = corrector.compute_correction(ws, restarted);
+    EXPECT_EQ(c.action, CorrectionAction::hold);
+    EXPECT_EQ(c.reason, HoldReason::not_confident);
+    EXPECT_TRUE(c.step_base.isZero());
   }
   // Sure within (upper bound 1.7 mm); a wider interval (upper bound 3 mm) keeps it so, 4.2 mm does not.
   auto ws3 = corrector.create_workspace();

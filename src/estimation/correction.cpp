@@ -57,6 +57,7 @@ RcmCorrector::Workspace RcmCorrector::create_workspace() const {
 void RcmCorrector::reset(Workspace& ws) const {
   ws.started = false;
   ws.last_time = 0.0;
+  ws.jumps = 0;
   ws.output = CorrectionOutput{};
 }
 
@@ -82,16 +83,17 @@ MoveBounds compute_move_bounds(const Eigen::Vector3d& move, const Eigen::Vector3
   return b;
 }
 
-// An action starts once the estimate is sure to be out of tolerance (its lower
-// bound is), or once it is out of tolerance and its 95 % interval is narrower
-// than the move: the estimate then knows the direction, and a shift by at most
-// its lower bound does not overshoot. Waiting for the lower bound to clear the
-// tolerance instead leaves a remaining offset between the tolerance and about
-// twice it uncorrected for good, since the evidence a misalignment leaves
-// falls with its square near zero.
+// An action starts once the estimate is out of tolerance and its 95 % interval
+// is narrower than the move: the estimate then knows the direction, and a
+// shift by at most its lower bound does not overshoot. Waiting for the lower
+// bound to clear the tolerance instead leaves a remaining offset between the
+// tolerance and about twice it uncorrected for good, since the evidence a
+// misalignment leaves falls with its square near zero; and a lower bound past
+// the tolerance under a wider interval (a restarted estimate: 42 mm, 3 to
+// 85 mm) is no ground for re-docking advice.
 bool starts_action(const MoveBounds& b, double tolerance) {
   const double interval = 2.0 * (b.distance - b.low);
-  return b.low > tolerance || (b.distance > tolerance && b.low > 0 && interval < b.distance);
+  return b.distance > tolerance && b.low > 0 && interval < b.distance;
 }
 
 }  // namespace
@@ -100,8 +102,13 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
                                                          const Eigen::Vector3d& applied_base) const {
   const CorrectionOptions& o = options_;
   CorrectionOutput& out = ws.output;
-  const CorrectionAction previous = out.action;
+  const CorrectionAction previous_action = out.action;
   const HoldReason previous_reason = out.reason;
+  // A restarted estimate (the change-point test) starts from the prior: what
+  // was being acted on is gone, and an action must start over.
+  const bool restarted = ws.started && estimate.jumps != ws.jumps;
+  ws.jumps = estimate.jumps;
+  const CorrectionAction previous = restarted ? CorrectionAction::hold : out.action;
   const double dt = ws.started ? std::clamp(estimate.time - ws.last_time, 0.0, o.max_step_dt_s) : 0.0;
   ws.started = true;
   ws.last_time = estimate.time;
@@ -156,7 +163,7 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
     out.step_base = incision_.R_base_inc * (b.direction * step);
     out.applied_base = applied_base + out.step_base;
   }
-  out.changed = out.action != previous || out.reason != previous_reason;
+  out.changed = out.action != previous_action || out.reason != previous_reason;
   return out;
 }
 

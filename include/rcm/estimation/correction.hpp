@@ -12,20 +12,19 @@
 //   misses a payload or a tool makes the estimate confidently wrong, and a
 //   shift on it would stretch the tissue further.
 // - hold: the RCM is within tolerance of the incision (the 95 % upper bound of
-//   the distance is), or the estimate is not sure either way: its lower bound
-//   is within tolerance, and the estimate is too, or its interval along the
-//   move is wider than the move (2 z sd_u >= |p|, sd_u the standard deviation
-//   along p): no advice then.
+//   the distance is), or the estimate is not sure either way: no advice while
+//   the estimate is within tolerance or its interval along the move is wider
+//   than the move (2 z sd_u >= |p|, sd_u the standard deviation along p).
 // - compensate: a software RCM shift toward the incision, for misalignments up
 //   to a limit; rate-limited, and never beyond the estimate's lower confidence
 //   bound |p| - z sd_u (a shift the estimate is 97.5 % sure does not overshoot).
 // - reposition: beyond the limit (or once the software shifts add up to it):
 //   manual re-docking advice, the move in the arm's own words.
 //
-// Hysteresis: hold turns into an action once the lower bound exceeds the
-// tolerance, or the estimate exceeds it with an interval narrower than the
-// move; an action returns to hold once the estimate falls below
-// release_fraction of the tolerance, or its lower bound reaches zero;
+// Hysteresis: hold turns into an action once the estimate exceeds the
+// tolerance with an interval narrower than the move; an action returns to hold
+// once the estimate falls below release_fraction of the tolerance, its lower
+// bound reaches zero, or the estimate restarts (OnlineOutput::jumps);
 // reposition turns back into compensate only once the upper bound is within
 // the limit; a hold "within tolerance" lasts until the upper bound exceeds
 // tolerance / release_fraction. The thresholds to start and to stop differ,
@@ -98,6 +97,7 @@ class RcmCorrector {
   struct Workspace {
     bool started = false;
     double last_time = 0.0;
+    int jumps = 0;  // the estimate's restarts seen (OnlineOutput::jumps)
     CorrectionOutput output;
   };
   RcmCorrector(const IncisionFrame& incision, const CorrectionOptions& options);
