@@ -119,9 +119,11 @@ PlotFiles save_plot(const PlotSpec& spec, const std::filesystem::path& stem) {
       gp << format_number(s.x[k]) << ' ' << format_number(s.y[k]) << '\n';
     gp << "EOD\n";
   }
-  gp << "set title " << gp_quote(spec.title) << "\n";
-  gp << "set xlabel " << gp_quote(spec.x_label) << "\n";
-  gp << "set ylabel " << gp_quote(spec.y_label) << "\n";
+  // Text is printed as written: enhanced mode would take the '_' of names
+  // such as D30_r0_0 or large_step for subscripts.
+  gp << "set title " << gp_quote(spec.title) << " noenhanced\n";
+  gp << "set xlabel " << gp_quote(spec.x_label) << " noenhanced\n";
+  gp << "set ylabel " << gp_quote(spec.y_label) << " noenhanced\n";
   if (spec.grid) gp << "set grid\n";
   if (spec.legend == "off") gp << "unset key\n";
   else gp << "set key " << spec.legend << "\n";
@@ -137,7 +139,7 @@ PlotFiles save_plot(const PlotSpec& spec, const std::filesystem::path& stem) {
     const auto& s = spec.series[i];
     if (i) plot << ", \\\n     ";
     plot << "$series" << i << " using 1:2 with " << style_text(s.style) << " lw "
-         << format_number(s.line_width) << " pt 7 ps 0.8 title " << gp_quote(s.label);
+         << format_number(s.line_width) << " pt 7 ps 0.8 title " << gp_quote(s.label) << " noenhanced";
   }
   plot << "\n";
   // gnuplot draws to temporaries, renamed once both figures are whole; run as

@@ -37,7 +37,13 @@ std::vector<IncisionMotion> make_default_incision_motions() {
   breathing.breathing_amplitude_m = Eigen::Vector3d(0.0, 0.0, 0.003);
   breathing.breathing_hz = 0.25;
   breathing.onset_s = 0.0;
-  return {step, drift, breathing};
+  IncisionMotion large_step;
+  large_step.name = "large_step";
+  large_step.step_m = Eigen::Vector3d(0.010, 0.015, 0.030);
+  large_step.step_time_s = 20.0;
+  large_step.onset_s = 20.0;
+  large_step.compensate_limit_m = 0.050;
+  return {step, drift, breathing, large_step};
 }
 
 namespace {
@@ -133,9 +139,14 @@ std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& conf
                                                            const ClosedLoopOptions& options) {
   if (!(options.duration_s > 20.0)) throw std::invalid_argument("ClosedLoopOptions: duration_s must be > 20");
   if (!(options.series_rate_hz > 0)) throw std::invalid_argument("ClosedLoopOptions: series_rate_hz must be > 0");
-  const CorrectionLoop loop(pipeline, RcmCorrector(pipeline.estimator().incision(), options.correction));
+  if (!(options.correction.compensate_limit_m > 0))
+    throw std::invalid_argument("ClosedLoopOptions: correction.compensate_limit_m must be > 0");
   std::vector<ClosedLoopScenario> out;
   for (const IncisionMotion& m : motions) {
+    if (!(m.compensate_limit_m >= 0)) throw std::invalid_argument("IncisionMotion: compensate_limit_m must be >= 0");
+    CorrectionOptions correction = options.correction;
+    if (m.compensate_limit_m > 0) correction.compensate_limit_m = m.compensate_limit_m;
+    const CorrectionLoop loop(pipeline, RcmCorrector(pipeline.estimator().incision(), correction));
     ClosedLoopScenario s;
     s.motion = m;
     s.open = run_one(config, loop, m, options, false);
@@ -181,6 +192,7 @@ nlohmann::json to_json(const std::vector<ClosedLoopScenario>& scenarios, const C
   for (const auto& sc : scenarios) {
     const IncisionMotion& m = sc.motion;
     s[m.name] = {{"onset_s", m.onset_s},
+                 {"compensate_limit_m", m.compensate_limit_m > 0 ? m.compensate_limit_m : o.correction.compensate_limit_m},
                  {"open", run_json(sc.open)},
                  {"closed", run_json(sc.closed)}};
   }

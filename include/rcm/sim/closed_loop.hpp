@@ -1,9 +1,9 @@
 #pragma once
 // The closed-loop bench: the simulated arm as a software-RCM arm (its pivot a
 // setpoint, the same joint-space dynamics) under teleoperation, an incision
-// that moves (a step, a slow drift, breathing), and the online estimator with
-// the correction (estimation/correction.hpp) in the loop, against the same run
-// with the RCM left where it was docked.
+// that moves (a step, a slow drift, breathing, a large step), and the online
+// estimator with the correction (estimation/correction.hpp) in the loop,
+// against the same run with the RCM left where it was docked.
 //
 // Approximation: moving the pivot changes where the joints pivot, not the
 // joint-space dynamics, and the tissue's damping sees the shaft's motion about
@@ -36,12 +36,17 @@ struct IncisionMotion {
   double breathing_hz = 0.0;
   // When the incision starts to leave the RCM: the clock of the force measures.
   double onset_s = 0.0;
+  // The software shift the arm allows in this scenario (0: the bench's
+  // CorrectionOptions::compensate_limit_m), in both runs.
+  double compensate_limit_m = 0.0;
   Eigen::Vector3d get_misalignment(double t) const;
 };
 
 // step (the patient or table moves 10 mm at 20 s), drift (0.15 mm/s for 60 s
-// from 10 s: 9 mm) and breathing (a 6 mm offset from the start, with 3 mm of
-// breathing at 0.25 Hz along the insertion axis).
+// from 10 s: 9 mm), breathing (a 6 mm offset from the start, with 3 mm of
+// breathing at 0.25 Hz along the insertion axis) and large_step (35 mm at
+// 20 s: 30 mm deeper, 10 and 15 mm across, on an arm whose software RCM may
+// move 50 mm; beyond the default 10 mm the corrector advises re-docking).
 std::vector<IncisionMotion> make_default_incision_motions();
 
 struct ClosedLoopOptions {
