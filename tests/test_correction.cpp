@@ -32,6 +32,7 @@ OnlineOutput make_estimate(double time, const Eigen::Vector3d& p, double sd, boo
   e.onset = onset;
   e.misalignment_m = p;
   e.sd_m = Eigen::Vector3d::Constant(sd);
+  e.covariance_m2 = Eigen::Matrix3d::Identity() * sd * sd;
   return e;
 }
 
@@ -265,6 +266,27 @@ TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
   const auto& done = corrector.compute_correction(ws2, make_estimate(0.02, Eigen::Vector3d(0.0009, 0, 0), 0.0001));
   EXPECT_EQ(done.action, CorrectionAction::hold);
   EXPECT_EQ(done.reason, HoldReason::within_tolerance);
+}
+
+// The spread along the move is u^T C u: axes whose errors are correlated
+// (as D and the radial offset are) can be sure of a diagonal move that their
+// per-axis spreads alone leave in doubt, and the other way round.
+TEST(Correction, ReadsTheSpreadAlongTheMoveFromTheFullCovariance) {
+  const RcmCorrector corrector(make_frame(), {});
+  const double sd = 0.001;
+  // 2.8 mm along (1, 0, 1) / sqrt 2; per axis 1 mm, so 1 mm along the move
+  // without the correlation: 95 % interval 0.9 to 4.8 mm, wider than the move.
+  for (const double rho : {-0.9, 0.0, 0.9}) {
+    OnlineOutput e = make_estimate(0.0, Eigen::Vector3d(0.002, 0.0, 0.002), sd);
+    e.covariance_m2(0, 2) = e.covariance_m2(2, 0) = rho * sd * sd;
+    auto ws = corrector.create_workspace();
+    const auto& c = corrector.compute_correction(ws, e);
+    const double sd_along = sd * std::sqrt(1.0 + rho);  // u^T C u = (1 + 1 + 2 rho) sd^2 / 2
+    EXPECT_NEAR(c.distance_low_m, std::max(0.0, std::sqrt(8e-6) - 1.96 * sd_along), 1e-12) << "rho " << rho;
+    EXPECT_NEAR(c.distance_high_m, std::sqrt(8e-6) + 1.96 * sd_along, 1e-12) << "rho " << rho;
+    // Anti-correlated: 0.32 mm along the move, sure of it; otherwise not.
+    EXPECT_EQ(c.action, rho < 0 ? CorrectionAction::compensate : CorrectionAction::hold) << "rho " << rho;
+  }
 }
 
 TEST(Correction, DescribesTheMoveAlongTheArmsAxes) {

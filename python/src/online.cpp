@@ -47,7 +47,9 @@ void bind_online(py::module_& m) {
       .def_readonly("at_rest", &OnlineOutput::at_rest)
       .def_readonly("hypothesis", &OnlineOutput::hypothesis)
       .def_readonly("misalignment_m", &OnlineOutput::misalignment_m, "[dr_x, dr_y, D], incision frame, m")
-      .def_readonly("sd_m", &OnlineOutput::sd_m)
+      .def_readonly("sd_m", &OnlineOutput::sd_m, "sqrt of the covariance's diagonal, m")
+      .def_readonly("covariance_m2", &OnlineOutput::covariance_m2,
+                    "3 x 3 covariance of misalignment_m, m^2 (the axes' errors are correlated)")
       .def_readonly("f_inc_base", &OnlineOutput::f_inc_base, "the model's force now, base frame, N")
       .def_readonly("force_norm_n", &OnlineOutput::force_norm_n)
       .def_readonly("cusum", &OnlineOutput::cusum)

@@ -114,6 +114,10 @@ class TestOnline(unittest.TestCase):
         np.testing.assert_allclose(replay.final_output.misalignment_m, cli["final"]["misalignment_m"], rtol=1e-9,
                                    atol=1e-12)
         np.testing.assert_allclose(replay.final_output.sd_m, cli["final"]["sd_m"], rtol=1e-9)
+        C = np.asarray(replay.final_output.covariance_m2)
+        self.assertEqual(C.shape, (3, 3))
+        np.testing.assert_allclose(C, C.T, atol=1e-18)
+        np.testing.assert_allclose(np.sqrt(np.diag(C)), replay.final_output.sd_m, rtol=1e-12)
         self.assertAlmostEqual(replay.onset_s, cli["onset_s"], places=9)
         self.assertEqual(len(replay.alarms), len(cli["alarms"]))
         for a, b in zip(replay.alarms, cli["alarms"]):

@@ -69,15 +69,18 @@ struct MoveBounds {
 };
 
 // The distance to move and its 95 % bounds: the standard deviation along the
-// move, from the per-axis ones (the estimator reports the diagonal).
-MoveBounds compute_move_bounds(const Eigen::Vector3d& move, const Eigen::Vector3d& sd, double z) {
+// move, u^T C u from the estimate's covariance C (its axes' errors are
+// correlated: the per-axis ones would misstate it); for no move, the largest
+// spread.
+MoveBounds compute_move_bounds(const Eigen::Vector3d& move, const Eigen::Matrix3d& covariance, double z) {
   MoveBounds b;
   b.distance = move.norm();
-  double sd_along = sd.maxCoeff();
+  double variance_along = covariance.diagonal().maxCoeff();
   if (b.distance > 0) {
     b.direction = move / b.distance;
-    sd_along = std::sqrt((b.direction.array().square() * sd.array().square()).sum());
+    variance_along = b.direction.dot(covariance * b.direction);
   }
+  const double sd_along = std::sqrt(std::max(0.0, variance_along));
   b.low = std::max(0.0, b.distance - z * sd_along);
   b.high = b.distance + z * sd_along;
   return b;
@@ -118,8 +121,8 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
   out.applied_base = applied_base;
   const Eigen::Vector3d& p = estimate.misalignment_m;
   const Eigen::Vector3d& sd = estimate.sd_m;
-  const bool finite = p.allFinite() && sd.allFinite() && applied_base.allFinite();
-  const MoveBounds b = finite ? compute_move_bounds(p, sd, o.confidence_z) : MoveBounds{};
+  const bool finite = p.allFinite() && estimate.covariance_m2.allFinite() && applied_base.allFinite();
+  const MoveBounds b = finite ? compute_move_bounds(p, estimate.covariance_m2, o.confidence_z) : MoveBounds{};
   out.move_inc = finite ? p : Eigen::Vector3d::Zero();
   out.move_base = incision_.R_base_inc * out.move_inc;
   out.move_low_inc = out.move_inc - o.confidence_z * sd;
@@ -255,11 +258,11 @@ AlignmentCheck check_alignment(const OnlineOutput& estimate, const IncisionFrame
                                const CorrectionOptions& o) {
   o.check();
   AlignmentCheck c;
-  if (!estimate.misalignment_m.allFinite() || !estimate.sd_m.allFinite()) {
+  if (!estimate.misalignment_m.allFinite() || !estimate.covariance_m2.allFinite()) {
     c.message = "no estimate yet: move the instrument about the RCM";
     return c;
   }
-  const MoveBounds b = compute_move_bounds(estimate.misalignment_m, estimate.sd_m, o.confidence_z);
+  const MoveBounds b = compute_move_bounds(estimate.misalignment_m, estimate.covariance_m2, o.confidence_z);
   c.within_m = b.high;
   c.confident = b.low > 0;
   if (b.high <= o.tolerance_m) {

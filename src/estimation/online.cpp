@@ -88,6 +88,7 @@ void OnlineEstimator::reset(Workspace& ws) const {
   ws.output = OnlineOutput{};
   ws.output.misalignment_m = ws.hypotheses[0].p;
   ws.output.sd_m = ws.hypotheses[0].P.diagonal().cwiseSqrt();
+  ws.output.covariance_m2 = ws.hypotheses[0].P;
 }
 
 void OnlineEstimator::apply_rcm_shift(Workspace& ws, const Eigen::Vector3d& shift_base) const {
@@ -224,6 +225,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
   out.hypothesis = best;
   out.misalignment_m = chosen.p;
   out.sd_m = chosen.P.diagonal().cwiseMax(0.0).cwiseSqrt();
+  out.covariance_m2 = chosen.P;
   out.fit_cost = ws.cost_weight > 0 ? chosen.cost / ws.cost_weight : 0.0;
 
   if (out.used) {

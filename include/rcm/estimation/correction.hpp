@@ -14,7 +14,8 @@
 // - hold: the RCM is within tolerance of the incision (the 95 % upper bound of
 //   the distance is), or the estimate is not sure either way: no advice while
 //   the estimate is within tolerance or its interval along the move is wider
-//   than the move (2 z sd_u >= |p|, sd_u the standard deviation along p).
+//   than the move (2 z sd_u >= |p|, sd_u the standard deviation along p,
+//   sqrt(u^T C u) from the estimate's covariance C and the move's direction u).
 // - compensate: a software RCM shift toward the incision, for misalignments up
 //   to a limit; rate-limited, and never beyond the estimate's lower confidence
 //   bound |p| - z sd_u (a shift the estimate is 97.5 % sure does not overshoot).

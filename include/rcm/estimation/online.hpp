@@ -124,6 +124,10 @@ struct OnlineOutput {
   int hypothesis = 0;                // index of the reported filter
   Eigen::Vector3d misalignment_m = Eigen::Vector3d::Zero();  // [dr_x, dr_y, D], incision frame
   Eigen::Vector3d sd_m = Eigen::Vector3d::Zero();            // sqrt of the covariance diagonal
+  // The covariance of misalignment_m (m^2, incision frame): the spread along
+  // a direction that mixes the axes (u^T C u) is not in sd_m, the axes'
+  // errors being correlated.
+  Eigen::Matrix3d covariance_m2 = Eigen::Matrix3d::Zero();
   Eigen::Vector3d f_inc_base = Eigen::Vector3d::Zero();      // the model's force now, base frame
   double force_norm_n = 0.0;
   double cusum = 0.0;
