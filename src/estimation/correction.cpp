@@ -94,10 +94,12 @@ MoveBounds compute_move_bounds(const Eigen::Vector3d& move, const Eigen::Matrix3
 // misalignment leaves falls with its square near zero; and a lower bound past
 // the tolerance under a wider interval (a restarted estimate: 42 mm, 3 to
 // 85 mm) is no ground for re-docking advice.
-bool starts_action(const MoveBounds& b, double tolerance) {
+bool is_sure_of_move(const MoveBounds& b) {
   const double interval = 2.0 * (b.distance - b.low);
-  return b.distance > tolerance && b.low > 0 && interval < b.distance;
+  return b.low > 0 && interval < b.distance;
 }
+
+bool starts_action(const MoveBounds& b, double tolerance) { return b.distance > tolerance && is_sure_of_move(b); }
 
 }  // namespace
 
@@ -264,7 +266,7 @@ AlignmentCheck check_alignment(const OnlineOutput& estimate, const IncisionFrame
   }
   const MoveBounds b = compute_move_bounds(estimate.misalignment_m, estimate.covariance_m2, o.confidence_z);
   c.within_m = b.high;
-  c.confident = b.low > 0;
+  c.confident = is_sure_of_move(b);
   if (b.high <= o.tolerance_m) {
     c.aligned = true;
     c.message = fmt::format("aligned within {} (95 %)", format_mm(b.high));

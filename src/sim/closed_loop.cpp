@@ -139,8 +139,6 @@ std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& conf
                                                            const ClosedLoopOptions& options) {
   if (!(options.duration_s > 20.0)) throw std::invalid_argument("ClosedLoopOptions: duration_s must be > 20");
   if (!(options.series_rate_hz > 0)) throw std::invalid_argument("ClosedLoopOptions: series_rate_hz must be > 0");
-  if (!(options.correction.compensate_limit_m > 0))
-    throw std::invalid_argument("ClosedLoopOptions: correction.compensate_limit_m must be > 0");
   std::vector<ClosedLoopScenario> out;
   for (const IncisionMotion& m : motions) {
     if (!(m.compensate_limit_m >= 0)) throw std::invalid_argument("IncisionMotion: compensate_limit_m must be >= 0");
