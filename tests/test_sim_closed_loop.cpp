@@ -106,7 +106,7 @@ TEST(ClosedLoopBench, TheCorrectionBringsTheRcmBackWithoutAWrongMove) {
     EXPECT_EQ(closed["advice"][0]["advice"], "hold: no misalignment detected");
   }
   // The drift ends under 2 N for good. A step may leave the RCM near the
-  // tolerance, where the interval straddles it and the corrector holds with the
+  // tolerance, where the last millimetres wait for their interval with the
   // force near 2 N (docs/compensation.md, "What limits it"): whether it then
   // stays under 2 N to the end moves with round-off in the free-space fit, its
   // RMS stays under 2 N. The breathing's own motion keeps it above.
@@ -234,13 +234,12 @@ TEST(ClosedLoopSafety, AnArmAtRestHolds) {
   for (auto a : r[0].closed.action) EXPECT_EQ(a, rcm::CorrectionAction::hold);
 }
 
-// A sudden 10 mm step of the incision: the change-point test restarts the
+// A sudden step of the incision: the change-point test restarts the
 // estimator's filters, the correction acts within seconds and the force on the
 // body wall falls below 2 N; without the test the settled filter follows by its
-// random walk and the force stays up for tens of seconds. What remains is the
-// corrector's tolerance (2 mm, its lower-bound rule): about 2 mm of
-// misalignment, whose force hovers between 1 and 2 N.
-// The bench's 10 mm step, and the large step (D = 30 mm, 10 and 15 mm across:
+// random walk and the force stays up for tens of seconds. What remains is
+// within the corrector's tolerance (2 mm), whose force stays under 2 N. The
+// bench's 10 mm step, and the large step (D = 30 mm, 10 and 15 mm across:
 // 35 mm, beyond the default software limit, on an arm whose software RCM may
 // move 50 mm), where the 5 mm/s rate limit takes 7 s to move it all.
 TEST(ClosedLoopStep, TheForceFallsBelow2NWithinSecondsOfAStep) {
