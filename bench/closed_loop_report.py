@@ -32,7 +32,30 @@ def fmt_time(v):
     return "never" if v is None else f"{v:.1f}"
 
 
-def target_table(a, j, runs):
+# The targets, one home for both the docs' summary and the targets table.
+def settles_within(run, seconds=5.0):
+    t = run["time_to_below_2n_s"]
+    return t is not None and t <= seconds
+
+
+def settles_quietly(run):
+    return run["rms_force_after_settle_n"] < 1.0
+
+
+def open_stays_high(run):
+    return run["rms_force_after_settle_n"] > 10.0
+
+
+def halves(scenario):
+    return scenario["open"]["rms_force_after_settle_n"] >= 2 * scenario["closed"]["rms_force_after_settle_n"]
+
+
+def meets_step_targets(scenario):
+    c = scenario["closed"]
+    return settles_within(c) and settles_quietly(c) and c["wrong_direction_moves"] == 0
+
+
+def target_table(j, runs):
     """The closed-loop targets against every seed's run, for docs/benchmarks.md."""
     def row(what, target, values, met):
         hit = sum(1 for ok in met if ok)
@@ -53,19 +76,19 @@ def target_table(a, j, runs):
         lines += [
             row(f"{what}: open-loop RMS force after settling (N)", "above 10 N",
                 [f"{c['open']['rms_force_after_settle_n']:.1f}" for c in steps],
-                [c["open"]["rms_force_after_settle_n"] > 10 for c in steps]),
+                [open_stays_high(c["open"]) for c in steps]),
             row(f"{what}: onset to force below 2 N for good (s)", "within 5 s (aim 1 s)", [fmt_time(v) for v in t],
-                [v is not None and v <= 5.0 for v in t]),
+                [settles_within(c["closed"]) for c in steps]),
             row(f"{what}: RMS force after settling (N)", "below 1 N",
                 [f"{c['closed']['rms_force_after_settle_n']:.2f}" for c in steps],
-                [c["closed"]["rms_force_after_settle_n"] < 1.0 for c in steps]),
+                [settles_quietly(c["closed"]) for c in steps]),
             row(f"{what}: wrong-direction moves", "none", [str(c["closed"]["wrong_direction_moves"]) for c in steps],
                 [c["closed"]["wrong_direction_moves"] == 0 for c in steps])]
     lines += [
         row("breathing (3 mm at 0.25 Hz): open-loop over closed-loop RMS force", "at least 2",
             [f"{b['open']['rms_force_after_settle_n'] / b['closed']['rms_force_after_settle_n']:.2f}"
              for b in breathing],
-            [b["open"]["rms_force_after_settle_n"] >= 2 * b["closed"]["rms_force_after_settle_n"] for b in breathing]),
+            [halves(b) for b in breathing]),
         row("the whole experiment, wall time (s)", "under 120 s on 2 cores", [f"{j['elapsed_s']:.0f}"],
             [j["elapsed_s"] < 120]),
         "", "The re-docking check's target (the residual reported within 1.5 mm of the truth) is a test: "
@@ -133,34 +156,25 @@ def main():
             hit = [seed for seed, o in runs if test(o["scenarios"])]
             return f"{len(hit)} of {len(runs)} seeds" + (f" ({', '.join(hit)})" if hit else "")
 
-        def step_met(sc, name="step"):
-            c = sc[name]["closed"]
-            t = c["time_to_below_2n_s"]
-            return (t is not None and t <= 5.0 and c["rms_force_after_settle_n"] < 1.0
-                    and c["wrong_direction_moves"] == 0)
-
-        def halved(sc):
-            return sc["breathing"]["closed"]["rms_force_after_settle_n"] <= \
-                0.5 * sc["breathing"]["open"]["rms_force_after_settle_n"]
-
         def closes(sc):
             return sc["drift"]["closed"]["time_to_below_2n_s"] is not None
 
         if {"step", "drift", "breathing"} <= set(names):
             lines += ["", f"Step (force below 2 N for good within 5 s of the onset, RMS force after settling below "
-                      f"1 N, no wrong-direction move): {seeds_where(step_met)}. Step, RMS force after settling below "
-                      f"1 N: {seeds_where(lambda sc: sc['step']['closed']['rms_force_after_settle_n'] < 1.0)}. "
+                      f"1 N, no wrong-direction move): {seeds_where(lambda sc: meets_step_targets(sc['step']))}. Step, "
+                      f"RMS force after settling below 1 N: "
+                      f"{seeds_where(lambda sc: settles_quietly(sc['step']['closed']))}. "
                       f"Drift, force below 2 N for good: {seeds_where(closes)}. Breathing, closed-loop RMS force at "
-                      f"most half the open loop's: {seeds_where(halved)}."]
+                      f"most half the open loop's: {seeds_where(lambda sc: halves(sc['breathing']))}."]
         if "large_step" in names:
             lines[-1] += (" Large step, the same measures as the step: "
-                          f"{seeds_where(lambda sc: step_met(sc, 'large_step'))}; RMS force after settling below 1 N: "
-                          f"{seeds_where(lambda sc: sc['large_step']['closed']['rms_force_after_settle_n'] < 1.0)}.")
+                          f"{seeds_where(lambda sc: meets_step_targets(sc['large_step']))}; RMS force after settling "
+                          f"below 1 N: {seeds_where(lambda sc: settles_quietly(sc['large_step']['closed']))}.")
     for doc, begin, end in DOCS:
         write_block(doc, begin, end, "\n".join(lines))
     if others and {"step", "drift", "breathing"} <= set(names):
         write_block(BENCHMARKS, "<!-- closed-loop-targets:begin -->", "<!-- closed-loop-targets:end -->",
-                    "\n".join(target_table(a, j, runs)))
+                    "\n".join(target_table(j, runs)))
     print("\n".join(lines))
 
 
