@@ -39,6 +39,9 @@ TEST(IncisionMotion, StepDriftBreathingAndALargeStep) {
   EXPECT_NEAR(large.get_misalignment(large.step_time_s).head<2>().norm(), std::hypot(0.010, 0.015), 1e-15);
   EXPECT_GT(large.compensate_limit_m, large.get_misalignment(large.step_time_s).norm());
   EXPECT_EQ(step.compensate_limit_m, 0.0);  // the bench's limit
+  // An arm that can move it all within 5 s; the bench's rate elsewhere.
+  EXPECT_LT(large.get_misalignment(large.step_time_s).norm() / large.max_rate_m_per_s, 5.0);
+  EXPECT_EQ(step.max_rate_m_per_s, 0.0);
   EXPECT_EQ(step.name, "step");
   EXPECT_TRUE(step.get_misalignment(step.step_time_s - 1e-9).isZero());
   EXPECT_NEAR(step.get_misalignment(step.step_time_s).norm(), 0.010, 1e-12);
@@ -50,6 +53,19 @@ TEST(IncisionMotion, StepDriftBreathingAndALargeStep) {
   EXPECT_NEAR(breathing.get_misalignment(0.0).z(), 0.006, 1e-15);
   EXPECT_NEAR(breathing.get_misalignment(1.0).z(), 0.009, 1e-12);  // a quarter period at 0.25 Hz
   EXPECT_NEAR(breathing.get_misalignment(3.0).z(), 0.003, 1e-12);
+}
+
+TEST(IncisionMotion, RateMatchesFiniteDifferenceAwayFromTheStep) {
+  const double h = 1e-6;
+  for (const auto& m : rcm::sim::make_default_incision_motions()) {
+    SCOPED_TRACE(m.name);
+    for (double t : {3.3, 17.9, 20.5, 41.2, 69.7, 80.1}) {
+      const Eigen::Vector3d fd = (m.get_misalignment(t + h) - m.get_misalignment(t - h)) / (2 * h);
+      EXPECT_LT((m.get_misalignment_rate(t) - fd).norm(), 1e-8) << "t = " << t;
+    }
+    // The step's jump is not a rate.
+    if (!m.step_m.isZero()) EXPECT_TRUE(m.get_misalignment_rate(m.step_time_s).isZero());
+  }
 }
 
 int run_cli(const std::string& args, std::string& out) {
@@ -113,6 +129,8 @@ TEST(ClosedLoopBench, TheCorrectionBringsTheRcmBackWithoutAWrongMove) {
   EXPECT_TRUE(j["scenarios"]["drift"]["closed"]["time_to_below_2n_s"].is_number());
   EXPECT_EQ(j["scenarios"]["large_step"]["compensate_limit_m"], 0.05);
   EXPECT_EQ(j["scenarios"]["step"]["compensate_limit_m"], 0.01);
+  EXPECT_EQ(j["scenarios"]["large_step"]["max_rate_m_per_s"], 0.02);
+  EXPECT_EQ(j["scenarios"]["step"]["max_rate_m_per_s"], 0.005);
   for (const char* name : {"step", "drift", "large_step"})
     EXPECT_LT(j["scenarios"][name]["closed"]["rms_force_after_settle_n"].get<double>(), 2.0) << name;
 
@@ -241,17 +259,18 @@ TEST(ClosedLoopSafety, AnArmAtRestHolds) {
 // within the corrector's tolerance (2 mm), whose force stays under 2 N. The
 // bench's 10 mm step, and the large step (D = 30 mm, 10 and 15 mm across:
 // 35 mm, beyond the default software limit, on an arm whose software RCM may
-// move 50 mm), where the 5 mm/s rate limit takes 7 s to move it all.
+// move 50 mm at 20 mm/s).
 TEST(ClosedLoopStep, TheForceFallsBelow2NWithinSecondsOfAStep) {
   const PreparedBench& bench = get_linear_bench();
   struct Case {
     Eigen::Vector3d step;
-    double limit_m, within_s;
+    double limit_m, rate_m_per_s, within_s;
   };
-  for (const Case& c : {Case{Eigen::Vector3d(0.006, 0.0, 0.008), 0.0, 5.0},
-                        Case{Eigen::Vector3d(0.010, 0.015, 0.030), 0.05, 8.0}}) {
+  for (const Case& c : {Case{Eigen::Vector3d(0.006, 0.0, 0.008), 0.0, 0.0, 5.0},
+                        Case{Eigen::Vector3d(0.010, 0.015, 0.030), 0.05, 0.02, 5.0}}) {
     auto step = make_step(c.step);
     step.compensate_limit_m = c.limit_m;
+    step.max_rate_m_per_s = c.rate_m_per_s;
     const auto r = rcm::sim::run_closed_loop_experiment(bench.config, *bench.pipeline, {step}, short_options());
     const auto& open = r[0].open;
     const auto& closed = r[0].closed;

@@ -262,6 +262,28 @@ TEST(SimTissue, CrossingVelocityMatchesFiniteDifference) {
   EXPECT_LT((compute_tissue_force(tissue, q, qd, 0.0).f_inc_base - fd).norm(), 1e-8);
 }
 
+TEST(SimTissue, DampingSeesTheStretchRateOfAMovingIncision) {
+  // The incision moves relative to the RCM (a patient, a software RCM shift):
+  // the damping force is c d(p_cross - p_anchor)/dt with both moving.
+  TissueParams params;
+  params.stiffness_n_per_m = 0.0;
+  params.damping_n_s_per_m = 1.0;
+  const Eigen::Vector3d q0(0.05, 0.1, 0.12);
+  const Eigen::Vector3d m0(0.004, -0.003, 0.035), m_rate(0.01, 0.02, -0.015);
+  const Eigen::Vector3d q(0.3, -0.2, 0.11), qd(0.4, -0.7, 0.02);
+  auto at = [&](double dt) {
+    TissueModel tissue(params, q0, m0 + dt * m_rate);
+    tissue.misalignment_rate_m_per_s = m_rate;
+    return compute_tissue_force(tissue, q + dt * qd, qd, 0.0);
+  };
+  const double h = 1e-6;
+  const Eigen::Vector3d fd = (at(h).stretch_base - at(-h).stretch_base) / (2 * h);
+  EXPECT_LT((at(0.0).f_inc_base - fd).norm(), 1e-8);
+  // The shaft slides through the tissue at qd3 less the crossing's own speed along it.
+  const double s_dot = (at(h).shaft_distance - at(-h).shaft_distance) / (2 * h);
+  EXPECT_NEAR(at(0.0).axial_velocity, qd[2] - s_dot, 1e-8);
+}
+
 TEST(SimTissue, AxialFrictionActsAlongTheShaft) {
   TissueParams params;
   params.stiffness_n_per_m = 0.0;

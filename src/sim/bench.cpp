@@ -163,6 +163,7 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
     if (moving) {
       moving->misalignment_m = hooks->get_misalignment(t);
       moving->p_anchor_base = moving->R_base_inc * moving->misalignment_m;
+      if (hooks->get_misalignment_rate) moving->misalignment_rate_m_per_s = hooks->get_misalignment_rate(t);
     }
     if (active_tissue) {
       try {

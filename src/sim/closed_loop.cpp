@@ -19,6 +19,16 @@ Eigen::Vector3d IncisionMotion::get_misalignment(double t) const {
   return m;
 }
 
+Eigen::Vector3d IncisionMotion::get_misalignment_rate(double t) const {
+  Eigen::Vector3d rate = Eigen::Vector3d::Zero();
+  if (t > drift_start_s && t < drift_end_s) rate += drift_m_per_s;
+  if (breathing_hz > 0) {
+    const double w = 2.0 * M_PI * breathing_hz;
+    rate += breathing_amplitude_m * (w * std::cos(w * t));
+  }
+  return rate;
+}
+
 std::vector<IncisionMotion> make_default_incision_motions() {
   IncisionMotion step;
   step.name = "step";
@@ -43,6 +53,7 @@ std::vector<IncisionMotion> make_default_incision_motions() {
   large_step.step_time_s = 20.0;
   large_step.onset_s = 20.0;
   large_step.compensate_limit_m = 0.050;
+  large_step.max_rate_m_per_s = 0.020;
   return {step, drift, breathing, large_step};
 }
 
@@ -64,6 +75,10 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   run.closed = closed;
   CorrectionLoop::Workspace ws = loop.create_workspace();
   Eigen::Vector3d shift_base = Eigen::Vector3d::Zero();  // the RCM setpoint minus the docked RCM
+  // The setpoint moves by each sample's step over the following sample period.
+  Eigen::Vector3d shift_rate_base = Eigen::Vector3d::Zero();
+  double last_sample_t = 0.0;
+  bool have_sample = false;
   const double series_dt = 1.0 / o.series_rate_hz;
   double next_series = 0.0;
   std::vector<double> force_after_settle;
@@ -76,15 +91,25 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   hooks.get_misalignment = [&](double t) -> Eigen::Vector3d {
     return motion.get_misalignment(t) - R.transpose() * shift_base;
   };
+  hooks.get_misalignment_rate = [&](double t) -> Eigen::Vector3d {
+    return motion.get_misalignment_rate(t) - R.transpose() * shift_rate_base;
+  };
   hooks.on_sample = [&](double t, const Eigen::Vector3d& q, const Eigen::Vector3d& qd, const Eigen::Vector3d& effort,
                         const Eigen::Vector3d& f_true) {
     const Eigen::Vector3d remaining_inc = motion.get_misalignment(t) - R.transpose() * shift_base;
     const CorrectionOutput& c =
         loop.compute_sample(ws, t, q.data(), qd.data(), effort.data(), closed ? shift_base : Eigen::Vector3d::Zero());
+    const double sample_dt = have_sample ? t - last_sample_t : 0.0;
+    have_sample = true;
+    last_sample_t = t;
+    shift_rate_base.setZero();
     if (!c.step_base.isZero()) {
       ++run.moves;
       if (c.step_base.dot(R * remaining_inc) < 0) ++run.wrong_direction_moves;
-      if (closed) shift_base = c.applied_base;  // the setpoint moves
+      if (closed) {  // the setpoint moves
+        shift_base = c.applied_base;
+        if (sample_dt > 0) shift_rate_base = c.step_base / sample_dt;
+      }
     }
     if (c.action != last_action || c.reason != last_reason || run.advice.empty()) {
       run.advice.emplace_back(t, describe_correction(c, loop.corrector()));
@@ -143,7 +168,9 @@ std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& conf
   for (const IncisionMotion& m : motions) {
     if (!(m.compensate_limit_m >= 0)) throw std::invalid_argument("IncisionMotion: compensate_limit_m must be >= 0");
     CorrectionOptions correction = options.correction;
+    if (!(m.max_rate_m_per_s >= 0)) throw std::invalid_argument("IncisionMotion: max_rate_m_per_s must be >= 0");
     if (m.compensate_limit_m > 0) correction.compensate_limit_m = m.compensate_limit_m;
+    if (m.max_rate_m_per_s > 0) correction.max_rate_m_per_s = m.max_rate_m_per_s;
     const CorrectionLoop loop(pipeline, RcmCorrector(pipeline.estimator().incision(), correction));
     ClosedLoopScenario s;
     s.motion = m;
@@ -191,6 +218,7 @@ nlohmann::json to_json(const std::vector<ClosedLoopScenario>& scenarios, const C
     const IncisionMotion& m = sc.motion;
     s[m.name] = {{"onset_s", m.onset_s},
                  {"compensate_limit_m", m.compensate_limit_m > 0 ? m.compensate_limit_m : o.correction.compensate_limit_m},
+                 {"max_rate_m_per_s", m.max_rate_m_per_s > 0 ? m.max_rate_m_per_s : o.correction.max_rate_m_per_s},
                  {"open", run_json(sc.open)},
                  {"closed", run_json(sc.closed)}};
   }

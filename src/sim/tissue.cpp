@@ -40,15 +40,18 @@ TissueOutput compute_tissue_force(const TissueModel& model, const Eigen::Vector3
   out.p_cross_base = s * f.z3;
   out.stretch_base = out.p_cross_base - model.p_anchor_base;
 
-  // Velocity of the crossing point (the incision is dragged with it).
+  // Velocity of the crossing point (the incision is dragged with it); the pad
+  // plane moves with D.
   const Eigen::Vector3d z3_dot = f.dz3_dq1 * qd[0] + f.x3 * qd[1];
-  const double s_dot = -D * n.dot(z3_dot) / (c * c);
+  const double D_dot = model.misalignment_rate_m_per_s.z();
+  const double s_dot = D_dot / c - D * n.dot(z3_dot) / (c * c);
   const Eigen::Vector3d p_cross_dot = s_dot * f.z3 + s * z3_dot;
+  const Eigen::Vector3d stretch_dot = p_cross_dot - model.R_base_inc * model.misalignment_rate_m_per_s;
 
   const double x = out.stretch_base.norm();
   Eigen::Vector3d f_el = Eigen::Vector3d::Zero();
   if (x > 0.0) f_el = compute_tissue_law(P, x) * (out.stretch_base / x);
-  const Eigen::Vector3d f_visc = P.damping_n_s_per_m * p_cross_dot;
+  const Eigen::Vector3d f_visc = P.damping_n_s_per_m * stretch_dot;
 
   // The shaft slides through the incision at qd3 - s_dot; friction drags the
   // tissue along z3 with it (on the shaft it acts the other way).

@@ -56,6 +56,9 @@ struct RunHooks {
   // The incision relative to the RCM as it is at time t (incision frame),
   // called every physics step: the tissue's anchor follows it.
   std::function<Eigen::Vector3d(double t)> get_misalignment;
+  // Its rate (m/s; optional: none means zero), for the tissue's damping and
+  // axial friction: a smooth motion's derivative, not a step's jump.
+  std::function<Eigen::Vector3d(double t)> get_misalignment_rate;
   // Every logged sample as the sensors give it, and the true incision force
   // (base frame), in time order; here the loop reads the arm and moves the RCM.
   std::function<void(double t, const Eigen::Vector3d& q, const Eigen::Vector3d& qd, const Eigen::Vector3d& effort,

@@ -6,8 +6,8 @@
 // against the same run with the RCM left where it was docked.
 //
 // Approximation: moving the pivot changes where the joints pivot, not the
-// joint-space dynamics, and the tissue's damping sees the shaft's motion about
-// the pivot, not the pivot's own motion (at most max_rate, 5 mm/s by default).
+// joint-space dynamics. The tissue sees the pivot move (its damping and axial
+// friction), as it sees the patient move.
 #include <Eigen/Core>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -39,14 +39,21 @@ struct IncisionMotion {
   // The software shift the arm allows in this scenario (0: the bench's
   // CorrectionOptions::compensate_limit_m), in both runs.
   double compensate_limit_m = 0.0;
+  // How fast the arm may shift its software RCM here (0: the bench's
+  // CorrectionOptions::max_rate_m_per_s).
+  double max_rate_m_per_s = 0.0;
   Eigen::Vector3d get_misalignment(double t) const;
+  // d/dt of get_misalignment, leaving out the step's jump (instantaneous: the
+  // tissue's damping is not asked to absorb it).
+  Eigen::Vector3d get_misalignment_rate(double t) const;
 };
 
 // step (the patient or table moves 10 mm at 20 s), drift (0.15 mm/s for 60 s
 // from 10 s: 9 mm), breathing (a 6 mm offset from the start, with 3 mm of
 // breathing at 0.25 Hz along the insertion axis) and large_step (35 mm at
 // 20 s: 30 mm deeper, 10 and 15 mm across, on an arm whose software RCM may
-// move 50 mm; beyond the default 10 mm the corrector advises re-docking).
+// move 50 mm at 20 mm/s; beyond the default 10 mm the corrector advises
+// re-docking, and at the default 5 mm/s the move alone takes 7 s).
 std::vector<IncisionMotion> make_default_incision_motions();
 
 struct ClosedLoopOptions {

@@ -21,6 +21,10 @@ struct TissueModel {
   Eigen::Vector3d misalignment_m = Eigen::Vector3d::Zero();  // [dr_x, dr_y, D], incision frame
   Eigen::Matrix3d R_base_inc = Eigen::Matrix3d::Identity();
   Eigen::Vector3d p_anchor_base = Eigen::Vector3d::Zero();
+  // How fast the incision moves relative to the RCM (incision frame, m/s): a
+  // moving patient or a moving software RCM. The pad plane moves with D, and
+  // the damping and the axial friction see the shaft relative to the tissue.
+  Eigen::Vector3d misalignment_rate_m_per_s = Eigen::Vector3d::Zero();
 
   TissueModel(const TissueParams& p, const Eigen::Vector3d& q0,
               const Eigen::Vector3d& misalignment_m);
