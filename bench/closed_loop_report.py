@@ -67,8 +67,9 @@ def target_table(j, runs):
              f"`/usr/bin/python3 bench/closed_loop_report.py` (`rcm simulate --experiment closed-loop` on seeds "
              f"{seeds}, {j['free_space_model']} free-space model; values in seed order):", "",
              "| measure | target | measured | met |", "|---|---|---|---|"]
-    for name, what in (("large_step", "large step (35 mm: D = 30 mm, 10 and 15 mm across; 50 mm software limit)"),
-                       ("step", "step (10 mm)")):
+    for name, what in (("large_step", "large step (35 mm: D = 30 mm, 10 and 15 mm across; a software RCM that may "
+                                      "move 50 mm at 20 mm/s)"),
+                       ("step", "step (10 mm; the large step's targets applied to it)")):
         if name not in j["scenarios"]:
             continue
         steps = [o["scenarios"][name] for _, o in runs]
