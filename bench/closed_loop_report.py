@@ -59,7 +59,8 @@ def target_table(j, runs):
     """The closed-loop targets against every seed's run, for docs/benchmarks.md."""
     def row(what, target, values, met):
         hit = sum(1 for ok in met if ok)
-        return f"| {what} | {target} | {' / '.join(values)} | {hit} of {len(met)} |"
+        count = f"{hit} of {len(met)}" if met else "-"
+        return f"| {what} | {target} | {' / '.join(values)} | {count} |"
 
     breathing = [o["scenarios"]["breathing"] for _, o in runs]
     seeds = ", ".join(seed for seed, _ in runs)
@@ -75,9 +76,11 @@ def target_table(j, runs):
         steps = [o["scenarios"][name] for _, o in runs]
         t = [c["closed"]["time_to_below_2n_s"] for c in steps]
         lines += [
-            row(f"{what}: open-loop RMS force after settling (N)", "above 10 N",
+            # The open-loop condition is the large step's: 10 mm leaves less force.
+            row(f"{what}: open-loop RMS force after settling (N)",
+                "above 10 N" if name == "large_step" else "reported",
                 [f"{c['open']['rms_force_after_settle_n']:.1f}" for c in steps],
-                [open_stays_high(c["open"]) for c in steps]),
+                [open_stays_high(c["open"]) for c in steps] if name == "large_step" else []),
             row(f"{what}: onset to force below 2 N for good (s)", "within 5 s (aim 1 s)", [fmt_time(v) for v in t],
                 [settles_within(c["closed"]) for c in steps]),
             row(f"{what}: RMS force after settling (N)", "below 1 N",
