@@ -139,6 +139,28 @@ TEST(ClosedLoopBench, TheCorrectionBringsTheRcmBackWithoutAWrongMove) {
             2);
 }
 
+TEST(ClosedLoopBench, TheCorrectorsFlagsApplyToEveryScenario) {
+  rcm::test::TempDir dir("rcm_closed_loop_flags");
+  std::string text;
+  ASSERT_EQ(run_cli("simulate --experiment closed-loop --quick --model linear --no-plot --json --max-shift-rate 0.01 "
+                    "--compensate-limit 0.04 --tolerance 0.003 --out " + (dir.path() / "bench").string(), text),
+            0)
+      << text;
+  const nlohmann::json j = nlohmann::json::parse(text);
+  EXPECT_EQ(j["correction"]["tolerance_m"], 0.003);
+  for (const char* name : {"step", "drift", "breathing", "large_step"}) {
+    EXPECT_EQ(j["scenarios"][name]["max_rate_m_per_s"], 0.01) << name;
+    EXPECT_EQ(j["scenarios"][name]["compensate_limit_m"], 0.04) << name;
+  }
+  // Bad gates fail before anything is simulated; other experiments do not read them.
+  const std::string other = " --quick --out " + (dir.path() / "other").string();
+  EXPECT_EQ(run_cli("simulate --experiment closed-loop --compensate-limit 0.001" + other, text), 2);
+  EXPECT_FALSE(fs::exists(dir.path() / "other"));
+  EXPECT_EQ(run_cli("simulate --experiment session --max-shift-rate 0.01" + other, text), 2);
+  EXPECT_EQ(run_cli("simulate --model linear" + other, text), 2);
+  EXPECT_FALSE(fs::exists(dir.path() / "other"));
+}
+
 // Safety: the correction never makes the force worse than leaving the RCM
 // where it was docked, and never moves the wrong way, where the estimate is
 // at its weakest. Each case: a quick session to prepare the estimator on (the

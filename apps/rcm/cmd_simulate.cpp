@@ -41,7 +41,12 @@ struct SimulateOptions {
   double free_space_s = -1, trial_s = -1, calibration_s = -1;
   int threads = 0;
   rcm::cli::OptionFlags<rcm::StudyOptions> free_space;  // closed-loop: the estimator's free-space model
+  rcm::cli::OptionFlags<rcm::CorrectionOptions> correction;  // closed-loop: the corrector's gates, every scenario
 };
+
+// The flags that only the closed-loop bench reads.
+const char* const kClosedLoopFlags[] = {"--model", "--model-file", "--tolerance", "--compensate-limit",
+                                        "--max-shift-rate"};
 
 std::string config_help() {
   const rcm::sim::SimConfig defaults = rcm::sim::make_default_config();
@@ -82,7 +87,14 @@ void run_closed_loop(const SimulateOptions& o, const rcm::sim::SimConfig& config
       rcm::OnlineEstimator(setup.incision, setup.tissue, make_closed_loop_online_options(setup.joint_options)));
 
   ClosedLoopOptions options;
-  const std::vector<IncisionMotion> motions = make_default_incision_motions();
+  o.correction.apply(options.correction);
+  std::vector<IncisionMotion> motions = make_default_incision_motions();
+  // A limit or a rate given on the command line is the arm's in every
+  // scenario, the large step's own included.
+  for (IncisionMotion& m : motions) {
+    if (o.correction.given("--compensate-limit")) m.compensate_limit_m = 0.0;
+    if (o.correction.given("--max-shift-rate")) m.max_rate_m_per_s = 0.0;
+  }
   std::cerr << fmt::format("simulate: {} motions, {:.0f} s each, open and closed loop ({} free-space model)\n",
                            motions.size(), options.duration_s,
                            rcm::dynamics::to_string(setup.free_space.model->kind()));
@@ -247,6 +259,15 @@ void run_simulate(const SimulateOptions& o) {
   validate_config(config, source);
   if (o.experiment == "speed") validate_speed_experiment(config, source);
 
+  if (o.experiment != "closed-loop")
+    for (const char* flag : kClosedLoopFlags)
+      if (o.free_space.given(flag) || o.correction.given(flag)) {
+        rcm::InputLocation loc;
+        loc.file = flag;
+        throw rcm::InputError(loc, "only --experiment closed-loop reads it");
+      }
+  rcm::CorrectionOptions correction;
+  o.correction.apply(correction);  // a bad gate is an error before anything is simulated
   if (o.print_config) {
     rcm::cli::print_json(config_to_json(config));
     return;
@@ -384,6 +405,13 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
                        "closed-loop: the estimator's free-space model, fitted on the session's free space (unset: "
                        "as rcm monitor)");
   opts->free_space.add(cmd, "--model-file", {"model_file"}, "closed-loop: a saved free-space model instead");
+  opts->correction.add(cmd, "--tolerance", {"tolerance_m"}, "closed-loop: the corrector's tolerance");
+  opts->correction.add(cmd, "--compensate-limit", {"compensate_limit_m"},
+                       "closed-loop: the software shift the arm allows, in every scenario (unset: the large step "
+                       "allows 50 mm)");
+  opts->correction.add(cmd, "--max-shift-rate", {"max_rate_m_per_s"},
+                       "closed-loop: how fast the arm shifts its RCM, in every scenario (unset: the large step "
+                       "shifts at 20 mm/s)");
   cmd->add_option("--tissue", opts->tissue, "tissue preset: linear (default), stiffening, viscoelastic, sliding");
   cmd->add_option("--friction", opts->friction,
                   "joint friction preset: hysteretic (default: rate-independent, the real PSM's band), smooth");
