@@ -75,7 +75,8 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   run.closed = closed;
   CorrectionLoop::Workspace ws = loop.create_workspace();
   Eigen::Vector3d shift_base = Eigen::Vector3d::Zero();  // the RCM setpoint minus the docked RCM
-  // The setpoint moves by each sample's step over the following sample period.
+  // The setpoint jumps by each sample's step (the elastic force sees it at
+  // once); the damping sees that step's rate over the following sample period.
   Eigen::Vector3d shift_rate_base = Eigen::Vector3d::Zero();
   double last_sample_t = 0.0;
   bool have_sample = false;
@@ -167,8 +168,8 @@ std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& conf
   std::vector<ClosedLoopScenario> out;
   for (const IncisionMotion& m : motions) {
     if (!(m.compensate_limit_m >= 0)) throw std::invalid_argument("IncisionMotion: compensate_limit_m must be >= 0");
-    CorrectionOptions correction = options.correction;
     if (!(m.max_rate_m_per_s >= 0)) throw std::invalid_argument("IncisionMotion: max_rate_m_per_s must be >= 0");
+    CorrectionOptions correction = options.correction;
     if (m.compensate_limit_m > 0) correction.compensate_limit_m = m.compensate_limit_m;
     if (m.max_rate_m_per_s > 0) correction.max_rate_m_per_s = m.max_rate_m_per_s;
     const CorrectionLoop loop(pipeline, RcmCorrector(pipeline.estimator().incision(), correction));
