@@ -63,6 +63,18 @@ def target_table(j, runs, default_rate):
         count = f"{hit} of {len(met)}" if met else "-"
         return f"| {what} | {target} | {' / '.join(values)} | {count} |"
 
+    def closed_rows(what, steps):
+        """A step's closed-loop targets over the seeds' runs of it."""
+        return [
+            row(f"{what}: onset to force below 2 N for good (s)", "within 5 s (aim 1 s)",
+                [fmt_time(c["closed"]["time_to_below_2n_s"]) for c in steps],
+                [settles_within(c["closed"]) for c in steps]),
+            row(f"{what}: RMS force after settling (N)", "below 1 N",
+                [f"{c['closed']['rms_force_after_settle_n']:.2f}" for c in steps],
+                [settles_quietly(c["closed"]) for c in steps]),
+            row(f"{what}: wrong-direction moves", "none", [str(c["closed"]["wrong_direction_moves"]) for c in steps],
+                [c["closed"]["wrong_direction_moves"] == 0 for c in steps])]
+
     breathing = [o["scenarios"]["breathing"] for _, o in runs]
     seeds = ", ".join(seed for seed, _ in runs)
     lines = [f"Measured {datetime.date.today().isoformat()} on {cpu_model()} ({os.cpu_count()} cores) by "
@@ -75,32 +87,16 @@ def target_table(j, runs, default_rate):
         if name not in j["scenarios"]:
             continue
         steps = [o["scenarios"][name] for _, o in runs]
-        t = [c["closed"]["time_to_below_2n_s"] for c in steps]
         lines += [
             # The open-loop condition is the large step's: 10 mm leaves less force.
             row(f"{what}: open-loop RMS force after settling (N)",
                 "above 10 N" if name == "large_step" else "reported",
                 [f"{c['open']['rms_force_after_settle_n']:.1f}" for c in steps],
                 [open_stays_high(c["open"]) for c in steps] if name == "large_step" else []),
-            row(f"{what}: onset to force below 2 N for good (s)", "within 5 s (aim 1 s)", [fmt_time(v) for v in t],
-                [settles_within(c["closed"]) for c in steps]),
-            row(f"{what}: RMS force after settling (N)", "below 1 N",
-                [f"{c['closed']['rms_force_after_settle_n']:.2f}" for c in steps],
-                [settles_quietly(c["closed"]) for c in steps]),
-            row(f"{what}: wrong-direction moves", "none", [str(c["closed"]["wrong_direction_moves"]) for c in steps],
-                [c["closed"]["wrong_direction_moves"] == 0 for c in steps])]
+            *closed_rows(what, steps)]
     if default_rate:
         what = f"large step, shifted at the default {1e3 * j['correction']['max_rate_m_per_s']:g} mm/s"
-        steps = [sc for _, sc in default_rate]
-        lines += [
-            row(f"{what}: onset to force below 2 N for good (s)", "within 5 s (aim 1 s)",
-                [fmt_time(c["closed"]["time_to_below_2n_s"]) for c in steps],
-                [settles_within(c["closed"]) for c in steps]),
-            row(f"{what}: RMS force after settling (N)", "below 1 N",
-                [f"{c['closed']['rms_force_after_settle_n']:.2f}" for c in steps],
-                [settles_quietly(c["closed"]) for c in steps]),
-            row(f"{what}: wrong-direction moves", "none", [str(c["closed"]["wrong_direction_moves"]) for c in steps],
-                [c["closed"]["wrong_direction_moves"] == 0 for c in steps])]
+        lines += closed_rows(what, [sc for _, sc in default_rate])
     lines += [
         row("breathing (3 mm at 0.25 Hz): open-loop over closed-loop RMS force", "at least 2",
             [f"{b['open']['rms_force_after_settle_n'] / b['closed']['rms_force_after_settle_n']:.2f}"
