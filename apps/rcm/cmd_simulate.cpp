@@ -63,7 +63,8 @@ nlohmann::json vec_json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
 
 // The closed-loop bench: a session to prepare the estimator on (free space,
 // calibration, one trial), then every incision motion open and closed loop.
-void run_closed_loop(const SimulateOptions& o, const rcm::sim::SimConfig& config, const std::filesystem::path& out_dir) {
+void run_closed_loop(const SimulateOptions& o, const rcm::CorrectionOptions& correction,
+                     const rcm::sim::SimConfig& config, const std::filesystem::path& out_dir) {
   using namespace rcm::sim;
   const auto start = std::chrono::steady_clock::now();
   SimConfig session_config = config;
@@ -87,7 +88,7 @@ void run_closed_loop(const SimulateOptions& o, const rcm::sim::SimConfig& config
       rcm::OnlineEstimator(setup.incision, setup.tissue, make_closed_loop_online_options(setup.joint_options)));
 
   ClosedLoopOptions options;
-  o.correction.apply(options.correction);
+  options.correction = correction;
   std::vector<IncisionMotion> motions = make_default_incision_motions();
   // A limit or a rate given on the command line is the arm's in every
   // scenario, the large step's own included.
@@ -374,7 +375,7 @@ void run_simulate(const SimulateOptions& o) {
     if (config.force_angle.plot) std::cout << fmt::format(", {}, {}", plot.png.string(), plot.svg.string());
     std::cout << fmt::format(" in {:.1f} s\n", elapsed);
   } else if (o.experiment == "closed-loop") {
-    run_closed_loop(o, config, out_dir);
+    run_closed_loop(o, correction, config, out_dir);
   } else if (o.experiment == "speed") {
     run_speed(o, config, out_dir);
   } else {

@@ -29,6 +29,15 @@ Eigen::Vector3d IncisionMotion::get_misalignment_rate(double t) const {
   return rate;
 }
 
+CorrectionOptions IncisionMotion::get_correction_options(const CorrectionOptions& bench) const {
+  if (!(compensate_limit_m >= 0)) throw std::invalid_argument("IncisionMotion: compensate_limit_m must be >= 0");
+  if (!(max_rate_m_per_s >= 0)) throw std::invalid_argument("IncisionMotion: max_rate_m_per_s must be >= 0");
+  CorrectionOptions o = bench;
+  if (compensate_limit_m > 0) o.compensate_limit_m = compensate_limit_m;
+  if (max_rate_m_per_s > 0) o.max_rate_m_per_s = max_rate_m_per_s;
+  return o;
+}
+
 std::vector<IncisionMotion> make_default_incision_motions() {
   IncisionMotion step;
   step.name = "step";
@@ -167,12 +176,8 @@ std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& conf
   if (!(options.series_rate_hz > 0)) throw std::invalid_argument("ClosedLoopOptions: series_rate_hz must be > 0");
   std::vector<ClosedLoopScenario> out;
   for (const IncisionMotion& m : motions) {
-    if (!(m.compensate_limit_m >= 0)) throw std::invalid_argument("IncisionMotion: compensate_limit_m must be >= 0");
-    if (!(m.max_rate_m_per_s >= 0)) throw std::invalid_argument("IncisionMotion: max_rate_m_per_s must be >= 0");
-    CorrectionOptions correction = options.correction;
-    if (m.compensate_limit_m > 0) correction.compensate_limit_m = m.compensate_limit_m;
-    if (m.max_rate_m_per_s > 0) correction.max_rate_m_per_s = m.max_rate_m_per_s;
-    const CorrectionLoop loop(pipeline, RcmCorrector(pipeline.estimator().incision(), correction));
+    const CorrectionLoop loop(pipeline,
+                              RcmCorrector(pipeline.estimator().incision(), m.get_correction_options(options.correction)));
     ClosedLoopScenario s;
     s.motion = m;
     s.open = run_one(config, loop, m, options, false);
@@ -217,9 +222,10 @@ nlohmann::json to_json(const std::vector<ClosedLoopScenario>& scenarios, const C
   nlohmann::json s = nlohmann::json::object();
   for (const auto& sc : scenarios) {
     const IncisionMotion& m = sc.motion;
+    const CorrectionOptions gates = m.get_correction_options(o.correction);
     s[m.name] = {{"onset_s", m.onset_s},
-                 {"compensate_limit_m", m.compensate_limit_m > 0 ? m.compensate_limit_m : o.correction.compensate_limit_m},
-                 {"max_rate_m_per_s", m.max_rate_m_per_s > 0 ? m.max_rate_m_per_s : o.correction.max_rate_m_per_s},
+                 {"compensate_limit_m", gates.compensate_limit_m},
+                 {"max_rate_m_per_s", gates.max_rate_m_per_s},
                  {"open", run_json(sc.open)},
                  {"closed", run_json(sc.closed)}};
   }

@@ -46,6 +46,9 @@ struct IncisionMotion {
   // d/dt of get_misalignment, leaving out the step's jump (instantaneous: the
   // tissue's damping is not asked to absorb it).
   Eigen::Vector3d get_misalignment_rate(double t) const;
+  // The bench's gates with this scenario's limit and rate where it sets them.
+  // Throws std::invalid_argument for a negative limit or rate.
+  CorrectionOptions get_correction_options(const CorrectionOptions& bench) const;
 };
 
 // step (the patient or table moves 10 mm at 20 s), drift (0.15 mm/s for 60 s
