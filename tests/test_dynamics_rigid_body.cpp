@@ -430,6 +430,77 @@ TEST(InsertionStiffness, TravelsWithTheModelFileAndIsChecked) {
   EXPECT_THROW(rcm::dynamics::LinearTorqueModel(model.info(), short_p), std::invalid_argument);
 }
 
+TEST(SlowDahlState, SpansAnEighthOfTheInsertionsTravel) {
+  // The slow state of the insertion spans an eighth of the travel fitted (the
+  // last samples are the test split's), whatever the bristles' scale x_c the
+  // fit chose; yaw and pitch keep ten x_c.
+  const rcm::Recording run = make_rigid_arm_run(1.0, 200.0, 60.0, 7);
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const auto fit = rcm::dynamics::fit_linear_torque_model({run}, options);
+  const auto& p = static_cast<const rcm::dynamics::LinearTorqueModel&>(*fit.model).parameters();
+  ASSERT_EQ(p.dahl_displacement_slow.size(), 3);
+  const double travel = run.position.col(2).maxCoeff() - run.position.col(2).minCoeff();
+  EXPECT_LE(p.dahl_displacement_slow[2], travel / 8.0 * (1 + 1e-12));
+  EXPECT_GE(p.dahl_displacement_slow[2], 0.9 * travel / 8.0);
+  for (int j = 0; j < 2; ++j)
+    EXPECT_DOUBLE_EQ(p.dahl_displacement_slow[j], rcm::dynamics::kSlowDahlFactor * p.dahl_displacement[j]) << j;
+  // And compute_step runs the state over that displacement: the same
+  // coefficient over another displacement predicts another torque.
+  rcm::dynamics::LinearTorqueParameters base = p;
+  base.coulomb_slow[2] = 0.5;
+  rcm::dynamics::LinearTorqueParameters other = base;
+  other.dahl_displacement_slow[2] *= 3.0;
+  const Eigen::MatrixXd a =
+      rcm::dynamics::predict_torque_streaming(rcm::dynamics::LinearTorqueModel(fit.model->info(), base), run);
+  const Eigen::MatrixXd b =
+      rcm::dynamics::predict_torque_streaming(rcm::dynamics::LinearTorqueModel(fit.model->info(), other), run);
+  EXPECT_EQ((b - a).leftCols(2).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_GT((b - a).col(2).cwiseAbs().maxCoeff(), 0.05);
+}
+
+TEST(SlowDahlState, TravelsWithTheModelFileAndIsChecked) {
+  const rcm::Recording run = make_rigid_arm_run(1.0, 200.0, 30.0, 3);
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const auto fit = rcm::dynamics::fit_linear_torque_model({run}, options);
+  const nlohmann::json doc = rcm::dynamics::torque_model_to_json(*fit.model);
+  ASSERT_TRUE(doc["parameters"].contains("dahl_displacement_slow"));
+  const auto back = rcm::dynamics::torque_model_from_json(doc, "m.json");
+  EXPECT_EQ(rcm::dynamics::torque_model_to_json(*back), doc);
+  // A file without it (written before it was stored) runs the slow state over
+  // kSlowDahlFactor x_c, as such files were fitted.
+  nlohmann::json old = doc;
+  old["parameters"].erase("dahl_displacement_slow");
+  const auto loaded = rcm::dynamics::torque_model_from_json(old, "old.json");
+  const auto& q = static_cast<const rcm::dynamics::LinearTorqueModel&>(*loaded).parameters();
+  ASSERT_EQ(q.dahl_displacement_slow.size(), 3);
+  for (int j = 0; j < 3; ++j)
+    EXPECT_DOUBLE_EQ(q.dahl_displacement_slow[j], rcm::dynamics::kSlowDahlFactor * q.dahl_displacement[j]);
+  auto expect_error = [&](const nlohmann::json& bad, const char* what) {
+    try {
+      rcm::dynamics::torque_model_from_json(bad, "m.json");
+      ADD_FAILURE() << "accepted " << what;
+    } catch (const rcm::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("parameters.dahl_displacement_slow"), std::string::npos) << e.what();
+    }
+  };
+  const auto& model = static_cast<const rcm::dynamics::LinearTorqueModel&>(*fit.model);
+  rcm::dynamics::LinearTorqueParameters zp = model.parameters();
+  zp.dahl_displacement_slow[1] = 0.0;
+  EXPECT_THROW(rcm::dynamics::LinearTorqueModel(model.info(), zp), std::invalid_argument);
+  rcm::dynamics::LinearTorqueParameters with_negative = model.parameters();
+  with_negative.offset << 0.01, -0.01, 0.01;  // any offset is a model's; as a displacement, not
+  nlohmann::json negative = doc;
+  negative["parameters"]["dahl_displacement_slow"] = rcm::dynamics::torque_model_to_json(
+      rcm::dynamics::LinearTorqueModel(model.info(), with_negative))["parameters"]["offset"];
+  expect_error(negative, "a negative displacement");
+  nlohmann::json alone = doc;  // without the slow state's coefficient it has no meaning
+  alone["parameters"].erase("coulomb_slow");
+  alone["parameters"].erase("sqrt_viscous");
+  expect_error(alone, "dahl_displacement_slow without coulomb_slow");
+}
+
 TEST(CoulombProfile, KnotWeightsInterpolateAndHoldBeyondTheRange) {
   int k;
   double w;

@@ -211,6 +211,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
                     "the gravity direction the fit found (unit, base frame; empty: free potential)")
       .def_readonly("coulomb_slow", &LinearTorqueParameters::coulomb_slow, "of the slow Dahl state (empty: none)")
       .def_readonly("sqrt_viscous", &LinearTorqueParameters::sqrt_viscous, "of sqrt(|qd|) sign(qd) (empty: none)")
+      .def_readonly("dahl_displacement_slow", &LinearTorqueParameters::dahl_displacement_slow,
+                    "the slow Dahl state's characteristic displacement (joint units; empty: none)")
       .def_readonly("coulomb_profile", &LinearTorqueParameters::coulomb_profile,
                     "the Coulomb level's change along each joint's travel at equally spaced knots (rows: joints; "
                     "empty: constant)")

@@ -360,9 +360,14 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
           hi[j] = std::max(hi[j], column.maxCoeff());
         }
     std::vector<detail::JointEstimatorChoice> estimators(M);
-    for (int j = 0; j < M; ++j)
-      estimators[j] = {p.dahl_displacement[j], p.acceleration_window_s[j], p.acceleration_filter_s[j],
-                       p.batch_acceleration_window_s[j], lo[j], std::max(hi[j], lo[j] + 1e-6)};
+    for (int j = 0; j < M; ++j) {
+      hi[j] = std::max(hi[j], lo[j] + 1e-6);
+      const double slow = j == kInsertionJoint
+                              ? std::max(kSlowDahlTravelFraction * (hi[j] - lo[j]), p.dahl_displacement[j])
+                              : kSlowDahlFactor * p.dahl_displacement[j];
+      estimators[j] = {p.dahl_displacement[j], slow, p.acceleration_window_s[j], p.acceleration_filter_s[j],
+                       p.batch_acceleration_window_s[j], lo[j], hi[j]};
+    }
     // The time split's training and validation samples, and the same samples
     // cut by speed (split_by_speed: slow, fast), in one pass.
     enum { kTrain, kValidation, kSlow, kFast };
@@ -437,7 +442,9 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
       }
       p.coulomb_slow.resize(M);
       p.sqrt_viscous.resize(M);
+      p.dahl_displacement_slow.resize(M);
       for (int j = 0; j < M; ++j) {
+        p.dahl_displacement_slow[j] = estimators[j].slow_dahl_displacement;
         p.coulomb_slow[j] = rigid.theta(detail::rigid_body_block_index(j, 4));
         p.sqrt_viscous[j] = rigid.theta(detail::rigid_body_block_index(j, 5));
       }

@@ -94,6 +94,11 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
   if (q.coulomb_slow.size() != q.sqrt_viscous.size() || (q.coulomb_slow.size() != 0 && q.coulomb_slow.size() != M))
     throw std::invalid_argument("linear model: coulomb_slow and sqrt_viscous need one value per output joint, or none");
   has_extra_friction_ = q.coulomb_slow.size() == M;
+  if (has_extra_friction_ && q.dahl_displacement_slow.size() == 0) q.dahl_displacement_slow = kSlowDahlFactor * q.dahl_displacement;
+  if (q.dahl_displacement_slow.size() != (has_extra_friction_ ? M : 0))
+    throw std::invalid_argument("linear model: dahl_displacement_slow needs one value per output joint, with coulomb_slow");
+  if (!(q.dahl_displacement_slow.array() > 0).all())
+    throw std::invalid_argument("linear model: dahl_displacement_slow must be positive");
   if (q.stiffness.size() != 0 && (q.stiffness.size() != M || !q.stiffness.allFinite()))
     throw std::invalid_argument("linear model: stiffness needs one finite value per output joint, or none");
   if (q.coulomb_profile.size() != 0 || q.coulomb_profile_range.size() != 0) {
@@ -255,7 +260,7 @@ void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, const do
     if (ws.has_previous) {
       ws.z[j] = compute_dahl_state(ws.z[j], q[j] - ws.prev_q[j], p.dahl_displacement[j]);
       if (has_extra_friction_)
-        ws.z_slow[j] = compute_dahl_state(ws.z_slow[j], q[j] - ws.prev_q[j], kSlowDahlFactor * p.dahl_displacement[j]);
+        ws.z_slow[j] = compute_dahl_state(ws.z_slow[j], q[j] - ws.prev_q[j], p.dahl_displacement_slow[j]);
     }
     const double qdd = ws.acceleration[j];
     double value =
@@ -323,6 +328,7 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
   if (p.gravity_direction.size()) j["gravity_direction"] = detail::encode_vector(p.gravity_direction);
   if (p.coulomb_slow.size()) j["coulomb_slow"] = detail::encode_vector(p.coulomb_slow);
   if (p.sqrt_viscous.size()) j["sqrt_viscous"] = detail::encode_vector(p.sqrt_viscous);
+  if (p.dahl_displacement_slow.size()) j["dahl_displacement_slow"] = detail::encode_vector(p.dahl_displacement_slow);
   if (p.coulomb_profile.size()) {
     j["coulomb_profile"] = detail::encode_array(p.coulomb_profile);
     j["coulomb_profile_range"] = detail::encode_array(p.coulomb_profile_range);
@@ -384,6 +390,13 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
   if (j.contains("coulomb_slow")) {
     p.coulomb_slow = decode_vector_d(j["coulomb_slow"], source, f + ".coulomb_slow", M);
     p.sqrt_viscous = decode_vector_d(j["sqrt_viscous"], source, f + ".sqrt_viscous", M);
+    if (j.contains("dahl_displacement_slow")) {
+      p.dahl_displacement_slow = decode_vector_d(j["dahl_displacement_slow"], source, f + ".dahl_displacement_slow", M);
+      if (!(p.dahl_displacement_slow.array() > 0).all())
+        fail(source, f + ".dahl_displacement_slow", "must be positive");
+    }
+  } else if (j.contains("dahl_displacement_slow")) {
+    fail(source, f + ".dahl_displacement_slow", "needs coulomb_slow and sqrt_viscous");
   }
   if (j.contains("coulomb_profile") != j.contains("coulomb_profile_range"))
     fail(source, f + (j.contains("coulomb_profile") ? ".coulomb_profile_range" : ".coulomb_profile"),

@@ -85,7 +85,7 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
         if (t > 0) {
           const double dq = rec.position(t, j) - rec.position(t - 1, j);
           z[j] = compute_dahl_state(z[j], dq, choices[j].dahl_displacement);
-          z_slow[j] = compute_dahl_state(z_slow[j], dq, kSlowDahlFactor * choices[j].dahl_displacement);
+          z_slow[j] = compute_dahl_state(z_slow[j], dq, choices[j].slow_dahl_displacement);
         }
         estimators[j].update(rec.time(t), rec.velocity(t, j));
       }

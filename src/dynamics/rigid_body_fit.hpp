@@ -17,6 +17,7 @@ namespace rcm::dynamics::detail {
 // One joint's estimators, as chosen by the candidate search.
 struct JointEstimatorChoice {
   double dahl_displacement = 1e-3;
+  double slow_dahl_displacement = 1e-2;  // of the slow Dahl state
   double causal_window_s = 0.0, causal_filter_s = 0.03;  // compute_step's qddot
   double batch_window_s = 0.0;  // the zero-phase qddot regressed on; 0: the causal one
   // The range the Coulomb profile's knots span (the training range).

@@ -33,10 +33,17 @@
 // direction of the last motion (a LuGre model without Stribeck):
 //   z <- sign(dq) + (z - sign(dq)) exp(-|dq| / x_c).
 // With the rigid-body structure, two more friction terms per joint: a second
-// Dahl state over kSlowDahlFactor times x_c (friction that builds over a longer
-// travel) and sqrt(|dq|) sign(dq), friction that grows with speed but less than
-// linearly (on the real PSM a viscous term fitted at one speed mispredicts the
-// other). Viscous and Coulomb coefficients are kept >= 0 (active set).
+// Dahl state, slower than the first, and sqrt(|dq|) sign(dq), friction that
+// grows with speed but less than linearly. The slow state's displacement is
+// kSlowDahlFactor x_c on yaw and pitch, and an eighth of the travel in the
+// training data on the insertion (kSlowDahlTravelFraction): on the real PSM the
+// insertion's friction at a point of a path is the same at full and half speed
+// but builds over centimetres of the stroke, and a slow state at ten times the
+// bristles' scale (a millimetre) leaves that build-up to the rate-dependent
+// terms, which a fit at one speed then scales wrongly to the other. On yaw and
+// pitch the longer state does not help across speeds on the real arm and
+// spoils the holding torque after short moves on the simulated one
+// (docs/dynamics.md). Viscous and Coulomb coefficients are kept >= 0 (active set).
 // And a Coulomb level that varies along each joint's travel: the Dahl state's
 // coefficient is coulomb + a piecewise-linear profile over knots equally spaced
 // on the training range (zero at the first knot, constant beyond the range),
@@ -70,7 +77,10 @@ inline double compute_dahl_state(double z, double dq, double x_c) {
   return s + (z - s) * std::exp(-std::abs(dq) / x_c);
 }
 
-// The slow Dahl state's characteristic displacement, in units of x_c.
+// The slow Dahl state's characteristic displacement: on the insertion, as a
+// fraction of its travel in the training data (at least x_c); on the other
+// joints, and in model files that do not store it, in units of x_c.
+constexpr double kSlowDahlTravelFraction = 0.125;
 constexpr double kSlowDahlFactor = 10.0;
 // Knots of the Coulomb profile a fit places over each joint's training range.
 constexpr int kCoulombProfileKnots = 6;
@@ -119,10 +129,13 @@ struct LinearTorqueParameters {
   // the potential was fitted free.
   Eigen::VectorXd gravity_direction;
   // Per output joint, with the rigid-body structure (empty: none): the
-  // coefficient of the slow Dahl state (kSlowDahlFactor x_c) and of
-  // compute_sqrt_velocity(qd).
+  // coefficient of the slow Dahl state and of compute_sqrt_velocity(qd).
   Eigen::VectorXd coulomb_slow;
   Eigen::VectorXd sqrt_viscous;
+  // The slow Dahl state's characteristic displacement per output joint (joint
+  // units, > 0), with coulomb_slow; empty: kSlowDahlFactor x dahl_displacement
+  // (model files written before it was stored).
+  Eigen::VectorXd dahl_displacement_slow;
   // Per output joint (empty: none): the Coulomb level's change along the travel
   // at K >= 2 knots equally spaced over [coulomb_profile_range(j, 0),
   // coulomb_profile_range(j, 1)] (M x K, joint units, first column 0), added to
