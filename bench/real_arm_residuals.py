@@ -207,12 +207,16 @@ def pair_table(args, rcm_cli):
                "(the same commanded point). Position: RMS of d q against the joint's RMS excursion. The effort "
                "difference regressed on d qddot (zero-phase cubic, 0.15 s) and a constant: the apparent inertia "
                "(kg m^2, kg) and the offset between the runs (N m, N), with the share R^2 of the difference they "
-               "explain; then R^2 once d qd and d sqrt(|qd|) sign(qd) (friction that depends on the rate) are added. "
+               "explain; then R^2 once d qd and d sqrt(|qd|) sign(qd) (friction that depends on the rate) are added, "
+               "and, instead of those, once the difference of the rigid-body velocity products is (rcm's 19 Lagrange "
+               "terms at zero qddot: centripetal and Coriolis torques, which grow with the square of the speed), with "
+               "the offset then left. "
                "Last two columns: the default fit (`rcm dynamics fit`) on one run predicts both, and the RMS of "
                "what its predicted difference misses of the measured one:\n")
     out.append("| runs | joint | position d / excursion | RMS effort d | apparent inertia | offset between runs | "
-               "R^2 inertia + offset | R^2 with the rate terms | missed, fit on the fast run | missed, fit on the slow run |")
-    out.append("|---|---|---|---|---|---|---|---|---|---|")
+               "R^2 inertia + offset | R^2 with the rate terms | R^2 with the velocity products | offset left | "
+               "missed, fit on the fast run | missed, fit on the slow run |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
     units = ("kg m^2", "kg m^2", "kg")
     insertion = []
     with tempfile.TemporaryDirectory() as work:
@@ -246,6 +250,8 @@ def pair_table(args, rcm_cli):
             qdd_a = zero_phase_acceleration(a["t"], a["qd"])
             qdd_b = zero_phase_acceleration(b["t"], b["qd"])
             sq = lambda v: np.sign(v) * np.sqrt(np.abs(v))
+            products = [stack(rcm.dynamics.compute_inertia_regressor, r["q"], r["qd"], np.zeros_like(r["qd"]))
+                        for r in (a, b)]
             for j in range(3):
                 de = a["tau"][:, j] - b["tau"][:, j]
                 ss = ((de - de.mean()) ** 2).sum()
@@ -254,11 +260,16 @@ def pair_table(args, rcm_cli):
                 r2 = 1.0 - ((de - X @ th) ** 2).sum() / ss
                 Xr = np.column_stack([X, a["qd"][:, j] - b["qd"][:, j], sq(a["qd"][:, j]) - sq(b["qd"][:, j])])
                 r2r = 1.0 - ((de - Xr @ np.linalg.lstsq(Xr, de, rcond=None)[0]) ** 2).sum() / ss
+                dv = products[0][:, j, :] - products[1][:, j, :]
+                Xv = np.column_stack([X, dv[:, np.abs(dv).max(0) > 0]])
+                thv = np.linalg.lstsq(Xv, de, rcond=None)[0]
+                r2v = 1.0 - ((de - Xv @ thv) ** 2).sum() / ss
                 missed = [np.sqrt(((de - (predicted[(n, "fast")][:, j] - predicted[(n, "slow")][:, j])) ** 2).mean())
                           for n in ("fast", "slow")]
                 dq = np.sqrt(((a["q"][:, j] - b["q"][:, j]) ** 2).mean()) / a["q"][:, j].std()
                 out.append(f"| {label} | {JOINTS[j]} | {100 * dq:.1f} % | {np.sqrt((de ** 2).mean()):.3f} {UNITS[j]} | "
-                           f"{th[0]:.3f} {units[j]} | {th[1]:+.3f} {UNITS[j]} | {r2:.2f} | {r2r:.2f} | "
+                           f"{th[0]:.3f} {units[j]} | {th[1]:+.3f} {UNITS[j]} | {r2:.2f} | {r2r:.2f} | {r2v:.2f} | "
+                           f"{thv[1]:+.3f} {UNITS[j]} | "
                            f"{missed[0]:.3f} {UNITS[j]} | {missed[1]:.3f} {UNITS[j]} |")
     out.append("\n**The insertion as each run's default fit sees it**: its mass along the axis (the armature, which "
                "holds the sliding body's mass), fitted with `--no-insertion-stiffness` and by default, and the "

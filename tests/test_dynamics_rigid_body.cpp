@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -499,6 +500,80 @@ TEST(SlowDahlState, TravelsWithTheModelFileAndIsChecked) {
   alone["parameters"].erase("coulomb_slow");
   alone["parameters"].erase("sqrt_viscous");
   expect_error(alone, "dahl_displacement_slow without coulomb_slow");
+}
+
+TEST(FrictionSpeedLimit, FrictionThatBendsOverHoldsBeyondTheFastestSpeedFitted) {
+  // The fit limits the joints whose rate-dependent friction bends over (a
+  // negative viscous coefficient) to the fastest speed it saw, and no other.
+  const rcm::Recording slow = make_rigid_arm_run(0.5, 100.0, 60.0, 8), fast = make_rigid_arm_run(1.0, 200.0, 30.0, 7);
+  rcm::dynamics::FitOptions options;
+  options.verbose = false;
+  const auto fit = rcm::dynamics::fit_linear_torque_model({slow}, options);
+  const auto& model = static_cast<const rcm::dynamics::LinearTorqueModel&>(*fit.model);
+  const auto& p = model.parameters();
+  ASSERT_EQ(p.friction_speed_limit.size(), 3);
+  for (int j = 0; j < 3; ++j) {
+    const double fastest = slow.velocity.col(j).cwiseAbs().maxCoeff();
+    if (p.viscous[j] < 0) {
+      EXPECT_LE(p.friction_speed_limit[j], fastest) << j;
+      EXPECT_GE(p.friction_speed_limit[j], 0.9 * fastest) << j;  // the test split's samples are not fitted
+    } else {
+      EXPECT_EQ(p.friction_speed_limit[j], 0.0) << j;
+    }
+  }
+  // compute_step: beyond a joint's limit the viscous and sqrt terms keep
+  // their value at the limit; within it, and on a joint without one (0),
+  // nothing changes.
+  rcm::dynamics::LinearTorqueParameters bent = p;
+  bent.viscous << -0.1, 0.05, -0.2;
+  bent.sqrt_viscous << 0.3, 0.2, 0.5;
+  Eigen::Vector3d limit;
+  for (int j = 0; j < 3; ++j) limit[j] = 0.5 * fast.velocity.col(j).cwiseAbs().maxCoeff();
+  limit[1] = 0.0;
+  rcm::dynamics::LinearTorqueParameters unlimited_p = bent;
+  bent.friction_speed_limit = limit;
+  unlimited_p.friction_speed_limit.resize(0);
+  const Eigen::MatrixXd limited_tau =
+      rcm::dynamics::predict_torque_streaming(rcm::dynamics::LinearTorqueModel(model.info(), bent), fast);
+  const Eigen::MatrixXd unlimited_tau =
+      rcm::dynamics::predict_torque_streaming(rcm::dynamics::LinearTorqueModel(model.info(), unlimited_p), fast);
+  int beyond = 0;
+  for (Eigen::Index t = 0; t < fast.time.size(); ++t)
+    for (int j = 0; j < 3; ++j) {
+      const double v = fast.velocity(t, j);
+      const double held = limit[j] > 0 ? std::clamp(v, -limit[j], limit[j]) : v;
+      const double expected =
+          bent.viscous[j] * (held - v) +
+          bent.sqrt_viscous[j] * (rcm::dynamics::compute_sqrt_velocity(held) - rcm::dynamics::compute_sqrt_velocity(v));
+      EXPECT_NEAR(limited_tau(t, j) - unlimited_tau(t, j), expected, 1e-9) << "t " << t << " joint " << j;
+      beyond += held != v;
+    }
+  EXPECT_GT(beyond, fast.time.size() / 10);  // the limits do bite
+  // In the model file, checked.
+  const rcm::dynamics::LinearTorqueModel bent_model(model.info(), bent);
+  const nlohmann::json doc = rcm::dynamics::torque_model_to_json(bent_model);
+  ASSERT_TRUE(doc["parameters"].contains("friction_speed_limit"));
+  EXPECT_EQ(rcm::dynamics::torque_model_to_json(*rcm::dynamics::torque_model_from_json(doc, "m.json")), doc);
+  nlohmann::json old = doc;  // written before it was stored: no limit
+  old["parameters"].erase("friction_speed_limit");
+  EXPECT_EQ(static_cast<const rcm::dynamics::LinearTorqueModel&>(*rcm::dynamics::torque_model_from_json(old, "old.json"))
+                .parameters()
+                .friction_speed_limit.size(),
+            0);
+  rcm::dynamics::LinearTorqueParameters with_negative = bent;
+  with_negative.offset << 0.01, -0.01, 0.01;
+  nlohmann::json negative = doc;
+  negative["parameters"]["friction_speed_limit"] = rcm::dynamics::torque_model_to_json(
+      rcm::dynamics::LinearTorqueModel(model.info(), with_negative))["parameters"]["offset"];
+  try {
+    rcm::dynamics::torque_model_from_json(negative, "m.json");
+    ADD_FAILURE() << "accepted a negative speed limit";
+  } catch (const rcm::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("parameters.friction_speed_limit"), std::string::npos) << e.what();
+  }
+  rcm::dynamics::LinearTorqueParameters short_p = bent;
+  short_p.friction_speed_limit.conservativeResize(2);
+  EXPECT_THROW(rcm::dynamics::LinearTorqueModel(model.info(), short_p), std::invalid_argument);
 }
 
 TEST(CoulombProfile, KnotWeightsInterpolateAndHoldBeyondTheRange) {

@@ -213,6 +213,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("sqrt_viscous", &LinearTorqueParameters::sqrt_viscous, "of sqrt(|qd|) sign(qd) (empty: none)")
       .def_readonly("dahl_displacement_slow", &LinearTorqueParameters::dahl_displacement_slow,
                     "the slow Dahl state's characteristic displacement (joint units; empty: none)")
+      .def_readonly("friction_speed_limit", &LinearTorqueParameters::friction_speed_limit,
+                    "per joint, the |qd| beyond which the rate-dependent friction holds (0 or empty: none)")
       .def_readonly("coulomb_profile", &LinearTorqueParameters::coulomb_profile,
                     "the Coulomb level's change along each joint's travel at equally spaced knots (rows: joints; "
                     "empty: constant)")

@@ -493,6 +493,16 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
           j + 1));
   }
 
+  // Rate-dependent friction that bends over is not carried beyond the
+  // fastest each joint moved in the samples fitted (linear_model.hpp).
+  p.friction_speed_limit = Eigen::VectorXd::Zero(M);
+  for (const auto* segments : {&split.train, &split.validation})
+    for (const auto& seg : *segments)
+      p.friction_speed_limit = p.friction_speed_limit.cwiseMax(
+          recordings[seg.recording].velocity.block(seg.begin, 0, seg.size(), M).cwiseAbs().colwise().maxCoeff().transpose());
+  for (int j = 0; j < M; ++j)
+    if (!(p.viscous[j] < 0)) p.friction_speed_limit[j] = 0.0;
+
   TorqueModelInfo info;
   info.num_joints = N;
   info.num_outputs = M;

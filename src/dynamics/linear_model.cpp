@@ -99,6 +99,10 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
     throw std::invalid_argument("linear model: dahl_displacement_slow needs one value per output joint, with coulomb_slow");
   if (!(q.dahl_displacement_slow.array() > 0).all())
     throw std::invalid_argument("linear model: dahl_displacement_slow must be positive");
+  if (q.friction_speed_limit.size() != 0 &&
+      (q.friction_speed_limit.size() != M || !(q.friction_speed_limit.array() >= 0).all() ||
+       !q.friction_speed_limit.allFinite()))
+    throw std::invalid_argument("linear model: friction_speed_limit needs one finite value >= 0 per output joint, or none");
   if (q.stiffness.size() != 0 && (q.stiffness.size() != M || !q.stiffness.allFinite()))
     throw std::invalid_argument("linear model: stiffness needs one finite value per output joint, or none");
   if (q.coulomb_profile.size() != 0 || q.coulomb_profile_range.size() != 0) {
@@ -263,10 +267,13 @@ void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, const do
         ws.z_slow[j] = compute_dahl_state(ws.z_slow[j], q[j] - ws.prev_q[j], p.dahl_displacement_slow[j]);
     }
     const double qdd = ws.acceleration[j];
+    const double v = p.friction_speed_limit.size() && p.friction_speed_limit[j] > 0
+                         ? std::clamp(qd[j], -p.friction_speed_limit[j], p.friction_speed_limit[j])
+                         : qd[j];
     double value =
-        p.armature[j] * qdd + p.viscous[j] * qd[j] + get_coulomb_level(j, q[j]) * ws.z[j] + p.offset[j];
+        p.armature[j] * qdd + p.viscous[j] * v + get_coulomb_level(j, q[j]) * ws.z[j] + p.offset[j];
     if (j < 3) value += ws.Y.row(j).dot(p.gravity);
-    if (has_extra_friction_) value += p.coulomb_slow[j] * ws.z_slow[j] + p.sqrt_viscous[j] * compute_sqrt_velocity(qd[j]);
+    if (has_extra_friction_) value += p.coulomb_slow[j] * ws.z_slow[j] + p.sqrt_viscous[j] * compute_sqrt_velocity(v);
     if (p.stiffness.size()) value += p.stiffness[j] * q[j];
     tau[j] = value;
     ws.prev_q[j] = q[j];
@@ -329,6 +336,7 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
   if (p.coulomb_slow.size()) j["coulomb_slow"] = detail::encode_vector(p.coulomb_slow);
   if (p.sqrt_viscous.size()) j["sqrt_viscous"] = detail::encode_vector(p.sqrt_viscous);
   if (p.dahl_displacement_slow.size()) j["dahl_displacement_slow"] = detail::encode_vector(p.dahl_displacement_slow);
+  if (p.friction_speed_limit.size()) j["friction_speed_limit"] = detail::encode_vector(p.friction_speed_limit);
   if (p.coulomb_profile.size()) {
     j["coulomb_profile"] = detail::encode_array(p.coulomb_profile);
     j["coulomb_profile_range"] = detail::encode_array(p.coulomb_profile_range);
@@ -397,6 +405,11 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
     }
   } else if (j.contains("dahl_displacement_slow")) {
     fail(source, f + ".dahl_displacement_slow", "needs coulomb_slow and sqrt_viscous");
+  }
+  if (j.contains("friction_speed_limit")) {
+    p.friction_speed_limit = decode_vector_d(j["friction_speed_limit"], source, f + ".friction_speed_limit", M);
+    if (!(p.friction_speed_limit.array() >= 0).all() || !p.friction_speed_limit.allFinite())
+      fail(source, f + ".friction_speed_limit", "must be finite and >= 0 (0: no limit)");
   }
   if (j.contains("coulomb_profile") != j.contains("coulomb_profile_range"))
     fail(source, f + (j.contains("coulomb_profile") ? ".coulomb_profile_range" : ".coulomb_profile"),

@@ -44,6 +44,13 @@
 // pitch the longer state does not help across speeds on the real arm and
 // spoils the holding torque after short moves on the simulated one
 // (docs/dynamics.md). Viscous and Coulomb coefficients are kept >= 0 (active set).
+// Where the fitted rate-dependent friction bends over (a negative viscous
+// term under the sqrt one: friction that saturates with speed), it is held at
+// its value at the fastest speed the fit saw rather than continued past the
+// bend (friction_speed_limit): on the real PSM a fit at half speed that
+// carries its curve to full speed predicts friction the arm does not show
+// there. Friction that grows linearly at the top of the fitted range goes on
+// growing.
 // And a Coulomb level that varies along each joint's travel: the Dahl state's
 // coefficient is coulomb + a piecewise-linear profile over knots equally spaced
 // on the training range (zero at the first knot, constant beyond the range),
@@ -136,6 +143,11 @@ struct LinearTorqueParameters {
   // units, > 0), with coulomb_slow; empty: kSlowDahlFactor x dahl_displacement
   // (model files written before it was stored).
   Eigen::VectorXd dahl_displacement_slow;
+  // Per output joint (empty: none for any): beyond this |qd| the
+  // rate-dependent friction (viscous, sqrt_viscous) keeps its value there
+  // (above); 0: no limit. The fit sets the largest |qd| it saw on the joints
+  // whose viscous coefficient is negative.
+  Eigen::VectorXd friction_speed_limit;
   // Per output joint (empty: none): the Coulomb level's change along the travel
   // at K >= 2 knots equally spaced over [coulomb_profile_range(j, 0),
   // coulomb_profile_range(j, 1)] (M x K, joint units, first column 0), added to
