@@ -39,7 +39,7 @@ constexpr double kRigidBodyTolerance = 1.25;
 // take from the noise of one path.
 constexpr double kProfileGain = 0.01;
 // Joints 1-3 of the structure are yaw, pitch and insertion.
-constexpr int kInsertionJoint = 2;
+constexpr int kPitchJoint = 1, kInsertionJoint = 2;
 
 // Gram matrix of one joint's regressor [gravity (17, joints 1-3), qdd, v, z, 1]
 // and its products with the torque, for one x_c and one qddot candidate.
@@ -362,7 +362,7 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
     std::vector<detail::JointEstimatorChoice> estimators(M);
     for (int j = 0; j < M; ++j) {
       hi[j] = std::max(hi[j], lo[j] + 1e-6);
-      const double slow = j == kInsertionJoint
+      const double slow = j == kPitchJoint || j == kInsertionJoint
                               ? std::max(kSlowDahlTravelFraction * (hi[j] - lo[j]), p.dahl_displacement[j])
                               : kSlowDahlFactor * p.dahl_displacement[j];
       estimators[j] = {p.dahl_displacement[j], slow, p.acceleration_window_s[j], p.acceleration_filter_s[j],

@@ -35,15 +35,17 @@
 // With the rigid-body structure, two more friction terms per joint: a second
 // Dahl state, slower than the first, and sqrt(|dq|) sign(dq), friction that
 // grows with speed but less than linearly. The slow state's displacement is
-// kSlowDahlFactor x_c on yaw and pitch, and an eighth of the travel in the
-// training data on the insertion (kSlowDahlTravelFraction): on the real PSM the
-// insertion's friction at a point of a path is the same at full and half speed
-// but builds over centimetres of the stroke, and a slow state at ten times the
-// bristles' scale (a millimetre) leaves that build-up to the rate-dependent
-// terms, which a fit at one speed then scales wrongly to the other. On yaw and
-// pitch the longer state does not help across speeds on the real arm and
-// spoils the holding torque after short moves on the simulated one
-// (docs/dynamics.md). Viscous and Coulomb coefficients are kept >= 0 (active set).
+// an eighth of the travel in the training data on pitch and insertion
+// (kSlowDahlTravelFraction), kSlowDahlFactor x_c on yaw: on the real PSM the
+// friction at a point of a path is the same at full and half speed but builds
+// over a good part of the stroke, and a slow state at ten times the bristles'
+// scale (a millimetre on the insertion) leaves that build-up to the
+// rate-dependent terms, which a fit at one speed then scales wrongly to the
+// other. On yaw the longer state makes no difference across speeds on the
+// real arm and spoils the holding torque after the short approaches of static
+// holds on the simulated one (docs/dynamics.md).
+// Viscous and Coulomb coefficients are kept >= 0 (active set), but for the
+// rigid-body fit's viscous one, which may bend a sqrt-viscous one over.
 // Where the fitted rate-dependent friction bends over (a negative viscous
 // term under the sqrt one: friction that saturates with speed), it is held at
 // its value at the fastest speed the fit saw rather than continued past the
@@ -84,9 +86,9 @@ inline double compute_dahl_state(double z, double dq, double x_c) {
   return s + (z - s) * std::exp(-std::abs(dq) / x_c);
 }
 
-// The slow Dahl state's characteristic displacement: on the insertion, as a
-// fraction of its travel in the training data (at least x_c); on the other
-// joints, and in model files that do not store it, in units of x_c.
+// The slow Dahl state's characteristic displacement: on pitch and insertion, as
+// a fraction of the joint's travel in the training data (at least x_c); on the
+// other joints, and in model files that do not store it, in units of x_c.
 constexpr double kSlowDahlTravelFraction = 0.125;
 constexpr double kSlowDahlFactor = 10.0;
 // Knots of the Coulomb profile a fit places over each joint's training range.
