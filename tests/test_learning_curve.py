@@ -27,15 +27,16 @@ SCRIPT = os.path.join(ROOT, "bench", "learning_curve.py")
 # same for every length, so what moves a point is only which motion the fit
 # saw, and how the fit's discrete choices fall on the validation fifth of a
 # short recording (its Dahl displacement, its qddot window, whether the slow
-# Coulomb and square-root velocity terms enter). Those choices move yaw's
-# held-out error by up to about a fifth from one length to the next on a seed,
-# pitch's and the insertion's (which sits on the effort sensor's noise) by a
-# few per cent: the "Largest rise" line of docs/dynamics.md, "Learning curves",
-# measured over three seeds and both kinds of data. 10 % is twice what pitch
-# and the insertion show; yaw needs 25 % to stay above its own noise. A rise
-# beyond them is what a fit that loses data, or a truncation that feeds it the
-# wrong rows, produces.
-TOLERANCE = (0.25, 0.10, 0.10)
+# Coulomb and square-root velocity terms enter), and on pitch the travel the
+# recording covers, an eighth of which its slow friction state spans. Those
+# move yaw's and pitch's held-out error by up to about a fifth from one length
+# of teleoperation to the next on a seed, the insertion's (which sits on the
+# effort sensor's noise) by well under a per cent: the "Largest rise" line of
+# docs/dynamics.md, "Learning curves", measured over three seeds. 10 % is far
+# above what the insertion shows; yaw and pitch need 25 % to stay above their
+# own noise. A rise beyond them is what a fit that loses data, or a truncation
+# that feeds it the wrong rows, produces.
+TOLERANCE = (0.25, 0.25, 0.10)
 
 
 def check(points, tolerance=TOLERANCE):
@@ -67,13 +68,13 @@ def self_test():
                 "rmse": [0.02, 0.03, 0.2], "nrmse_percent": nrmse}
     good = [point("teleoperation", 0.5, [0.60, 0.85, 4.1]), point("teleoperation", 1, [0.65, 0.80, 4.1]),
             point("teleoperation", 2, [0.55, 0.80, 4.0])]
-    rising = good[:2] + [point("teleoperation", 2, [0.55, 0.90, 4.0])]
+    rising = good[:2] + [point("teleoperation", 2, [0.55, 1.08, 4.0])]
     nan = good[:2] + [point("teleoperation", 2, [0.55, float("nan"), 4.0])]
     failures = []
     if check(good):
         failures.append(f"a curve within tolerance was flagged: {check(good)}")
     if not any("pitch" in m and "2 min" in m for m in check(rising)):
-        failures.append("a rise of 12.5 % on pitch was not flagged")
+        failures.append("a rise of 35 % on pitch was not flagged")
     if not any("yaw" in m for m in check(good[:1] + [point("teleoperation", 1, [0.80, 0.85, 4.1])])):
         failures.append("a rise of 33 % on yaw was not flagged")
     if not any("not finite" in m for m in check(nan)):
