@@ -80,7 +80,7 @@ bench: build
 	$(PYTHON) bench/run_benchmarks.py --build $(BUILD)
 
 # Interval coverage and method errors per friction model, free-space path and
-# length (about 40 minutes on 2 cores); writes its table into docs/estimation.md.
+# length (about 15 minutes on 2 cores); writes its table into docs/estimation.md.
 COVERAGE_SEEDS ?= 1,2
 coverage: build
 	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
