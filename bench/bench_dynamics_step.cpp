@@ -105,8 +105,9 @@ static void BM_LinearModelStep(benchmark::State& state) {
 BENCHMARK(BM_LinearModelStep);
 
 // The structure the default fit gives a yaw / pitch / insertion arm: the
-// rigid-body inertia, the slow Dahl state and sqrt-velocity friction, a
-// Coulomb level along each joint's travel and a stiffness.
+// rigid-body inertia, the slow Dahl state and sqrt-velocity friction held
+// beyond a speed limit, a Coulomb level along each joint's travel and a
+// stiffness.
 static void BM_LinearModelStepFittedStructure(benchmark::State& state) {
   LinearTorqueParameters p{Eigen::VectorXd::Ones(17), Eigen::VectorXd::Ones(6), Eigen::VectorXd::Ones(6),
                            Eigen::VectorXd::Ones(6), Eigen::VectorXd::Ones(6), Eigen::VectorXd::Constant(6, 1e-3)};
@@ -117,6 +118,8 @@ static void BM_LinearModelStepFittedStructure(benchmark::State& state) {
   p.coulomb_profile_range.col(0).setConstant(-1.0);
   p.coulomb_profile_range.col(1).setConstant(1.0);
   p.stiffness = Eigen::VectorXd::Constant(6, 0.2);
+  p.dahl_displacement_slow = Eigen::VectorXd::Constant(6, 0.02);
+  p.friction_speed_limit = Eigen::VectorXd::Constant(6, 0.5);
   LinearTorqueModel m(info6(), p);
   run(state, m);
 }
@@ -137,6 +140,8 @@ static void BM_LinearModelStepLiveZeroPhase(benchmark::State& state) {
   p.inertia = Eigen::VectorXd::Constant(19, 0.1);
   p.coulomb_slow = p.sqrt_viscous = Eigen::VectorXd::Constant(3, 0.1);
   p.stiffness = Eigen::VectorXd::Constant(3, 0.2);
+  p.dahl_displacement_slow = Eigen::VectorXd::Constant(3, 0.02);
+  p.friction_speed_limit = Eigen::VectorXd::Constant(3, 0.5);
   p.batch_acceleration_window_s = Eigen::VectorXd::Constant(3, window);
   p.live_zero_phase = true;
   LinearTorqueModel m(info, p);
