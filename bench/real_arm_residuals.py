@@ -239,8 +239,9 @@ def pair_table(args, rcm_cli):
                      train], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                 with_k = rcm.dynamics.load_torque_model(model).parameters
                 without = rcm.dynamics.load_torque_model(plain).parameters
-                insertion.append(f"| {label}, {name} run | {without.armature[2]:.3f} kg | {with_k.armature[2]:.3f} kg | "
-                                 f"{with_k.stiffness[2]:.2f} N/m |")
+                insertion.append(f"| {label}, {name} run | {with_k.armature[0]:.4f} kg m^2 | "
+                                 f"{with_k.armature[1]:.4f} kg m^2 | {without.armature[2]:.3f} kg | "
+                                 f"{with_k.armature[2]:.3f} kg | {with_k.stiffness[2]:.2f} N/m |")
                 for which, path in (("fast", fast), ("slow", slow)):
                     pred = os.path.join(work, "pred.csv")
                     run([rcm_cli, "dynamics", "eval", model, path, "--json", "--predictions", pred],
@@ -271,11 +272,13 @@ def pair_table(args, rcm_cli):
                            f"{th[0]:.3f} {units[j]} | {th[1]:+.3f} {UNITS[j]} | {r2:.2f} | {r2r:.2f} | {r2v:.2f} | "
                            f"{thv[1]:+.3f} {UNITS[j]} | "
                            f"{missed[0]:.3f} {UNITS[j]} | {missed[1]:.3f} {UNITS[j]} |")
-    out.append("\n**The insertion as each run's default fit sees it**: its mass along the axis (the armature, which "
-               "holds the sliding body's mass), fitted with `--no-insertion-stiffness` and by default, and the "
-               "stiffness the default fit found:\n")
-    out.append("| run | mass, no stiffness | mass, default | stiffness |")
-    out.append("|---|---|---|---|")
+    out.append("\n**Each run's default fit**: the constant inertia it found on yaw and pitch (the armature; the "
+               "configuration-dependent part is the rigid-body terms), the insertion's mass along the axis (the "
+               "armature, which holds the sliding body's mass) fitted with `--no-insertion-stiffness` and by default, "
+               "and the stiffness the default fit found:\n")
+    out.append("| run | yaw armature | pitch armature | insertion mass, no stiffness | insertion mass, default | "
+               "stiffness |")
+    out.append("|---|---|---|---|---|---|")
     out += insertion
     block = "\n".join(out)
     print(block)
