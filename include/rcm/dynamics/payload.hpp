@@ -10,9 +10,11 @@
 // rotation about z and joint offsets move into the moments), so e is read
 // from the fitted model: the direction of its own sliding body's moment v2.
 // Those four are what a short recording with the payload re-identifies on a
-// linear model fitted without it; inertia and friction are kept (a payload of
-// an instrument's size changes the gravity torque far more than the inertia
-// at the dVRK's accelerations).
+// linear model fitted without it; inertia and friction are kept. The
+// payload's own inertia is left out with them: on the real PSM a mass on the
+// insertion stage sits about half a metre from the RCM, and its inertia is
+// a good part of what the refitted model still misses on yaw and pitch at
+// full speed (docs/dynamics.md).
 
 #include <Eigen/Core>
 #include <memory>
