@@ -156,12 +156,14 @@ def payload_table(args, rcm_cli, J):
     out.append(f"\n**Payload re-identified** (`rcm dynamics payload` on the first {args.refit_seconds:g} s of the "
                "second recording, which has the new payload; then `rcm dynamics eval` on the third; the default "
                "linear model). Torque RMSE yaw / pitch (N m) / insertion (N), and the force error at D = 30 mm, "
-               "theta = 20 deg, before and after; last column: what the re-identified model's yaw and pitch "
+               "theta = 20 deg, before and after; the inertia the refit added to the yaw and pitch armatures; "
+               "last column: what the re-identified model's yaw and pitch "
                "residuals on the third recording hold of an inertia (regressed after the fact on qddot, zero-phase "
                "cubic over 0.15 s, and a constant), and the RMS that leaves:\n")
     out.append("| split | without | force error (N) | re-identified | force error (N) | first moment found (N m) | "
-               "weight along the instrument found (N) | inertia left, yaw / pitch |")
-    out.append("|---|---|---|---|---|---|---|---|")
+               "weight along the instrument found (N) | inertia found, yaw / pitch (kg m^2) | "
+               "inertia left, yaw / pitch |")
+    out.append("|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as work:
         for s in args.payload_split:
             label, files = s.split("=", 1)
@@ -202,8 +204,9 @@ def payload_table(args, rcm_cli, J):
                 left.append(f"{th[0]:+.3f} kg m^2 ({np.sqrt((r[:, j] ** 2).mean()):.3f} -> "
                             f"{np.sqrt(((r[:, j] - X @ th) ** 2).mean()):.3f} N m)")
             h = np.linalg.norm(found["payload"]["first_moment_n_m"])
+            inertia = found["payload"]["inertia_kg_m2"]
             out.append(f"| {label} | " + " | ".join(cells) + f" | {h:.3f} | {abs(found['payload']['weight_n']):.2f} | "
-                       + " / ".join(left) + " |")
+                       f"{inertia[0]:+.3f} / {inertia[1]:+.3f} | " + " / ".join(left) + " |")
 
     block = "\n".join(out)
     print(block)

@@ -1,5 +1,6 @@
 // Payload re-identification: the four payload terms are the gradient of the
-// sliding body's potential; a weight added to the simulated arm's insertion
+// sliding body's potential; a known payload and inertia are recovered exactly
+// from a recording the model made; a weight added to the simulated arm's insertion
 // stage after the free-space fit is re-identified from a minute of motion and
 // the model predicts another recording with it as well as a model fitted with
 // it; what cannot identify it is refused; `rcm dynamics payload` writes the
@@ -105,6 +106,38 @@ TEST(PayloadRefit, AWeightOnTheInsertionStageIsReidentifiedFromAMinute) {
   for (int j = 0; j < 3; ++j) EXPECT_LE(refit.rms_after[j], refit.rms_before[j] + 1e-12);
   // The refitted model says what was done to it.
   ASSERT_TRUE(refit.model->info().training.contains("payload_refit"));
+}
+
+// A recording made by the model itself with a known payload and inertia added
+// (its gravity moved by the payload's moments, its yaw and pitch armatures
+// raised): the refit returns those numbers and a model that reproduces the
+// recording.
+TEST(PayloadRefit, RecoversAKnownPayloadAndInertiaExactly) {
+  using namespace rcm::dynamics;
+  const rcm::Recording light = simulate_free_space(0.0, 120.0, 7);
+  const auto fit = fit_linear_torque_model({light}, quiet());
+  const auto& model = static_cast<const LinearTorqueModel&>(*fit.model);
+  LinearTorqueParameters p = model.parameters();
+  const Eigen::Vector3d e = get_instrument_axis(p);
+  Eigen::Matrix<double, 17, kGravityMoments> P;
+  compute_gravity_moment_map(p.gravity_direction, P);
+  Eigen::Matrix<double, kGravityMoments, 1> v = Eigen::Matrix<double, kGravityMoments, 1>::Zero();
+  const Eigen::Vector4d payload(0.08, -0.3, 0.45, 1.2);  // h (N m), m along e (N)
+  v.segment<3>(1) = payload.head<3>();
+  v.segment<3>(4) = payload[3] * e;
+  p.gravity += P * v;
+  const Eigen::Vector2d inertia(0.04, -0.02);
+  p.armature.head<2>() += inertia;
+  const LinearTorqueModel truth(model.info(), p);
+  rcm::Recording heavy = simulate_free_space(0.0, 60.0, 8);
+  heavy.effort.leftCols(3) = predict_torque(truth, heavy);
+
+  const PayloadRefit refit = refit_payload(model, {heavy});
+  for (int k = 0; k < 4; ++k) EXPECT_NEAR(refit.payload[k], payload[k], 1e-6) << "term " << k << " " << refit.to_json().dump();
+  for (int j = 0; j < 2; ++j) EXPECT_NEAR(refit.inertia[j], inertia[j], 1e-6) << "joint " << j + 1;
+  const Eigen::MatrixXd again = predict_torque(*refit.model, heavy);
+  EXPECT_LT((again - heavy.effort.leftCols(3)).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_EQ(refit.to_json()["payload"]["inertia_kg_m2"].size(), 2u);
 }
 
 TEST(PayloadRefit, RefusesWhatCannotIdentifyIt) {

@@ -264,9 +264,10 @@ void run_payload(const DynamicsArgs& a) {
                     fmt::format("{:.4g} {}", refit.rms_after[j], unit)});
   }
   std::cout << fmt::format("payload re-identified on {} samples (reciprocal condition {:.2g}): first moment "
-                           "[{:.4g}, {:.4g}, {:.4g}] N m, weight along the instrument {:.4g} N\n",
+                           "[{:.4g}, {:.4g}, {:.4g}] N m, weight along the instrument {:.4g} N, inertia about yaw "
+                           "{:.4g} kg m^2 and pitch {:.4g} kg m^2\n",
                            refit.samples, refit.reciprocal_condition, refit.payload[0], refit.payload[1],
-                           refit.payload[2], refit.payload[3])
+                           refit.payload[2], refit.payload[3], refit.inertia[0], refit.inertia[1])
             << rcm::cli::format_table({"joint", "RMS residual before", "after"}, rows) << "wrote " << a.out << "\n";
 }
 

@@ -84,12 +84,16 @@ class TestDynamics(unittest.TestCase):
 
     def test_refit_payload(self):
         # On the recording the model was fitted on there is no payload to find:
-        # the residual does not grow and the weight found is small; the model it
+        # the residual does not grow, the weight and the inertia found are small
+        # (the inertia against the armatures the fit found); the model it
         # returns predicts like any other. A generic potential is refused.
         free = rcm.load_recording(session_file("free_space.csv"))
         out = rcm.dynamics.refit_payload(self.model(), [free])
         self.assertEqual(out["samples"], free.num_samples)
         self.assertLess(abs(out["payload"]["weight_n"]), 0.2)
+        armature = self.model().parameters.armature
+        for j in range(2):
+            self.assertLess(abs(out["payload"]["inertia_kg_m2"][j]), 0.05 * armature[j])
         for before, after in zip(out["rms_before"], out["rms_after"]):
             self.assertLessEqual(after, before + 1e-12)
         self.assertEqual(rcm.dynamics.predict_torque(out["model"], free).shape, (free.num_samples, 3))

@@ -29,7 +29,10 @@ Eigen::Matrix<double, G, kPayloadTerms> compute_payload_coefficient_map(const Ei
   return P * S;
 }
 
-const char* const kTermNames[kPayloadTerms] = {"h_x", "h_y", "h_z", "m"};
+// The refit's terms: the payload's gravity (compute_payload_regressor) and its
+// inertia about the yaw and pitch axes, the change of those joints' armatures.
+constexpr int kRefitTerms = kPayloadTerms + 2;
+const char* const kTermNames[kRefitTerms] = {"h_x", "h_y", "h_z", "m", "inertia_yaw", "inertia_pitch"};
 
 }  // namespace
 
@@ -60,7 +63,9 @@ Eigen::Vector3d get_instrument_axis(const LinearTorqueParameters& p) {
 
 nlohmann::json PayloadRefit::to_json() const {
   nlohmann::json j;
-  j["payload"] = {{"first_moment_n_m", {payload[0], payload[1], payload[2]}}, {"weight_n", payload[3]}};
+  j["payload"] = {{"first_moment_n_m", {payload[0], payload[1], payload[2]}},
+                  {"weight_n", payload[3]},
+                  {"inertia_kg_m2", {inertia[0], inertia[1]}}};
   j["rms_before"] = {rms_before[0], rms_before[1], rms_before[2]};
   j["rms_after"] = {rms_after[0], rms_after[1], rms_after[2]};
   j["instrument_axis"] = {instrument_axis[0], instrument_axis[1], instrument_axis[2]};
@@ -79,12 +84,12 @@ PayloadRefit refit_payload(const LinearTorqueModel& model, const std::vector<Rec
   const Eigen::Vector3d e = get_instrument_axis(p);
   const Eigen::Matrix<double, G, kPayloadTerms> B = compute_payload_coefficient_map(p.gravity_direction, e);
 
-  // Normal equations of the residual r = effort - model on the payload terms,
+  // Normal equations of the residual r = effort - model on the refit's terms,
   // per joint (A = sum over joints of A_j), pooled over every recording: they
   // also give each joint's residual after the refit,
   // |r_j - Y_j x|^2 = |r_j|^2 - 2 x.b_j + x' A_j x, without a second pass.
-  using Normal = Eigen::Matrix<double, kPayloadTerms, kPayloadTerms>;
-  using Terms = Eigen::Matrix<double, kPayloadTerms, 1>;
+  using Normal = Eigen::Matrix<double, kRefitTerms, kRefitTerms>;
+  using Terms = Eigen::Matrix<double, kRefitTerms, 1>;
   std::array<Normal, 3> A_joint;
   std::array<Terms, 3> b_joint;
   for (int j = 0; j < 3; ++j) {
@@ -99,11 +104,22 @@ PayloadRefit refit_payload(const LinearTorqueModel& model, const std::vector<Rec
       throw InputError(InputLocation::plain(rec.source, "position"),
                        fmt::format("expected joints 1-3 (yaw, pitch, insertion); the recording has {}", rec.num_joints()));
     const Eigen::MatrixXd predicted = predict_torque(model, rec);
+    // The armature's column is whatever qddot estimate the model multiplies it
+    // by: the change of the prediction when the armature grows by one.
+    Eigen::MatrixXd qdd(predicted.rows(), 2);
+    for (int j = 0; j < 2; ++j) {
+      LinearTorqueParameters unit = p;
+      unit.armature[j] += 1.0;
+      qdd.col(j) = predict_torque(LinearTorqueModel(model.info(), std::move(unit)), rec).col(j) - predicted.col(j);
+    }
+    Eigen::Matrix<double, 3, kRefitTerms> Y = Eigen::Matrix<double, 3, kRefitTerms>::Zero();
     for (Eigen::Index t = 0; t < predicted.rows(); ++t) {
       // A recording's matrices are column-major: joint values of one sample are not contiguous.
       const double q[3] = {rec.position(t, 0), rec.position(t, 1), rec.position(t, 2)};
       LinearTorqueModel::compute_gravity_regressor(q, Yg);
-      const Eigen::Matrix<double, 3, kPayloadTerms> Y = Yg * B;
+      Y.leftCols<kPayloadTerms>().noalias() = Yg * B;
+      Y(0, kPayloadTerms) = qdd(t, 0);
+      Y(1, kPayloadTerms + 1) = qdd(t, 1);
       for (int j = 0; j < 3; ++j) {
         const double r = rec.effort(t, j) - predicted(t, j);
         A_joint[j].noalias() += Y.row(j).transpose() * Y.row(j);
@@ -118,7 +134,7 @@ PayloadRefit refit_payload(const LinearTorqueModel& model, const std::vector<Rec
   const Normal A = A_joint[0] + A_joint[1] + A_joint[2];
   const Terms b = b_joint[0] + b_joint[1] + b_joint[2];
 
-  // Whether the motion tells the four terms apart.
+  // Whether the motion tells the six terms apart.
   double lo = 0.0, hi = 0.0;
   Eigen::Index worst = 0;
   const bool nonzero = detail::get_scaled_extreme_eigenvalues(A, lo, hi, &worst);
@@ -132,14 +148,17 @@ PayloadRefit refit_payload(const LinearTorqueModel& model, const std::vector<Rec
   }
 
   PayloadRefit out;
-  out.payload = A.ldlt().solve(b);
+  const Terms x = A.ldlt().solve(b);
+  out.payload = x.head<kPayloadTerms>();
+  out.inertia = x.tail<2>();
   out.instrument_axis = e;
   out.reciprocal_condition = rcond;
   out.samples = samples;
   LinearTorqueParameters refit = p;
   refit.gravity += B * out.payload;
+  refit.armature.head<2>() += out.inertia;
   for (int j = 0; j < 3; ++j) {
-    const double after = sum_sq[j] - 2.0 * out.payload.dot(b_joint[j]) + out.payload.dot(A_joint[j] * out.payload);
+    const double after = sum_sq[j] - 2.0 * x.dot(b_joint[j]) + x.dot(A_joint[j] * x);
     out.rms_before[j] = std::sqrt(sum_sq[j] / static_cast<double>(samples));
     out.rms_after[j] = std::sqrt(std::max(after, 0.0) / static_cast<double>(samples));
   }

@@ -10,11 +10,12 @@
 // rotation about z and joint offsets move into the moments), so e is read
 // from the fitted model: the direction of its own sliding body's moment v2.
 // Those four are what a short recording with the payload re-identifies on a
-// linear model fitted without it; inertia and friction are kept. The
-// payload's own inertia is left out with them: on the real PSM a mass on the
-// insertion stage sits about half a metre from the RCM, and its inertia is
-// a good part of what the refitted model still misses on yaw and pitch at
-// full speed (docs/dynamics.md).
+// linear model fitted without it, with two more: the payload's inertia about
+// the yaw and pitch axes, as changes of those joints' armatures. On the real
+// PSM a mass on the insertion stage sits about half a metre up the instrument
+// from the RCM, and without its inertia the refitted model misses a good part
+// of the yaw and pitch torque at full speed (docs/dynamics.md). Friction and
+// the configuration-dependent inertia are kept.
 
 #include <Eigen/Core>
 #include <memory>
@@ -41,15 +42,16 @@ void compute_payload_regressor(const Eigen::Vector3d& g, const Eigen::Vector3d& 
 Eigen::Vector3d get_instrument_axis(const LinearTorqueParameters& parameters);
 
 struct PayloadRefitOptions {
-  // Below this reciprocal condition number of the four terms' normal matrix
+  // Below this reciprocal condition number of the six terms' normal matrix
   // (scaled to unit columns) the recording does not move the arm enough to
   // tell them apart: an InputError says which, instead of a guess.
   double min_reciprocal_condition = 1e-6;
 };
 
 struct PayloadRefit {
-  std::unique_ptr<LinearTorqueModel> model;  // the input model with the payload's gravity added
+  std::unique_ptr<LinearTorqueModel> model;  // the input model with the payload's gravity and inertia added
   Eigen::Matrix<double, kPayloadTerms, 1> payload;  // [h_x, h_y, h_z, m] times |g| (N m, N)
+  Eigen::Vector2d inertia = Eigen::Vector2d::Zero();  // added to the yaw and pitch armatures (kg m^2)
   Eigen::Vector3d instrument_axis = Eigen::Vector3d::Zero();  // e, the moments' frame
   Eigen::Vector3d rms_before = Eigen::Vector3d::Zero();  // per joint, on the recordings given
   Eigen::Vector3d rms_after = Eigen::Vector3d::Zero();
@@ -63,7 +65,7 @@ struct PayloadRefit {
 // gravity direction). Linear least squares on the residual of the model's
 // whole-recording prediction. Throws InputError for a model without the
 // structure, fewer than three joints, no samples, or a recording that does not
-// identify the four terms.
+// identify the six terms.
 PayloadRefit refit_payload(const LinearTorqueModel& model, const std::vector<Recording>& recordings,
                            const PayloadRefitOptions& options = {});
 
