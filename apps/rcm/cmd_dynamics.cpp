@@ -355,7 +355,7 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   pl->add_option("model", args->model_path, "linear model fitted without the payload")->required();
   pl->add_option("recordings", args->recordings, "free-space recordings with the payload (a minute of motion)")
       ->required();
-  pl->add_option("--out", args->out, "model file to write: the model with the payload's gravity")->required();
+  pl->add_option("--out", args->out, "model file to write: the model with the payload's gravity and inertia")->required();
   pl->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   pl->add_flag("--json", args->json, "print the payload and the residuals as one JSON object");
   pl->callback([args] { run_payload(*args); });

@@ -1,6 +1,6 @@
 #pragma once
 // A payload change on the insertion stage (another instrument, a camera, a
-// clip): only the sliding body's mass and first moment change. Under the
+// clip): the sliding body's mass, first moment and inertia change. Under the
 // rigid-body potential (rigid_body.hpp) that body contributes
 //   U = g . Rz(q1) Rx(q2) (h + q3 m e),
 // e the instrument axis in the frame of the potential's moments, so the
