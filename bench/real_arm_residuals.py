@@ -156,14 +156,15 @@ def payload_table(args, rcm_cli, J):
     out.append(f"\n**Payload re-identified** (`rcm dynamics payload` on the first {args.refit_seconds:g} s of the "
                "second recording, which has the new payload; then `rcm dynamics eval` on the third; the default "
                "linear model). Torque RMSE yaw / pitch (N m) / insertion (N), and the force error at D = 30 mm, "
-               "theta = 20 deg, before and after; the inertia the refit added to the yaw and pitch armatures; "
+               "theta = 20 deg, before and after; the inertia the refit added to the yaw and pitch armatures; the "
+               "angle between the model's gravity direction and the one the refit found; "
                "last column: what the re-identified model's yaw and pitch "
                "residuals on the third recording hold of an inertia (regressed after the fact on qddot, zero-phase "
                "cubic over 0.15 s, and a constant), and the RMS that leaves:\n")
     out.append("| split | without | force error (N) | re-identified | force error (N) | first moment found (N m) | "
-               "weight along the instrument found (N) | inertia found, yaw / pitch (kg m^2) | "
+               "weight along the instrument found (N) | inertia found, yaw / pitch (kg m^2) | gravity direction moved | "
                "inertia left, yaw / pitch |")
-    out.append("|---|---|---|---|---|---|---|---|---|")
+    out.append("|---|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as work:
         for s in args.payload_split:
             label, files = s.split("=", 1)
@@ -205,8 +206,10 @@ def payload_table(args, rcm_cli, J):
                             f"{np.sqrt(((r[:, j] - X @ th) ** 2).mean()):.3f} N m)")
             h = np.linalg.norm(found["payload"]["first_moment_n_m"])
             inertia = found["payload"]["inertia_kg_m2"]
+            g0 = np.asarray(rcm.dynamics.load_torque_model(model).parameters.gravity_direction)
+            moved = np.degrees(np.arccos(np.clip(np.dot(g0, found["gravity_direction"]), -1.0, 1.0)))
             out.append(f"| {label} | " + " | ".join(cells) + f" | {h:.3f} | {abs(found['payload']['weight_n']):.2f} | "
-                       f"{inertia[0]:+.3f} / {inertia[1]:+.3f} | " + " / ".join(left) + " |")
+                       f"{inertia[0]:+.3f} / {inertia[1]:+.3f} | {moved:.0f} deg | " + " / ".join(left) + " |")
 
     block = "\n".join(out)
     print(block)

@@ -265,9 +265,10 @@ void run_payload(const DynamicsArgs& a) {
   }
   std::cout << fmt::format("payload re-identified on {} samples (reciprocal condition {:.2g}): first moment "
                            "[{:.4g}, {:.4g}, {:.4g}] N m, weight along the instrument {:.4g} N, inertia about yaw "
-                           "{:.4g} kg m^2 and pitch {:.4g} kg m^2\n",
+                           "{:.4g} kg m^2 and pitch {:.4g} kg m^2; gravity direction [{:.4f}, {:.4f}, {:.4f}]\n",
                            refit.samples, refit.reciprocal_condition, refit.payload[0], refit.payload[1],
-                           refit.payload[2], refit.payload[3], refit.inertia[0], refit.inertia[1])
+                           refit.payload[2], refit.payload[3], refit.inertia[0], refit.inertia[1],
+                           refit.gravity_direction[0], refit.gravity_direction[1], refit.gravity_direction[2])
             << rcm::cli::format_table({"joint", "RMS residual before", "after"}, rows) << "wrote " << a.out << "\n";
 }
 
@@ -355,7 +356,7 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   pl->add_option("model", args->model_path, "linear model fitted without the payload")->required();
   pl->add_option("recordings", args->recordings, "free-space recordings with the payload (a minute of motion)")
       ->required();
-  pl->add_option("--out", args->out, "model file to write: the model with the payload's gravity and inertia")->required();
+  pl->add_option("--out", args->out, "model file to write: the model with its potential refitted and the payload's inertia")->required();
   pl->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   pl->add_flag("--json", args->json, "print the payload and the residuals as one JSON object");
   pl->callback([args] { run_payload(*args); });

@@ -380,8 +380,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
   }, py::arg("model"), py::arg("recordings"),
         "Re-identify a payload change on the insertion stage from free-space recordings with it, on a linear\n"
         "model fitted without it (what `rcm dynamics payload` does). Returns a dict: 'model' (the model with\n"
-        "the payload's gravity and inertia), 'payload' {'first_moment_n_m', 'weight_n', 'inertia_kg_m2'},\n"
-        "'rms_before', 'rms_after',\n"
+        "its potential refitted and the payload's inertia), 'payload' {'first_moment_n_m', 'weight_n',\n"
+        "'inertia_kg_m2'}, 'gravity_direction', 'rms_before', 'rms_after',\n"
         "'instrument_axis', 'reciprocal_condition', 'samples'; rcm.InputError when the model or the motion\n"
         "cannot identify it.");
 }

@@ -12,11 +12,6 @@ namespace rcm::dynamics::detail {
 
 namespace {
 constexpr int G = LinearTorqueModel::kGravityTerms;
-constexpr double kDegree = M_PI / 180.0;
-
-Eigen::Vector3d direction(double polar, double azimuth) {
-  return {std::sin(polar) * std::cos(azimuth), std::sin(polar) * std::sin(azimuth), std::cos(polar)};
-}
 }  // namespace
 
 ModelStats& ModelStats::operator+=(const ModelStats& o) {
@@ -279,27 +274,7 @@ RigidBodySolution solve_rigid_body_at(const ModelStats& stats, int M, InertiaStr
 RigidBodySolution solve_rigid_body(const ModelStats& stats, int M, InertiaStructure structure, double beta,
                                    unsigned profile_joints, unsigned stiffness_joints) {
   RigidBodyProblem problem(stats, M, structure, beta, profile_joints, stiffness_joints);
-  // g and -g give the same span: the upper half sphere is enough.
-  RigidBodySolution best;
-  double best_polar = 0.0, best_azimuth = 0.0;
-  bool first = true;
-  for (int polar = 0; polar <= 90; polar += 5)
-    for (int azimuth = 0; azimuth < 360; azimuth += (polar == 0 ? 360 : 15)) {
-      RigidBodySolution s = problem.solve_at(direction(polar * kDegree, azimuth * kDegree));
-      if (first || s.loss < best.loss) {
-        best = std::move(s);
-        best_polar = polar;
-        best_azimuth = azimuth;
-        first = false;
-      }
-    }
-  const double p0 = best_polar, a0 = best_azimuth;
-  for (int dp = -5; dp <= 5; ++dp)
-    for (int da = -8; da <= 8; ++da) {
-      RigidBodySolution s = problem.solve_at(direction((p0 + dp) * kDegree, (a0 + da) * kDegree));
-      if (s.loss < best.loss) best = std::move(s);
-    }
-  return best;
+  return search_gravity_direction([&](const Eigen::Vector3d& g) { return problem.solve_at(g); });
 }
 
 }  // namespace rcm::dynamics::detail

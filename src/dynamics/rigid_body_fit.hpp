@@ -6,6 +6,7 @@
 // one gravity direction (7 moments and 2 angles instead of 17 coefficients).
 
 #include <Eigen/Core>
+#include <cmath>
 #include <vector>
 
 #include "rcm/dynamics/fit.hpp"
@@ -93,6 +94,39 @@ RigidBodySolution solve_rigid_body(const ModelStats& stats, int num_outputs,
 RigidBodySolution solve_rigid_body_at(const ModelStats& stats, int num_outputs, InertiaStructure structure,
                                       double beta, const Eigen::Vector3d& g, unsigned profile_joints = 0u,
                                       unsigned stiffness_joints = 0u);
+
+// The gravity direction whose least-squares solution has the lowest loss: a
+// grid over the upper half sphere (g and -g give the same span) every 5 deg
+// of polar angle and 15 deg of azimuth, then every degree within 5 deg of
+// polar angle and 8 deg of azimuth of the best. solve(g) returns an object
+// with a `loss`; the best one is returned (the first on ties).
+template <class Solve>
+auto search_gravity_direction(Solve solve) -> decltype(solve(Eigen::Vector3d())) {
+  constexpr double kDegree = 3.14159265358979323846 / 180.0;
+  auto direction = [](double polar, double azimuth) {
+    return Eigen::Vector3d(std::sin(polar) * std::cos(azimuth), std::sin(polar) * std::sin(azimuth), std::cos(polar));
+  };
+  decltype(solve(Eigen::Vector3d())) best{};
+  int best_polar = 0, best_azimuth = 0;
+  bool first = true;
+  for (int polar = 0; polar <= 90; polar += 5)
+    for (int azimuth = 0; azimuth < 360; azimuth += (polar == 0 ? 360 : 15)) {
+      auto s = solve(direction(polar * kDegree, azimuth * kDegree));
+      if (first || s.loss < best.loss) {
+        best = std::move(s);
+        best_polar = polar;
+        best_azimuth = azimuth;
+        first = false;
+      }
+    }
+  const int p0 = best_polar, a0 = best_azimuth;
+  for (int dp = -5; dp <= 5; ++dp)
+    for (int da = -8; da <= 8; ++da) {
+      auto s = solve(direction((p0 + dp) * kDegree, (a0 + da) * kDegree));
+      if (s.loss < best.loss) best = std::move(s);
+    }
+  return best;
+}
 
 // min |A^(1/2) x - ...|: (A + ridge) x = b with x[i] >= 0 for i in `nonnegative`
 // by an active set; the ridge, relative to each diagonal, picks the small-norm
