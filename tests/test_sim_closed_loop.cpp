@@ -102,6 +102,17 @@ TEST(ClosedLoopBench, TheCorrectionBringsTheRcmBackWithoutAWrongMove) {
     EXPECT_NEAR(open["residual_misalignment_m"].get<double>(), final_open[i++], 0.001);
     EXPECT_TRUE(open["time_to_below_2n_s"].is_null());
     EXPECT_EQ(open["final_shift_base_m"], nlohmann::json({0.0, 0.0, 0.0}));
+    // On an incision that stays where it went, the estimate's 95 % intervals
+    // cover the truth (breathing moves it faster than the estimate follows).
+    for (const auto* run : {&open, &closed}) {
+      ASSERT_EQ((*run)["interval_coverage"].size(), 3u);
+      ASSERT_EQ((*run)["interval_rms_z"].size(), 3u);
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_GT((*run)["interval_rms_z"][k].get<double>(), 0.0);
+        if (std::string(name) == "step" || std::string(name) == "large_step")
+          EXPECT_GE((*run)["interval_coverage"][k].get<double>(), 0.95) << k;
+      }
+    }
     // Closed: moves were made, none against the true remaining misalignment
     // (breathing: few), and the RCM ends nearer the incision with less force
     // on the body wall.
@@ -127,6 +138,15 @@ TEST(ClosedLoopBench, TheCorrectionBringsTheRcmBackWithoutAWrongMove) {
   // stays under 2 N to the end moves with round-off in the free-space fit, its
   // RMS stays under 2 N. The breathing's own motion keeps it above.
   EXPECT_TRUE(j["scenarios"]["drift"]["closed"]["time_to_below_2n_s"].is_number());
+  // The estimator's options and the model it ran on are there to rerun it.
+  EXPECT_EQ(j["online"]["correlation_time_s"], 1.0);
+  EXPECT_EQ(j["online"]["jump_threshold"], 4.0);
+  EXPECT_TRUE(fs::exists(out / "free_space_model.json"));
+  EXPECT_EQ(run_cli("dynamics eval --json " + (out / "free_space_model.json").string() + " " +
+                        (out / "session" / "free_space.csv").string(),
+                    text),
+            0)
+      << text;
   EXPECT_EQ(j["scenarios"]["large_step"]["compensate_limit_m"], 0.05);
   EXPECT_EQ(j["scenarios"]["step"]["compensate_limit_m"], 0.01);
   EXPECT_EQ(j["scenarios"]["large_step"]["max_rate_m_per_s"], 0.02);
@@ -143,11 +163,12 @@ TEST(ClosedLoopBench, TheCorrectorsFlagsApplyToEveryScenario) {
   rcm::test::TempDir dir("rcm_closed_loop_flags");
   std::string text;
   ASSERT_EQ(run_cli("simulate --experiment closed-loop --quick --model linear --no-plot --json --max-shift-rate 0.01 "
-                    "--compensate-limit 0.04 --tolerance 0.003 --out " + (dir.path() / "bench").string(), text),
+                    "--compensate-limit 0.04 --tolerance 0.003 --correlation-time 0.5 --out " + (dir.path() / "bench").string(), text),
             0)
       << text;
   const nlohmann::json j = nlohmann::json::parse(text);
   EXPECT_EQ(j["correction"]["tolerance_m"], 0.003);
+  EXPECT_EQ(j["online"]["correlation_time_s"], 0.5);
   for (const char* name : {"step", "drift", "breathing", "large_step"}) {
     EXPECT_EQ(j["scenarios"][name]["max_rate_m_per_s"], 0.01) << name;
     EXPECT_EQ(j["scenarios"][name]["compensate_limit_m"], 0.04) << name;
@@ -157,6 +178,8 @@ TEST(ClosedLoopBench, TheCorrectorsFlagsApplyToEveryScenario) {
   EXPECT_EQ(run_cli("simulate --experiment closed-loop --compensate-limit 0.001" + other, text), 2);
   EXPECT_FALSE(fs::exists(dir.path() / "other"));
   EXPECT_EQ(run_cli("simulate --experiment session --max-shift-rate 0.01" + other, text), 2);
+  EXPECT_EQ(run_cli("simulate --experiment session --correlation-time 0.5" + other, text), 2);
+  EXPECT_EQ(run_cli("simulate --experiment closed-loop --correlation-time 0" + other, text), 2);
   EXPECT_EQ(run_cli("simulate --model linear" + other, text), 2);
   EXPECT_FALSE(fs::exists(dir.path() / "other"));
 }

@@ -42,11 +42,12 @@ struct SimulateOptions {
   int threads = 0;
   rcm::cli::OptionFlags<rcm::StudyOptions> free_space;  // closed-loop: the estimator's free-space model
   rcm::cli::OptionFlags<rcm::CorrectionOptions> correction;  // closed-loop: the corrector's gates, every scenario
+  rcm::cli::OptionFlags<rcm::OnlineEstimatorOptions> online;  // closed-loop: over the bench's estimator options
 };
 
 // The flags that only the closed-loop bench reads.
-const char* const kClosedLoopFlags[] = {"--model", "--model-file", "--tolerance", "--compensate-limit",
-                                        "--max-shift-rate"};
+const char* const kClosedLoopFlags[] = {"--model",          "--model-file",     "--tolerance",
+                                        "--compensate-limit", "--max-shift-rate", "--correlation-time"};
 
 std::string config_help() {
   const rcm::sim::SimConfig defaults = rcm::sim::make_default_config();
@@ -83,9 +84,10 @@ void run_closed_loop(const SimulateOptions& o, const rcm::CorrectionOptions& cor
   // before, which a breathing incision has left (docs/compensation.md).
   study.fit.live_zero_phase = false;
   const rcm::MonitorSetup setup = rcm::prepare_monitor(session, study, rcm::cli::get_torque_model_fitter());
-  const rcm::OnlinePipeline pipeline(
-      setup.free_space.model,
-      rcm::OnlineEstimator(setup.incision, setup.tissue, make_closed_loop_online_options(setup.joint_options)));
+  rcm::OnlineEstimatorOptions online = make_closed_loop_online_options(setup.joint_options);
+  o.online.apply(online);
+  const rcm::OnlinePipeline pipeline(setup.free_space.model,
+                                     rcm::OnlineEstimator(setup.incision, setup.tissue, online));
 
   ClosedLoopOptions options;
   options.correction = correction;
@@ -104,8 +106,16 @@ void run_closed_loop(const SimulateOptions& o, const rcm::CorrectionOptions& cor
   j["seed"] = config.seed;
   j["tissue"] = config.tissue.preset;
   j["free_space_model"] = rcm::dynamics::to_string(setup.free_space.model->kind());
+  j["online"] = {{"correlation_time_s", online.correlation_time_s},
+                 {"jump_threshold", online.jump_threshold},
+                 {"drift_sd_m_per_sqrt_s", online.drift_sd_m_per_sqrt_s}};
   j["session"] = written.manifest.string();
   const std::string table = format_closed_loop_table(scenarios);
+  // The model the estimator ran on, for `rcm monitor --model-file` and `rcm dynamics eval`.
+  if (!study.model_file) {
+    rcm::dynamics::save_torque_model(out_dir / "free_space_model.json", *setup.free_space.model);
+    j["free_space_model_file"] = (out_dir / "free_space_model.json").string();
+  }
   rcm::save_json_file(out_dir / "closed_loop.json", j);
   rcm::write_file_atomic(out_dir / "closed_loop.md", "# Closed-loop bench\n\n" + table);
   rcm::save_json_file(out_dir / "sim_config.json", config_to_json(config));
@@ -262,13 +272,15 @@ void run_simulate(const SimulateOptions& o) {
 
   if (o.experiment != "closed-loop")
     for (const char* flag : kClosedLoopFlags)
-      if (o.free_space.given(flag) || o.correction.given(flag)) {
+      if (o.free_space.given(flag) || o.correction.given(flag) || o.online.given(flag)) {
         rcm::InputLocation loc;
         loc.file = flag;
         throw rcm::InputError(loc, "only --experiment closed-loop reads it");
       }
   rcm::CorrectionOptions correction;
   o.correction.apply(correction);  // a bad gate is an error before anything is simulated
+  rcm::OnlineEstimatorOptions online_flags_alone;
+  o.online.apply(online_flags_alone);  // so is a bad estimator option
   if (o.print_config) {
     rcm::cli::print_json(config_to_json(config));
     return;
@@ -413,6 +425,9 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   opts->correction.add(cmd, "--max-shift-rate", {"max_rate_m_per_s"},
                        "closed-loop: how fast the arm shifts its RCM, in every scenario (unset: the large step "
                        "shifts at 20 mm/s)");
+  opts->online.add(cmd, "--correlation-time", {"correlation_time_s"},
+                   "closed-loop: the free-space model error's correlation time the estimator assumes (the "
+                   "measurement variance is sigma^2 times it per second; unset: the study's)");
   cmd->add_option("--tissue", opts->tissue, "tissue preset: linear (default), stiffening, viscoelastic, sliding");
   cmd->add_option("--friction", opts->friction,
                   "joint friction preset: hysteretic (default: rate-independent, the real PSM's band), smooth");

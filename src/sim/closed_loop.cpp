@@ -94,6 +94,8 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   std::vector<double> force_after_settle;
   double last_above = -1.0, residual_sum = 0.0;
   int residual_count = 0;
+  Eigen::Vector3d z_sq_sum = Eigen::Vector3d::Zero(), covered = Eigen::Vector3d::Zero();
+  int z_count = 0;
   CorrectionAction last_action = CorrectionAction::hold;
   HoldReason last_reason = HoldReason::no_onset;
 
@@ -131,7 +133,16 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
       run.peak_force_n = std::max(run.peak_force_n, f);
       run.max_fit_cost = std::max(run.max_fit_cost, c.fit_cost);
     }
-    if (t >= motion.onset_s + o.settled_after_s) force_after_settle.push_back(f);
+    if (t >= motion.onset_s + o.settled_after_s) {
+      force_after_settle.push_back(f);
+      const OnlineOutput& e = get_online_output(ws.pipeline.estimator);
+      if (e.misalignment_m.allFinite() && (e.sd_m.array() > 0).all()) {
+        const Eigen::Vector3d z = (e.misalignment_m - remaining_inc).cwiseQuotient(e.sd_m);
+        z_sq_sum += z.cwiseAbs2();
+        covered += (z.array().abs() <= loop.corrector().options().confidence_z).cast<double>().matrix();
+        ++z_count;
+      }
+    }
     if (f > o.force_threshold_n) last_above = t;
     if (t >= o.duration_s - 10.0) {
       residual_sum += remaining_inc.norm();
@@ -153,6 +164,10 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   run.rms_force_after_settle_n = force_after_settle.empty() ? 0.0 : std::sqrt(sum_sq / force_after_settle.size());
   if (last_above < o.duration_s - 5.0) run.time_to_below_s = std::max(0.0, last_above - motion.onset_s);
   run.residual_misalignment_m = residual_count ? residual_sum / residual_count : 0.0;
+  if (z_count > 0) {
+    run.interval_rms_z = (z_sq_sum / z_count).cwiseSqrt();
+    run.interval_coverage = covered / z_count;
+  }
   run.final_shift_base = shift_base;
   const OnlineOutput& estimate = get_online_output(ws.pipeline.estimator);
   run.final_estimate_m = estimate.misalignment_m;
@@ -202,6 +217,8 @@ nlohmann::json run_json(const ClosedLoopRun& r) {
   j["final_estimate_m"] = {r.final_estimate_m[0], r.final_estimate_m[1], r.final_estimate_m[2]};
   j["final_truth_m"] = {r.final_truth_m[0], r.final_truth_m[1], r.final_truth_m[2]};
   j["alignment"] = r.alignment;
+  j["interval_rms_z"] = {r.interval_rms_z[0], r.interval_rms_z[1], r.interval_rms_z[2]};
+  j["interval_coverage"] = {r.interval_coverage[0], r.interval_coverage[1], r.interval_coverage[2]};
   nlohmann::json advice = nlohmann::json::array();
   for (const auto& [t, words] : r.advice) advice.push_back({{"time_s", t}, {"advice", words}});
   j["advice"] = advice;

@@ -85,6 +85,12 @@ struct ClosedLoopRun {
   Eigen::Vector3d final_estimate_m = Eigen::Vector3d::Zero();
   Eigen::Vector3d final_truth_m = Eigen::Vector3d::Zero();
   std::string alignment;
+  // How well the estimate's 95 % intervals describe its error over the settled
+  // part (from the onset plus settled_after_s), per axis [dr_x, dr_y, D]: the
+  // RMS of (estimate - truth) / sd (1 for intervals as wide as the errors,
+  // below 1 for wider ones) and the share of samples the interval covers.
+  Eigen::Vector3d interval_rms_z = Eigen::Vector3d::Zero();
+  Eigen::Vector3d interval_coverage = Eigen::Vector3d::Zero();
   // Time series at series_rate_hz: true |f|, true |incision - RCM|, the action.
   std::vector<double> time_s, force_n, misalignment_m;
   std::vector<CorrectionAction> action;
