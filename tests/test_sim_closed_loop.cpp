@@ -163,7 +163,9 @@ TEST(ClosedLoopBench, TheCorrectorsFlagsApplyToEveryScenario) {
   rcm::test::TempDir dir("rcm_closed_loop_flags");
   std::string text;
   ASSERT_EQ(run_cli("simulate --experiment closed-loop --quick --model linear --no-plot --json --max-shift-rate 0.01 "
-                    "--compensate-limit 0.04 --tolerance 0.003 --correlation-time 0.5 --out " + (dir.path() / "bench").string(), text),
+                    "--compensate-limit 0.04 --tolerance 0.003 --correlation-time 0.5 --out " +
+                        (dir.path() / "bench").string(),
+                    text),
             0)
       << text;
   const nlohmann::json j = nlohmann::json::parse(text);
