@@ -17,6 +17,7 @@
 #include "rcm/sim/bench.hpp"
 #include "rcm/sim/sim_config.hpp"
 #include "test_dynamics_synthetic.hpp"
+#include "statistical_test.hpp"
 
 namespace fs = std::filesystem;
 
@@ -197,6 +198,7 @@ TEST(Study, OnlineEstimatorTracksEveryTrialAndStaysQuietInFreeSpace) {
 // axial-friction tissue too, where the three-step subtraction of radial from
 // total force is not exact.
 TEST(Study, JointMethodHoldsOnStiffeningAndSlidingTissue) {
+  RCM_STATISTICAL_TEST();
   int covered = 0, trials = 0;
   for (const std::string preset : {"stiffening", "sliding"}) {
     std::random_device rd;
@@ -236,6 +238,7 @@ TEST(Study, JointMethodHoldsOnStiffeningAndSlidingTissue) {
 // joint method stays accurate with intervals that cover the truth, and the
 // balanced static step beats the paper's last hold on the same fitted model.
 TEST(Study, HystereticFrictionJointIntervalsCoverAndBalancedHoldsBeatTheLastHold) {
+  RCM_STATISTICAL_TEST();
   int trials = 0;
   Eigen::Vector3i covered = Eigen::Vector3i::Zero();
   double e_balanced = 0.0, e_last = 0.0, e_joint_max = 0.0;

@@ -16,6 +16,7 @@
 #include "rcm/tissue/tissue_law.hpp"
 #include "rcm/tissue/tissue_pairs.hpp"
 #include "temp_dir.hpp"
+#include "statistical_test.hpp"
 
 namespace {
 
@@ -282,6 +283,7 @@ TEST(TissueFit, ReportedLossIsTheMeanSquaredErrorOfTheExpression) {
 }
 
 TEST(TissueFit, RecoversTheTrueFamilyIn95PercentOf40Seeds) {
+  RCM_STATISTICAL_TEST();
   for (const Law& law : synthetic_laws()) {
     int hits = 0;
     std::string misses;
