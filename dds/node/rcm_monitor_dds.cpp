@@ -68,7 +68,7 @@ int run(int argc, char** argv) {
   app.add_option("--alarm-force-n", p.alarm_force_n, "force alarm threshold (N)")->capture_default_str();
   app.add_option("--onset-threshold", p.onset_threshold, "onset detector threshold")->capture_default_str();
   app.add_option("--publish-every", p.publish_every, "publish every n-th estimate")->capture_default_str();
-  app.add_option("--queue-size", p.queue_size, "history depth of the estimate topics")->capture_default_str();
+  app.add_option("--queue-size", p.queue_size, "history depth of the subscription and the estimate topics")->capture_default_str();
   app.add_option("--base-frame", p.base_frame, "frame_id of incision_force (default <arm>_base)");
   app.add_option("--incision-frame", p.incision_frame, "frame_id of misalignment (default <arm>_incision)");
   app.add_flag("--dedupe", p.dedupe, "drop repeated samples in the session's recordings");
@@ -112,7 +112,10 @@ int run(int argc, char** argv) {
   const std::string input = "rt/" + p.get_input_topic();
   const dds_entity_t topic = check(
       dds_create_topic(participant, &sensor_msgs_msg_dds__JointState__desc, input.c_str(), nullptr, nullptr), "topic");
-  dds_qos_t* qos = make_qos(best_effort ? DDS_RELIABILITY_BEST_EFFORT : DDS_RELIABILITY_RELIABLE, 100,
+  // The estimator wants every sample: a history as deep as the outputs' lets
+  // the node fall behind for a while (another process, a slow disk) without
+  // Cyclone overwriting samples it has not taken, which nothing would count.
+  dds_qos_t* qos = make_qos(best_effort ? DDS_RELIABILITY_BEST_EFFORT : DDS_RELIABILITY_RELIABLE, p.queue_size,
                             DDS_DURABILITY_VOLATILE);
   const dds_entity_t reader = check(dds_create_reader(participant, topic, qos, nullptr), "reader");
   dds_delete_qos(qos);
