@@ -18,6 +18,7 @@
 #endif
 
 namespace {
+namespace cmd_convert {
 
 struct Options {
   std::string in, out, joint_names;
@@ -134,4 +135,5 @@ const bool registered = rcm::cli::register_command({"convert", 15, [](CLI::App& 
   cmd->callback([o] { run(*o); });
 }});
 
+}  // namespace cmd_convert
 }  // namespace

@@ -12,6 +12,7 @@
 #include "study_cli.hpp"
 
 namespace {
+namespace cmd_demo {
 
 struct Options {
   std::string out = "demo-out";
@@ -103,4 +104,5 @@ const bool registered = rcm::cli::register_command({"demo", 5, [](CLI::App& app)
   cmd->callback([o] { run(*o); });
 }});
 
+}  // namespace cmd_demo
 }  // namespace

@@ -26,6 +26,7 @@
 #endif
 
 namespace {
+namespace cmd_dynamics {
 
 struct DynamicsArgs {
   std::string model_kind;  // empty: the default of rcm run, rcm monitor and the node
@@ -369,4 +370,5 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
 #endif
 }});
 
+}  // namespace cmd_dynamics
 }  // namespace

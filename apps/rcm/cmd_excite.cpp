@@ -16,6 +16,7 @@
 #include "rcm/kinematics/psm_model.hpp"
 
 namespace {
+namespace cmd_excite {
 
 struct ExciteArgs {
   std::string out;
@@ -116,4 +117,5 @@ const bool registered = rcm::cli::register_command({"excite", 25, [](CLI::App& a
   cmd->callback([args] { run_excite(*args); });
 }});
 
+}  // namespace cmd_excite
 }  // namespace

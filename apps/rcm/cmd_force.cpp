@@ -18,6 +18,7 @@
 #include "rcm/kinematics/psm_model.hpp"
 
 namespace {
+namespace cmd_force {
 
 struct Options {
   std::string model_path, recording, out, q0, robot = "dvrk-psm-classic";
@@ -139,4 +140,5 @@ const bool registered = rcm::cli::register_command({"force", 35, [](CLI::App& ap
   cmd->callback([o] { run(*o); });
 }});
 
+}  // namespace cmd_force
 }  // namespace

@@ -13,6 +13,7 @@
 #include "rcm/io/session.hpp"
 
 namespace {
+namespace cmd_inspect {
 
 struct Options {
   std::string file;
@@ -202,4 +203,5 @@ const bool registered = rcm::cli::register_command({"inspect", 10, [](CLI::App& 
   cmd->callback([o] { run(*o); });
 }});
 
+}  // namespace cmd_inspect
 }  // namespace

@@ -11,6 +11,7 @@
 #include "rcm/kinematics/psm_model.hpp"
 
 namespace {
+namespace cmd_kinematics {
 
 struct Options {
   std::string q, q0 = "0,0,0.12", robot = "dvrk-psm-classic";
@@ -80,4 +81,5 @@ const bool registered = rcm::cli::register_command({"kinematics", 15, [](CLI::Ap
   cmd->callback([o] { run(*o); });
 }});
 
+}  // namespace cmd_kinematics
 }  // namespace

@@ -20,6 +20,7 @@
 #include "study_cli.hpp"
 
 namespace {
+namespace cmd_monitor {
 
 struct Options {
   std::string session, recording, out, options_file;
@@ -229,4 +230,5 @@ const bool registered = rcm::cli::register_command({"monitor", 65, [](CLI::App& 
   cmd->callback([o] { run(*o); });
 }});
 
+}  // namespace cmd_monitor
 }  // namespace

@@ -10,6 +10,7 @@
 #include "study_cli.hpp"
 
 namespace {
+namespace cmd_run {
 
 struct Options {
   std::string session, out = "rcm-run", options_file;
@@ -80,4 +81,5 @@ const bool registered = rcm::cli::register_command({"run", 60, [](CLI::App& app)
   cmd->callback([o] { run(*o); });
 }});
 
+}  // namespace cmd_run
 }  // namespace

@@ -14,6 +14,7 @@
 #include "study_cli.hpp"
 
 namespace {
+namespace cmd_setup {
 
 struct Options {
   std::string session, out = "rcm-setup", options_file;
@@ -68,4 +69,5 @@ const bool registered = rcm::cli::register_command({"setup", 55, [](CLI::App& ap
   cmd->callback([o] { run(*o); });
 }});
 
+}  // namespace cmd_setup
 }  // namespace

@@ -21,6 +21,7 @@
 #include "study_cli.hpp"
 
 namespace {
+namespace cmd_simulate {
 
 struct SimulateOptions {
   std::string out;
@@ -453,4 +454,5 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   cmd->callback([opts] { run_simulate(*opts); });
 }});
 
+}  // namespace cmd_simulate
 }  // namespace

@@ -21,6 +21,7 @@
 #include "study_cli.hpp"
 
 namespace {
+namespace cmd_tissue {
 
 struct Options {
   std::string pairs_file, session_file, model_file, force_source = "estimated";
@@ -267,4 +268,5 @@ const bool registered = rcm::cli::register_command({"tissue", 50, [](CLI::App& a
   });
 }});
 
+}  // namespace cmd_tissue
 }  // namespace

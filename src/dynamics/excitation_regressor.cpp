@@ -8,11 +8,12 @@
 #include "rcm/dynamics/excitation.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "gram_conditioning.hpp"
+#include "gravity_terms.hpp"
 
 namespace rcm::dynamics {
 
 namespace {
-constexpr int G = LinearTorqueModel::kGravityTerms;
+using detail::G;
 static_assert(G == 17, "RegressorConditioning::kColumns counts 17 gravity terms");
 // Index of joint j's friction block column b (0 armature, 1 viscous, 2 Coulomb, 3 offset).
 constexpr int block_column(int j, int b) { return G + kInertiaTerms + 4 * j + b; }

@@ -19,6 +19,7 @@
 
 #include "acceleration.hpp"
 #include "rigid_body_fit.hpp"
+#include "gravity_terms.hpp"
 
 namespace rcm::dynamics {
 
@@ -28,7 +29,7 @@ using detail::AccelerationEstimator;
 using detail::compute_zero_phase_acceleration;
 using detail::is_time_sorted;
 using detail::kDefaultAccelerationFilter;
-constexpr int G = LinearTorqueModel::kGravityTerms;
+using detail::G;
 constexpr int kBlock = 4;  // armature, viscous, coulomb, offset
 // The rigid-body structure is kept while its validation loss is within this
 // factor of the generic one's (FitOptions::rigid_body): a time slice of the same

@@ -17,6 +17,7 @@
 #include "acceleration.hpp"
 #include "rcm/dynamics/rigid_body.hpp"
 #include "model_io.hpp"
+#include "gravity_terms.hpp"
 
 namespace rcm::dynamics {
 
@@ -28,7 +29,7 @@ using detail::compute_zero_phase_acceleration;
 using detail::is_time_sorted;
 using detail::kDefaultAccelerationFilter;
 using detail::kDefaultAccelerationWindow;
-constexpr int G = LinearTorqueModel::kGravityTerms;
+using detail::G;
 
 struct LinearWorkspace final : TorqueModelWorkspace {
   Eigen::VectorXd prev_q, z, z_slow, acceleration;

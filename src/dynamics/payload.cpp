@@ -11,12 +11,13 @@
 #include "rcm/dynamics/rigid_body.hpp"
 #include "gram_conditioning.hpp"
 #include "rigid_body_fit.hpp"
+#include "gravity_terms.hpp"
 
 namespace rcm::dynamics {
 
 namespace {
 
-constexpr int G = LinearTorqueModel::kGravityTerms;
+using detail::G;
 
 // The 17 gravity coefficients of the four payload terms: compute_gravity_moment_map
 // of the moments v1 = h, v2 = m e.

@@ -7,11 +7,12 @@
 
 #include "acceleration.hpp"
 #include "rcm/dynamics/linear_model.hpp"
+#include "gravity_terms.hpp"
 
 namespace rcm::dynamics::detail {
 
 namespace {
-constexpr int G = LinearTorqueModel::kGravityTerms;
+using detail::G;
 }  // namespace
 
 ModelStats& ModelStats::operator+=(const ModelStats& o) {

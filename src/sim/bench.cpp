@@ -30,7 +30,6 @@ namespace rcm::sim {
 
 namespace {
 
-constexpr double kPi = 3.141592653589793;
 
 std::uint64_t splitmix64(std::uint64_t x) {
   x += 0x9e3779b97f4a7c15ULL;
@@ -113,7 +112,7 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
 
   const long step_begin = -std::lround(C.settle_s * C.physics_rate_hz);
   const long step_end = static_cast<long>(k_last) * decimation;  // exclusive
-  const double alpha = 1.0 - std::exp(-2.0 * kPi * C.velocity_filter_hz * dt);
+  const double alpha = 1.0 - std::exp(-2.0 * M_PI * C.velocity_filter_hz * dt);
   const Eigen::Vector3d q0 = config.protocol.q0;
   const ShaftFrame f0 = compute_shaft_frame(q0);
 

@@ -13,7 +13,6 @@
 namespace rcm::sim {
 
 namespace {
-constexpr double kPi = 3.141592653589793;
 }  // namespace
 
 using detail::run_parallel;
@@ -34,7 +33,7 @@ ForceAngleResult run_force_angle_experiment(const SimConfig& config) {
       ref.add_hold(0.0, q0);
       for (std::size_t i = 0; i < F.angles_deg.size(); ++i) {
         Eigen::Vector3d target = q0;
-        target[F.pivot_joint - 1] += F.angles_deg[i] * kPi / 180.0;
+        target[F.pivot_joint - 1] += F.angles_deg[i] * M_PI / 180.0;
         ref.add_move(step_s * static_cast<double>(i), F.move_s, target);
         ref.add_hold(step_s * static_cast<double>(i) + F.move_s, target);
       }
@@ -54,7 +53,7 @@ ForceAngleResult run_force_angle_experiment(const SimConfig& config) {
         const Eigen::VectorXd truth = rec.truth.force.middleRows(k0, n).rowwise().norm();
         ForceAnglePoint p;
         p.offset_m = D;
-        p.theta_rad = F.angles_deg[i] * kPi / 180.0;
+        p.theta_rad = F.angles_deg[i] * M_PI / 180.0;
         p.theta_true_rad = rec.truth.theta.segment(k0, n).mean();
         p.force_n = measured.mean();
         p.force_std_n = std::sqrt((measured.array() - p.force_n).square().mean());
@@ -75,7 +74,7 @@ void save_force_angle_csv(const std::filesystem::path& path, const ForceAngleRes
                  "offset_m,theta_rad,force_n,theta_deg,force_std_n,force_true_n,force_law_n,theta_true_rad\n");
   for (const auto& p : result.points)
     fmt::format_to(std::back_inserter(buf), "{},{},{},{},{},{},{},{}\n", p.offset_m, p.theta_rad,
-                   p.force_n, p.theta_rad * 180.0 / kPi, p.force_std_n, p.force_true_n,
+                   p.force_n, p.theta_rad * 180.0 / M_PI, p.force_std_n, p.force_true_n,
                    p.force_law_n, p.theta_true_rad);
   write_file_atomic(path, std::string(buf.data(), buf.size()));
 }
@@ -95,7 +94,7 @@ PlotFiles save_force_angle_plot(const std::filesystem::path& stem, const ForceAn
     s.label = fmt::format("D = {:g} mm", D * 1000.0);
     for (const auto& p : result.points)
       if (p.offset_m == D) {
-        s.x.push_back(p.theta_rad * 180.0 / kPi);
+        s.x.push_back(p.theta_rad * 180.0 / M_PI);
         s.y.push_back(p.force_n);
       }
     spec.series.push_back(std::move(s));
