@@ -6,10 +6,14 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <random>
+#include <sstream>
+#include <string>
 
 #include "rcm/common/error.hpp"
+#include "rcm/common/text_file.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/estimation/online.hpp"
 #include "rcm/estimation/study.hpp"
@@ -388,6 +392,27 @@ TEST(StudyCli, LocatedErrors) {
   EXPECT_NE(err.find("no_calibration.json: field calibration"), std::string::npos) << err;
   EXPECT_EQ(run_cli("run /nonexistent/session.json", &err), 2);
   EXPECT_NE(err.find("/nonexistent/session.json: file not found"), std::string::npos) << err;
+  // A NaN in the last trial stops the run before the free-space fit, not after
+  // the fit and the trials before it.
+  rcm::Session bad = bench().session;
+  ASSERT_FALSE(bad.trials.empty());
+  ASSERT_EQ(bad.trials.back().recording.extension(), ".csv");
+  std::istringstream lines(rcm::read_text_file(bad.trials.back().recording));
+  std::ostringstream corrupted;
+  std::string line;
+  for (int n = 1; std::getline(lines, line); ++n) {
+    if (n == 50) line = "nan" + line.substr(line.find(','));  // the time column
+    corrupted << line << '\n';
+  }
+  const fs::path bad_trial = bench().dir / "bad_last_trial.csv";
+  std::ofstream(bad_trial) << corrupted.str();
+  bad.trials.back().recording = bad_trial;
+  const fs::path bad_manifest = bench().dir / "bad_last_trial.json";
+  rcm::save_session(bad_manifest, bad);
+  const fs::path bad_out = bench().dir / "bad_last_trial_run";
+  EXPECT_EQ(run_cli("run " + bad_manifest.string() + " --model linear --out " + bad_out.string(), &err), 2);
+  EXPECT_NE(err.find("bad_last_trial.csv:50: column time"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(bad_out / "free_space_model.json")) << err;
 }
 
 TEST(StudyCli, RunWritesTheContractJson) {

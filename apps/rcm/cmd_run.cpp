@@ -23,6 +23,7 @@ void run(const Options& o) {
   const rcm::Session session = rcm::load_session(o.session);
   rcm::check_study_inputs(session, options);
   rcm::install_interrupt_handlers();
+  rcm::check_study_recordings(session, options);
   const std::filesystem::path out(o.out);
   rcm::FreeSpaceModelStep free_space;
   try {

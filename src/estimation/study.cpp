@@ -215,8 +215,24 @@ void check_study_inputs(const Session& session, const StudyOptions& options) {
   check_options(options, "StudyOptions");
 }
 
+void check_study_recordings(const Session& session, const StudyOptions& options) {
+  const RecordingReadOptions read = get_read_options(session, options.read);
+  std::vector<std::filesystem::path> paths;
+  if (session.calibration) paths.push_back(session.calibration->recording);
+  if (options.method == "joint" && session.baseline) paths.push_back(*session.baseline);
+  for (const TrialSpec& spec : session.trials) {
+    paths.push_back(spec.recording);
+    if (spec.static_recording) paths.push_back(*spec.static_recording);
+  }
+  for (const auto& path : paths) {
+    throw_if_interrupted("checking the session's recordings");
+    (void)load_recording(path, read);
+  }
+}
+
 StudyResult run_study(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
   check_study_inputs(session, options);
+  check_study_recordings(session, options);
   return run_study(session, options, fit_free_space_step(session, options, fitter));
 }
 

@@ -195,6 +195,13 @@ MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options
 // (check_options); throws InputError.
 void check_study_inputs(const Session& session, const StudyOptions& options);
 
+// Reads every recording run_study will read after the free-space fit (the
+// calibration, the aligned baseline for the joint method, each trial and its
+// static hold) and discards it, so that a bad file stops the study before the
+// fit rather than after it and the trials before it. Throws the reader's
+// InputError (file, line, field).
+void check_study_recordings(const Session& session, const StudyOptions& options);
+
 // Throws InputError for any defect of the session's files; the study needs a
 // calibration and at least one trial. Once an interrupt is requested
 // (rcm/common/interrupt.hpp) the study stops: with the trials finished by then
