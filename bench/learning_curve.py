@@ -20,7 +20,7 @@ method's bootstrap is turned off there: it sets the intervals, not the
 estimate, and is most of the run's time.
 
 The table (mean over the seeds and their range) and a figure go between the
-learning-curve markers of docs/dynamics.md and into
+learning-curve markers of docs/validation-free-space.md and into
 docs/figures/learning_curve.png, with the date and machine (a run of network
 kinds alone: the table only, between the learning-curve-networks markers); `--json FILE` keeps
 every point. `--real DIR` adds a torque-only curve on real recordings: DIR holds
@@ -49,7 +49,7 @@ import time
 from doc_tables import cpu_model, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "dynamics.md")
+DOC = os.path.join(ROOT, "docs", "validation-free-space.md")
 FIGURE = os.path.join(ROOT, "docs", "figures", "learning_curve.png")
 # The linear curve's block; a run of network kinds alone (their fits take
 # minutes each, so fewer seeds and lengths) goes to its own block.

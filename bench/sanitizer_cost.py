@@ -3,7 +3,7 @@
 (bench/sanitizer/jet_kernel.cpp: ceres::Jet through small Eigen expressions)
 and on the compile time of one of the library's Eigen-heavy files
 (src/estimation/online.cpp), the reason for `make test-sanitize`'s flags;
-writes the table into docs/reliability.md between its markers.
+writes the table into docs/validation-reliability.md between its markers.
 
     /usr/bin/python3 bench/sanitizer_cost.py [--repeats 3]
 """
@@ -19,7 +19,7 @@ import time
 from doc_tables import cpu_model, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "reliability.md")
+DOC = os.path.join(ROOT, "docs", "validation-reliability.md")
 BEGIN, END = "<!-- sanitizer-cost:begin -->", "<!-- sanitizer-cost:end -->"
 BASE = ["-O2", "-DNDEBUG", "-std=c++17", "-I/usr/include/eigen3"]
 VARIANTS = [

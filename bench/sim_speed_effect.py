@@ -16,7 +16,7 @@ beyond what the fit found, in kg m^2 (yaw, pitch) and kg (insertion).
 Beside them, the real Classic PSM1 recordings' figures for the same protocol
 (--real DIR: psm1_105g_insertion_full.csv, ..._half.csv and the 205 g pair,
 fitted and scored the same way; they stay where they are). The table goes
-between the speed-effect markers of docs/simulator.md, with the date and
+between the speed-effect markers of docs/validation-free-space.md, with the date and
 machine.
 
   /usr/bin/python3 bench/sim_speed_effect.py --build build [--seeds 1,2,3] [--arms cable,rigid] [--real DIR] [--no-doc]
@@ -35,7 +35,7 @@ from doc_tables import cpu_model, run, write_block
 from recording_arrays import load, zero_phase_acceleration
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOCS = [os.path.join(ROOT, "docs", "simulator.md")]
+DOCS = [os.path.join(ROOT, "docs", "validation-free-space.md")]
 BEGIN, END = "<!-- speed-effect:begin -->", "<!-- speed-effect:end -->"
 JOINTS = ("yaw", "pitch", "insertion")
 # The real Classic PSM1 recordings of the same protocol (one excitation path,
