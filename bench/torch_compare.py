@@ -9,7 +9,7 @@ default) and 2 x 128 LSTM, head 64 (tanh), 6 outputs; streaming = one sample wit
 state carried, one thread; training = one Adam update of the 1 x 128 network on
 32 streams x 100 samples, 2 threads. Also writes
 BUILD_DIR/pytorch_lstm.pt, a TorchScript module in the layout that
-`rcm dynamics import` reads (docs/dynamics.md).
+`rcm dynamics import` reads (docs/methods.md).
 """
 import json
 import os
