@@ -50,7 +50,7 @@ test: build
 # (heap, stack and global overflows, use after free and leaks are still caught).
 # UBSan's null, alignment and pointer-overflow checks are off: on Eigen's
 # pointer arithmetic they lengthen the instrumented build most (the compile
-# column of docs/validation-reliability.md's table); a null dereference still faults and
+# column of bench/sanitizer_cost.py's table); a null dereference still faults and
 # ASan reports it with its stack, as it does an access out of bounds.
 # The random-session property test runs one session of two trials instrumented.
 SANITIZE_BUILD ?= build-sanitize
@@ -87,7 +87,8 @@ coverage: build
 
 # The free-space model's held-out torque error and estimate error against the
 # length of teleoperation and excitation data (about 10 minutes on 2 cores);
-# writes its table and figure into docs/validation-free-space.md. REAL=DIR adds the curve of
+# prints its table (bench/learning_curve.py --doc writes it and its figure into
+# docs/validation-free-space.md). REAL=DIR adds the curve of
 # real recordings (NAME_full.csv / NAME_half.csv pairs).
 learning-curve: build
 	$(PYTHON) bench/learning_curve.py --build $(BUILD) $(if $(REAL),--real $(REAL))

@@ -1,12 +1,13 @@
 #!/usr/bin/env python3
-"""Writes docs/cli.md, the command reference, from the programs themselves.
+"""Writes docs/cli.md and docs/cli-files.md, the reference, from the programs themselves.
 
 Every section comes from a program: each command and subcommand of `rcm`
 (found in `rcm --help`, then in each command's own help), its `--help` with
 every flag, default and unit (the study options are the footer of `rcm run
 --help`, from their option tables), the `--help` of every other program in
 PROGRAMS, and the fields of the model and results files that a quick study
-writes. Nothing in the page is typed by hand.
+writes. The study options and the files' fields go on docs/cli-files.md, the
+rest on docs/cli.md. Nothing in either page is typed by hand.
 
     /usr/bin/python3 tools/gen_cli_reference.py --build build            # rewrite docs/cli.md
     /usr/bin/python3 tools/gen_cli_reference.py --build build --check    # fail if it differs
@@ -28,6 +29,7 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "cli.md")
+FILES_DOC = os.path.join(ROOT, "docs", "cli-files.md")
 
 # Every program rcm installs, in the order of the page: (name, what it is).
 # A new program gets one line here.
@@ -39,12 +41,21 @@ PROGRAMS = [
 
 HEADER = """# Command reference
 
-Every program, command and flag of rcm, with its default and unit, and the
-fields of the files rcm writes. This page is written by
-`tools/gen_cli_reference.py` from the programs' own `--help` and from the
-files of a quick study; `make docs-cli` rewrites it, and the ctest
-`docs_cli_reference` fails when it and the programs disagree. Do not edit it
-by hand. What the files mean: [formats.md](formats.md).
+Every program, command and flag of rcm, with its default and unit. This page
+and [cli-files.md](cli-files.md) (the study options and the fields of the
+files rcm writes) are written by `tools/gen_cli_reference.py` from the
+programs' own `--help` and from the files of the tutorial's study; `make
+docs-cli` rewrites them, and the ctest `docs_cli_reference` fails when they
+and the programs disagree. Do not edit them by hand.
+"""
+
+FILES_HEADER = """# Reference: options and files
+
+The fields of the JSON files rcm reads and writes, from the programs
+themselves: the study options (from their option tables, as `rcm run --help`
+prints them), the free-space model file and the results file (from the
+tutorial's study). Written by `tools/gen_cli_reference.py`, with
+[cli.md](cli.md); what the files mean: [formats.md](formats.md).
 """
 
 
@@ -93,51 +104,121 @@ def program_sections(binary, name):
     return sections
 
 
-def json_fields(value, path="", out=None):
-    """{field path: set of JSON types}; arrays of objects as `name[]`."""
-    if out is None:
-        out = {}
+# Sections of a help that the page names instead of printing: the simulator's
+# configuration keys are a file's fields, not flags, and fill pages; the study
+# options, which three commands print alike, are on docs/cli-files.md.
+NAMED_SECTIONS = {
+    "Configuration (--config FILE": "  (every key with its default: `rcm simulate --help` or `rcm simulate --print-config`)",
+    "Study options (--options FILE": "  (every field with its default and unit: docs/cli-files.md, \"Study options\")",
+}
+STUDY_OPTIONS = "Study options (--options FILE"
 
-    def kind(v):
-        if isinstance(v, bool):
-            return "true|false"
-        if isinstance(v, (int, float)):
-            return "number"
-        if isinstance(v, str):
-            return "text"
-        if v is None:
-            return "null"
-        if isinstance(v, dict):
-            return "object"
-        inner = sorted({kind(e) for e in v})
-        return "array" + (" of " + "|".join(inner) if inner else "")
 
-    if isinstance(value, dict):
-        for k, v in value.items():
-            p = f"{path}.{k}" if path else k
-            out.setdefault(p, set()).add(kind(v))
-            if isinstance(v, dict):
-                json_fields(v, p, out)
-            elif isinstance(v, list) and any(isinstance(e, dict) for e in v):
-                for e in v:
-                    if isinstance(e, dict):
-                        json_fields(e, p + "[]", out)
+def compact(text, heading, seen):
+    """The help as the page prints it: a section that an earlier command printed alike (the study
+    options of `--options FILE`, the bag flags) is named, not repeated; the padding that aligns
+    CLI11's columns is cut to two spaces, a wrapped line's indent to six."""
+    sections, current = [], []
+    for line in text.splitlines():
+        if not line.strip():
+            if current:
+                sections.append(current)
+            current = []
+            continue
+        current.append(line)
+    if current:
+        sections.append(current)
+    out = []
+    for lines in sections:
+        body = "\n".join(lines)
+        head = lines[0]
+        if head == "Subcommands:":  # each has its own section: name them only
+            out.append("Subcommands (each below): " + ", ".join(l.split()[0] for l in lines[1:] if l.startswith("  ")
+                                                                 and not l.startswith("    ")))
+            continue
+        named = next((v for k, v in NAMED_SECTIONS.items() if head.startswith(k)), None)
+        if head.startswith(STUDY_OPTIONS):
+            seen.setdefault(STUDY_OPTIONS, "\n".join(re.sub(r"(?<=\S) {3,}", "  ", l) for l in lines[1:]))
+        if named is not None:
+            out.append("\n".join([head.rstrip(":") + ":" if head.endswith(":") else head, named]))
+            continue
+        if head.endswith(":") and not head.startswith(" ") and len(lines) > 3:
+            if body in seen:
+                out.append(f"{head}\n  (the same as under `{seen[body]}`)")
+                continue
+            seen[body] = heading
+        out.append("\n".join(re.sub(r"(?<=\S) {3,}", "  ", re.sub(r"^ {7,}", "      ", l)) for l in lines
+                             if l.split() != ["-h,--help", "Print", "this", "help", "message", "and", "exit"]))
+    return "\n\n".join(out)
+
+
+def is_array_record(v):
+    return isinstance(v, dict) and set(v) == {"shape", "dtype", "data"}
+
+
+def json_objects(value, path, out):
+    """{object path: {field: set of kinds}}, each object once; the elements of an array of objects
+    merged under `name[]`. Kinds: number, text, true|false, null, [] (array), {} (object)."""
+    fields = out.setdefault(path, {})
+    for k, v in value.items():
+        if is_array_record(v):
+            kind = "[]"
+        elif isinstance(v, dict):
+            kind = "{}"
+            json_objects(v, f"{path}.{k}" if path else k, out)
+        elif isinstance(v, list):
+            kind = "[]"
+            for e in v:
+                if isinstance(e, dict) and not is_array_record(e):
+                    kind = "[{}]"
+                    json_objects(e, (f"{path}.{k}" if path else k) + "[]", out)
+        elif isinstance(v, bool):
+            kind = "true|false"
+        elif isinstance(v, (int, float)):
+            kind = "number"
+        elif isinstance(v, str):
+            kind = "text"
+        else:
+            kind = "null"
+        fields.setdefault(k, set()).add(kind)
     return out
 
 
+def describe_field(name, kinds):
+    kinds = set(kinds)
+    null = "null" in kinds and len(kinds) > 1
+    kinds.discard("null") if null else None
+    if kinds == {"number"}:
+        text = name
+    elif kinds == {"[]"}:
+        text = name + "[]"
+    elif kinds <= {"{}", "[{}]"}:
+        text = name + ("[{}]" if "[{}]" in kinds else "{}")
+    else:
+        text = f"{name} ({'|'.join(sorted(kinds))})"
+    return text + (" or null" if null else "")
+
+
 def field_block(path):
+    """One line per object of the file: its path, then its fields (a number unless marked: `x[]`
+    an array, `x{}` an object listed on its own line, `x[{}]` an array of objects, `(text)`)."""
     with open(path) as f:
-        fields = json_fields(json.load(f))
-    width = max(len(p) for p in fields) + 2
-    lines = [f"{p.ljust(width)}{' or '.join(sorted(t))}" for p, t in fields.items()]
+        objects = json_objects(json.load(f), "", {})
+    lines, first = [], {}
+    for obj, fields in objects.items():
+        listed = ", ".join(describe_field(k, v) for k, v in fields.items())
+        if listed in first:  # an object laid out as an earlier one (a solver report, an error summary)
+            lines.append(f"{obj or '(top level)'}: as {first[listed]}")
+            continue
+        first[listed] = obj
+        lines.append(f"{obj or '(top level)'}: {listed}")
     return "```text\n" + "\n".join(lines) + "\n```"
 
 
-def make_study(rcm_binary, work):
-    subprocess.run([rcm_binary, "simulate", "--quick", "--seed", "1", "--out", os.path.join(work, "bench")],
-                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    subprocess.run([rcm_binary, "run", os.path.join(work, "bench", "session.json"), "--out",
-                    os.path.join(work, "study")], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+def make_study(build, work):
+    """The tutorial's study, made by running the tutorial (the ctest passes the one it made)."""
+    subprocess.run([sys.executable, os.path.join(ROOT, "tests", "check_tutorial.py"), "--build", build,
+                    "--work", work], check=True, stdout=subprocess.DEVNULL)
     return os.path.join(work, "study")
 
 
@@ -153,9 +234,8 @@ def old_sections(text):
 
 
 def generate(build, study_dir, current):
-    parts = [HEADER]
-    rows = ["| program or command | what it does |", "|---|---|"]
     bodies, missing = [], []
+    seen = {}
     kept = old_sections(current)
     for name, what in PROGRAMS:
         binary = os.path.join(build, "bin", name)
@@ -163,27 +243,38 @@ def generate(build, study_dir, current):
             missing.append(name)
             if name in kept:
                 bodies.append(kept[name])
-                for heading, summary in re.findall(r"^## (.+)\n\n(.*)$", kept[name], re.M):
-                    rows.append(f"| [`{heading}`](#{slug(heading)}) | {summary} |")
             continue
-        sections = program_sections(binary, name)
+        # A command whose help holds only its subcommands has no section of its own.
+        sections = [sec for sec in program_sections(binary, name)
+                    if not (sec[0] != name and "Options:" not in sec[2].replace("Options:\n  -h,--help", "")
+                            and "Subcommands:" in sec[2] and "Positionals:" not in sec[2])]
         body = [f"<!-- program:{name}:begin -->"]
         for k, (heading, summary, text) in enumerate(sections):
+            text = compact(text, heading, seen)
             summary = summary or what
-            rows.append(f"| [`{heading}`](#{slug(heading)}) | {summary} |")
+            if text.splitlines()[0].strip() == summary.strip():
+                text = "\n".join(text.splitlines()[1:])
             body.append(f"## {heading}\n\n{summary}\n\n```text\n{text}\n```\n")
         body.append(f"<!-- program:{name}:end -->")
         bodies.append("\n".join(body))
-    parts.append("\n".join(rows) + "\n")
-    parts += bodies
-    parts.append("## Model file (rcm-torque-model/1)\n\nThe fields of `free_space_model.json` (the default "
-                 "`linear` kind), as `rcm setup`, `rcm run` and `rcm dynamics fit` write it. Arrays of numbers are "
-                 "stored as `{shape, dtype, data}` with the data in base64.\n\n"
+    files = [FILES_HEADER]
+    if STUDY_OPTIONS in seen:
+        files.append("## Study options (`--options FILE`)\n\nA JSON object of any of these fields, nested as "
+                     "the dots say, read by `rcm run`, `rcm setup` and `rcm monitor` (`--options FILE`; the flags "
+                     "override it); the same fields are Python's `rcm.StudyOptions`. Each line: the field, what it "
+                     "is (unit; limits) [type, default].\n\n```text\n" + seen[STUDY_OPTIONS] + "\n```\n")
+    legend = ("One line per object: its path, then its fields. A field is a number unless marked: `x[]` an "
+              "array, `x{}` an object with a line of its own, `x[{}]` an array of objects (`x[]` on its line), "
+              "`(text)`, `(true|false)`; `or null` when it may be absent.")
+    files.append("## Model file (rcm-torque-model/1)\n\nThe fields of `free_space_model.json` (the default "
+                 "`linear` kind), as `rcm setup`, `rcm run` and `rcm dynamics fit` write it; arrays of numbers are "
+                 "stored as `{shape, dtype, data}`, the data in base64 ([formats.md](formats.md)). " + legend + "\n\n"
                  + field_block(os.path.join(study_dir, "free_space_model.json")) + "\n")
-    parts.append("## Results file (rcm-results/1)\n\nThe fields of `results.json`, as `rcm run` writes it with its "
-                 "defaults (joint method, three-step beside it), and `rcm run --json` prints it.\n\n"
+    files.append("## Results file (rcm-results/1)\n\nThe fields of `results.json`, as `rcm run` writes it with its "
+                 "defaults (joint method, three-step beside it) and `rcm run --json` prints it. Units are SI "
+                 "(m, N, N m, s). The contract's fields: [formats.md](formats.md#results-rcm-results1).\n\n"
                  + field_block(os.path.join(study_dir, "results.json")) + "\n")
-    return "\n".join(parts), missing
+    return "\n".join([HEADER] + bodies), "\n".join(files), missing
 
 
 def slug(heading):
@@ -194,31 +285,33 @@ def slug(heading):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--build", default=os.path.join(ROOT, "build"), help="build folder whose bin/ holds the programs")
-    ap.add_argument("--study", help="folder with results.json and free_space_model.json of an `rcm run`")
-    ap.add_argument("--check", action="store_true", help="compare with docs/cli.md instead of writing it")
-    ap.add_argument("--doc", default=DOC, help="the page (default docs/cli.md)")
+    ap.add_argument("--study", help="folder with results.json and free_space_model.json of the tutorial's study")
+    ap.add_argument("--check", action="store_true", help="compare with the pages instead of writing them")
     args = ap.parse_args()
-    current = open(args.doc).read() if os.path.exists(args.doc) else ""
+    current = {doc: open(doc).read() if os.path.exists(doc) else "" for doc in (DOC, FILES_DOC)}
     with tempfile.TemporaryDirectory() as work:
-        study = args.study or make_study(os.path.join(args.build, "bin", "rcm"), work)
-        text, missing = generate(args.build, study, current)
+        study = args.study or make_study(args.build, os.path.join(work, "tutorial"))
+        cli, files, missing = generate(args.build, study, current[DOC])
     for name in missing:
         print(f"{name}: not built here; its section is kept as it was, unchecked", file=sys.stderr)
-    if args.check:
-        if text == current:
-            print(f"{os.path.relpath(args.doc, ROOT)} agrees with the programs")
-            return 0
-        diff = difflib.unified_diff(current.splitlines(), text.splitlines(), "docs/cli.md", "the programs",
-                                    lineterm="", n=1)
-        print("\n".join(list(diff)[:200]))
-        print(f"{os.path.relpath(args.doc, ROOT)} differs from the programs: rerun `make docs-cli` and commit it")
-        return 1
-    tmp = args.doc + ".tmp"
-    with open(tmp, "w") as f:
-        f.write(text)
-    os.replace(tmp, args.doc)
-    print(f"wrote {os.path.relpath(args.doc, ROOT)} ({len(text.encode()) / 1024:.1f} KB)")
-    return 0
+    status = 0
+    for doc, text in ((DOC, cli), (FILES_DOC, files)):
+        rel = os.path.relpath(doc, ROOT)
+        if args.check:
+            if text == current[doc]:
+                print(f"{rel} agrees with the programs")
+                continue
+            diff = difflib.unified_diff(current[doc].splitlines(), text.splitlines(), rel, "the programs",
+                                        lineterm="", n=1)
+            print("\n".join(list(diff)[:200]))
+            print(f"{rel} differs from the programs: run `make docs-cli` and commit it")
+            status = 1
+            continue
+        with open(doc + ".tmp", "w") as f:
+            f.write(text)
+        os.replace(doc + ".tmp", doc)
+        print(f"wrote {rel} ({len(text.encode()) / 1024:.1f} KB)")
+    return status
 
 
 if __name__ == "__main__":
