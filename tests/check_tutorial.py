@@ -51,7 +51,8 @@ def parse(text):
     return blocks
 
 
-NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+# A number, but not the digits of a name (D30_r10_15, effort_1), which stay as written.
+NUMBER = re.compile(r"(?<![A-Za-z_])[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?(?![A-Za-z_\d])")
 
 
 def line_pattern(line):
