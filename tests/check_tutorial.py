@@ -2,8 +2,8 @@
 """The tutorial runs: every command of docs/tutorial.md, in a scratch folder.
 
 The tutorial's ```sh blocks are run in order, each as one bash script (`set -e
--o pipefail`), in one working folder, with the build's programs first on PATH
-and RCM_SOURCE set to the repository. A block preceded by the comment
+-o pipefail`), in one working folder, with the build's programs first on PATH. A
+block preceded by the comment
 `<!-- tutorial: not run ... -->` is skipped (it needs the reader's own robot or
 recordings; the comment says why). Every block that runs must be followed by
 a ```text block, what the reader should see. Every line of it but `...` must
@@ -91,7 +91,6 @@ def run_page(page, build, work, update=False):
     blocks = parse(text)
     env = dict(os.environ)
     env["PATH"] = os.path.join(os.path.abspath(build), "bin") + os.pathsep + env.get("PATH", "")
-    env["RCM_SOURCE"] = ROOT
     env["PYTHONPATH"] = os.path.join(os.path.abspath(build), "python")
     problems, ran, skipped, total = [], 0, 0, 0.0
     page_lines = text.splitlines()
