@@ -125,8 +125,21 @@ void TrajectoryPlayer::add_setpoint(const JointStateView& m, std::int64_t stamp_
   bool ok = !m.position.empty();
   for (double v : m.position) ok = ok && std::isfinite(v);
   if (!ok) return;
-  setpoint_.assign(m.position.begin(), m.position.end());
-  setpoint_stamp_ns_ = stamp_ns;
+  setpoints_[next_setpoint_].assign(m.position.begin(), m.position.end());
+  setpoint_stamps_[next_setpoint_] = stamp_ns;
+  next_setpoint_ = (next_setpoint_ + 1) % kSetpoints;
+}
+
+const std::vector<double>* TrajectoryPlayer::find_setpoint(std::int64_t stamp_ns, std::size_t joints) const {
+  const std::vector<double>* best = nullptr;
+  std::int64_t best_stamp = -1;
+  for (std::size_t i = 0; i < kSetpoints; ++i)
+    if (setpoint_stamps_[i] >= 0 && setpoint_stamps_[i] <= stamp_ns && setpoint_stamps_[i] > best_stamp &&
+        setpoints_[i].size() == joints) {
+      best = &setpoints_[i];
+      best_stamp = setpoint_stamps_[i];
+    }
+  return best;
 }
 
 const PlayerCommand& TrajectoryPlayer::compute_tick(std::int64_t wall_ns) {
@@ -226,7 +239,8 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
   record(m, stamp_ns);
 
   // Tracking error against the arm's own setpoint, else against what was sent.
-  const std::vector<double>& reference = !setpoint_.empty() && setpoint_.size() == n ? setpoint_ : last_sent_;
+  const std::vector<double>* setpoint = find_setpoint(stamp_ns, n);
+  const std::vector<double>& reference = setpoint ? *setpoint : last_sent_;
   if (reference.size() == n) {
     for (std::size_t j = 0; j < n; ++j) {
       const double e = std::abs(measured_[j] - reference[j]);

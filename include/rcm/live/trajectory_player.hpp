@@ -127,8 +127,14 @@ class TrajectoryPlayer {
   std::int64_t start_stamp_ns_ = 0, move_stamp_ns_ = 0, first_sent_stamp_ns_ = 0, last_sent_stamp_ns_ = 0;
   std::size_t next_row_ = 0;
   std::vector<double> held_, goal_, last_sent_, measured_;
-  std::vector<double> setpoint_;
-  std::int64_t setpoint_stamp_ns_ = 0;
+  // The arm's recent setpoint_js, by stamp: each measured_js is held against
+  // the setpoint of its own period (or the last one before it), whatever the
+  // order the two topics arrive in.
+  static constexpr std::size_t kSetpoints = 256;
+  std::vector<std::vector<double>> setpoints_ = std::vector<std::vector<double>>(kSetpoints);
+  std::vector<std::int64_t> setpoint_stamps_ = std::vector<std::int64_t>(kSetpoints, -1);
+  std::size_t next_setpoint_ = 0;
+  const std::vector<double>* find_setpoint(std::int64_t stamp_ns, std::size_t joints) const;
   std::vector<double> error_sq_sum_;
   std::size_t error_count_ = 0;
   // The recording, row by row.
