@@ -1,5 +1,5 @@
 // rcm convert: a bag's joint-state topic (and optionally a force topic) to the
-// rcm CSV layout, validated as every recording is (docs/ros.md): a rosbag2
+// rcm CSV layout, validated as every recording is (docs/formats.md): a rosbag2
 // recording always, a ROS 1 bag when built with ROS. Every command also reads
 // bags directly; convert makes a file other tools read.
 
