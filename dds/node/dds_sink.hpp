@@ -14,7 +14,7 @@
 #include <thread>
 #include <vector>
 
-#include "../shared/dds_io.hpp"
+#include "support/dds_io.hpp"
 #include "rcm/live/monitor_node.hpp"
 #include "ros2_msgs.h"
 

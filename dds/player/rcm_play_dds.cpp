@@ -1,7 +1,7 @@
 // rcm_play_dds: plays a joint trajectory on an arm that speaks CRTK over ROS 2
 // (a dVRK, or rcm_sim_psm_dds) and records its measured_js, without ROS 2. What
 // it decides per message is rcm::TrajectoryPlayer (include/rcm/live/); this
-// file reads the flags, talks to the arm (dds/shared/crtk_client.hpp) and
+// file reads the flags, talks to the arm (dds/support/crtk_client.hpp) and
 // writes the recording. docs/howto-procedure.md.
 //
 //   rcm_play_dds excitation.csv --out free_space.csv [--arm PSM1]
@@ -22,7 +22,7 @@
 #include <iostream>
 #include <string>
 
-#include "../shared/crtk_client.hpp"
+#include "support/crtk_client.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/joint_trajectory.hpp"
 #include "rcm/io/json_file.hpp"

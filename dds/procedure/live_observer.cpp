@@ -2,7 +2,7 @@
 
 #include "live_observer.hpp"
 
-#include "../shared/dds_io.hpp"
+#include "support/dds_io.hpp"
 #include "ros2_msgs.h"
 
 namespace rcm::dds_node {

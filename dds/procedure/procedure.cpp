@@ -295,7 +295,8 @@ int Procedure::run_phases() {
                                      std::to_string(o_.seed), "--rate", num(rate > 0 ? rate : 1000.0), "--out",
                                      excitation};
     args.insert(args.end(), o_.excite_args.begin(), o_.excite_args.end());
-    const int code = run_child(args, o_.out / "excite.log");
+    const int code = run_child(args, o_.out / "excite.log", interrupted_);
+    if (interrupted_()) return 4;
     if (code != 0) throw std::runtime_error(fmt::format("rcm excite exited {}; see {}", code, (o_.out / "excite.log").string()));
   }
   const JointTrajectory trajectory = load_joint_trajectory(excitation);
@@ -341,7 +342,8 @@ int Procedure::run_phases() {
                                    (o_.out / "setup").string(), "--options", (o_.out / "setup_options.json").string()};
   args.insert(args.end(), o_.setup_args.begin(), o_.setup_args.end());
   say("setup: rcm setup session.json (log setup.log)");
-  const int code = run_child(args, o_.out / "setup.log");
+  const int code = run_child(args, o_.out / "setup.log", interrupted_);
+  if (interrupted_()) return 4;
   const fs::path setup_json = o_.out / "setup" / "setup.json";
   if ((code != 0 && code != 3) || !fs::exists(setup_json))
     throw std::runtime_error(fmt::format("rcm setup exited {}; see {}", code, (o_.out / "setup.log").string()));

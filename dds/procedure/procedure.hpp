@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "../shared/child_process.hpp"
-#include "../shared/crtk_client.hpp"
+#include "support/child_process.hpp"
+#include "support/crtk_client.hpp"
 #include "live_observer.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/session.hpp"

@@ -13,7 +13,7 @@
 //                closed across processes; on an arm, the live monitor
 //
 // The phases play and record in this process (rcm::TrajectoryPlayer,
-// dds/shared/crtk_client.hpp); `rcm excite`, `rcm setup` and rcm_monitor_dds
+// dds/support/crtk_client.hpp); `rcm excite`, `rcm setup` and rcm_monitor_dds
 // run as child processes, the same programs a team runs by hand. Every
 // recording, session.json (rcm-session/1, for `rcm run`), the setup's folder,
 // the monitors' logs and procedure.json land in --out. docs/howto-procedure.md.
@@ -31,8 +31,8 @@
 #include <string>
 #include <thread>
 
-#include "../shared/child_process.hpp"
-#include "../shared/crtk_client.hpp"
+#include "support/child_process.hpp"
+#include "support/crtk_client.hpp"
 #include "live_observer.hpp"
 #include "procedure.hpp"
 #include "rcm/common/error.hpp"

@@ -19,7 +19,7 @@
 #include <string>
 #include <vector>
 
-#include "../shared/dds_io.hpp"
+#include "support/dds_io.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/sim/simulated_psm.hpp"

@@ -78,9 +78,14 @@ std::string Child::log() const {
   return s.str();
 }
 
-int run_child(const std::vector<std::string>& args, const std::filesystem::path& log) {
+int run_child(const std::vector<std::string>& args, const std::filesystem::path& log,
+              const std::function<bool()>& interrupted) {
   Child c(args, log);
-  return c.wait(std::chrono::hours(24));
+  while (!interrupted()) {
+    const int code = c.wait(std::chrono::milliseconds(100));
+    if (code != Child::kStillRunning) return code;
+  }
+  return c.stop(std::chrono::seconds(5));
 }
 
 std::filesystem::path get_program_directory() {

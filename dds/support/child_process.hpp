@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -36,8 +37,10 @@ class Child {
   int status_ = 0;
 };
 
-// Runs `args` to its end; its exit code (or -signal). Its output goes to `log`.
-int run_child(const std::vector<std::string>& args, const std::filesystem::path& log);
+// Runs `args` to its end, or stops it once `interrupted()`; its exit code (or
+// -signal). Its output goes to `log`.
+int run_child(const std::vector<std::string>& args, const std::filesystem::path& log,
+              const std::function<bool()>& interrupted);
 
 // The directory of the running program (/proc/self/exe), where rcm's other
 // programs are installed beside it.
