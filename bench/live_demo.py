@@ -54,14 +54,15 @@ def demo_json(procedure):
 
 def table(d):
     lines = ["", "| phase | status | samples recorded | rows sent | pacing (arm time vs file) | "
-                 "tracking error max, yaw / pitch / insertion |",
+                 "largest tracking error, yaw / pitch / insertion (mrad, mrad, mm) |",
              "|---|---|---|---|---|---|"]
     for p in d["phases"]:
         err = p.get("max_tracking_error") or {}
-        vals = " / ".join(f"{v * 1e3:.2f}" for v in list(err.values())[:3])
+        vals = " / ".join(f"{1e3 * err[j]:.2f}" if j in err else "-"
+                          for j in ("outer_yaw", "outer_pitch", "outer_insertion"))
         pacing = "-" if p["pacing_error"] is None else f"{100 * p['pacing_error']:+.3f} %"
         lines.append(f"| {p['name']} | {p['status']} | {p['samples_recorded']} | {p['rows_sent']} | {pacing} | "
-                     f"{vals} mrad, mrad, mm |")
+                     f"{vals} |")
     s, loop = d["setup"], d["closed_loop"]
     lines += ["",
               f"rcm setup: {'READY' if s['ready'] else 'NOT READY'}"
@@ -70,14 +71,18 @@ def table(d):
               f"live estimate against the simulator's truth: error {fmt(d['estimate_error_m'], 2, 1e3)} mm"
               + (f" (estimate {', '.join(f'{1e3 * v:.1f}' for v in d['estimate_m'])} mm, truth "
                  f"{', '.join(f'{1e3 * v:.1f}' for v in d['truth_m'])} mm)" if d.get("estimate_m") else ""),
-              "",
-              f"| closed loop across processes ({loop.get('motion')}) | |",
-              "|---|---|",
-              f"| peak force | {fmt(loop.get('peak_force_n'), 1)} N |",
-              f"| onset to force below 2 N for good | {fmt(loop.get('time_to_below_2n_s'), 1, none='never')} s |",
-              f"| RMS force after settling | {fmt(loop.get('rms_force_after_settle_n'))} N |",
-              f"| residual misalignment | {fmt(loop.get('residual_misalignment_m'), 1, 1e3)} mm |",
-              f"| moves / wrong-direction moves | {loop.get('moves')} / {loop.get('wrong_direction_moves')} |"]
+              ""]
+    if loop.get("motion") is None:
+        lines.append("closed loop across processes: not run (the procedure stopped before it)")
+    else:
+        below = loop.get("time_to_below_2n_s")
+        lines += [f"| closed loop across processes ({loop['motion']}) | |",
+                  "|---|---|",
+                  f"| peak force | {fmt(loop.get('peak_force_n'), 1)} N |",
+                  f"| onset to force below 2 N for good | {'never' if below is None else f'{below:.1f} s'} |",
+                  f"| RMS force after settling | {fmt(loop.get('rms_force_after_settle_n'))} N |",
+                  f"| residual misalignment | {fmt(loop.get('residual_misalignment_m'), 1, 1e3)} mm |",
+                  f"| moves / wrong-direction moves | {loop.get('moves')} / {loop.get('wrong_direction_moves')} |"]
     return "\n".join(lines)
 
 

@@ -50,8 +50,9 @@ def stop(p):
         p.kill()
 
 
-def one_procedure(bindir, seed, work, args):
-    out = os.path.join(work, f"seed{seed}")
+def one_procedure(bindir, seed, work, args, setup=None):
+    """The procedure against the simulator. `setup`: (session, model) made before: the live phase only."""
+    out = os.path.join(work, f"seed{seed}" + ("_live" if setup else ""))
     os.makedirs(out, exist_ok=True)
     env = env_for(200 + seed)
     start = time.monotonic()
@@ -59,28 +60,32 @@ def one_procedure(bindir, seed, work, args):
         sim = start_sim(bindir, ["--rate", f"{args.rate:g}", "--time-scale", f"{args.time_scale:g}", "--teleop",
                                  "--software-rcm", "--seed", str(seed)], log, env)
         try:
+            # A shared machine can keep the simulator off the CPU for a second:
+            # the player waits 5 s for measured_js rather than 1.
+            cmd = [os.path.join(bindir, "rcm_procedure_dds"), "--simulator", "--power", "--out", out, "--software-rcm",
+                   "--incision-motion", "large_step", "--seed", str(seed), "--measured-timeout-s", "5"]
+            if setup:
+                cmd += ["--session", setup[0], "--model-file", setup[1]]
             with open(os.path.join(out, "procedure.log"), "w") as plog:
-                # A shared machine can keep the simulator off the CPU for a second:
-                # the player waits 5 s for measured_js rather than 1.
-                code = subprocess.call([os.path.join(bindir, "rcm_procedure_dds"), "--simulator", "--power", "--out",
-                                        out, "--software-rcm", "--incision-motion", "large_step", "--seed", str(seed),
-                                        "--measured-timeout-s", "5"],
-                                       stdout=plog, stderr=subprocess.STDOUT, env=env)
+                code = subprocess.call(cmd, stdout=plog, stderr=subprocess.STDOUT, env=env)
         finally:
             stop(sim)
     with open(os.path.join(out, "procedure.json")) as f:
         j = json.load(f)
     j["exit"] = code
     j["report_wall_s"] = time.monotonic() - start
-    print(f"seed {seed}: procedure exited {code} in {j['report_wall_s']:.0f} s", file=sys.stderr, flush=True)
+    print(f"seed {seed}{' (live phase)' if setup else ''}: procedure exited {code} in {j['report_wall_s']:.0f} s",
+          file=sys.stderr, flush=True)
     return j
 
 
 def one_bench(rcm, seed, work):
+    """The in-process bench on `seed`: its large step, closed, and the session and model it prepared."""
     out = os.path.join(work, f"bench{seed}")
     p = subprocess.run([rcm, "simulate", "--experiment", "closed-loop", "--seed", str(seed), "--out", out, "--json",
                         "--no-plot"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, check=True)
-    return json.loads(p.stdout)["scenarios"]["large_step"]["closed"]
+    j = json.loads(p.stdout)
+    return j["scenarios"]["large_step"]["closed"], (j["session"], j["free_space_model_file"])
 
 
 def sim_cpu_share(bindir, work, seconds=10.0):
@@ -123,7 +128,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--build", default=os.path.join(ROOT, "build"))
     ap.add_argument("--seeds", default="1,2,3,4,5,6,7,8")
-    ap.add_argument("--setup-seeds", type=int, default=5, help="the first N seeds count for the setup verdict")
+    ap.add_argument("--full-seeds", default="1,2,3,4,5", help="seeds of the whole procedure (the setup's verdict)")
     ap.add_argument("--rate", type=float, default=1500.0)
     ap.add_argument("--time-scale", type=float, default=2.0)
     ap.add_argument("--keep", help="keep every run's folder here")
@@ -134,66 +139,63 @@ def main():
     work = args.keep or tempfile.mkdtemp(prefix="rcm_live_procedure_")
     os.makedirs(work, exist_ok=True)
     seeds = [int(s) for s in args.seeds.split(",")]
+    full_seeds = [int(s) for s in args.full_seeds.split(",") if s]
     started = time.monotonic()
     if args.from_json:
         with open(args.from_json) as f:
             saved = json.load(f)
         runs = {int(k): v for k, v in saved["runs"].items()}
+        live = {int(k): v for k, v in saved["live"].items()}
         bench = {int(k): v for k, v in saved["bench"].items()}
         cpu, steps = saved["sim_cpu_share"], saved.get("steps") or step_cost(args.build)
         seeds = [s for s in seeds if s in runs]
         started -= saved.get("minutes", 0) * 60
     else:
-        runs = {s: one_procedure(bindir, s, work, args) for s in seeds}
-        bench = {s: one_bench(os.path.join(bindir, "rcm"), s, work) for s in seeds}
+        bench, live, runs = {}, {}, {}
+        for s in seeds:
+            bench[s], setup = one_bench(os.path.join(bindir, "rcm"), s, work)
+            live[s] = one_procedure(bindir, s, work, args, setup)
+        for s in full_seeds:
+            runs[s] = one_procedure(bindir, s, work, args)
         cpu = sim_cpu_share(bindir, work)
         steps = step_cost(args.build)
         with open(os.path.join(work, "report.json"), "w") as f:
-            json.dump({"runs": runs, "bench": bench, "sim_cpu_share": cpu, "steps": steps,
+            json.dump({"runs": runs, "live": live, "bench": bench, "sim_cpu_share": cpu, "steps": steps,
                        "minutes": (time.monotonic() - started) / 60, "load": os.getloadavg()[0]}, f, indent=2)
 
     stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     load = saved.get("load", os.getloadavg()[0]) if args.from_json else os.getloadavg()[0]
-    head = (f"Measured by `bench/live_procedure_report.py --seeds {args.seeds} --rate {args.rate:g} --time-scale "
-            f"{args.time_scale:g}` on {stamp}, {cpu_model()}, {os.cpu_count()} cores, load average {load:.1f} at the "
-            f"end, {(time.monotonic() - started) / 60:.0f} min in all. Per seed: `rcm_sim_psm_dds --rate "
-            f"{args.rate:g} --teleop --software-rcm`, its clock {args.time_scale:g} times the wall's, and "
-            "`rcm_procedure_dds --simulator --power --software-rcm --incision-motion large_step --measured-timeout-s 5` "
-            "with every other "
-            "default (a 120 s excitation designed by `rcm excite` at the arm's rate, 10 s baseline, 30 s "
-            "calibration at D* = 30 mm, `rcm setup`, a 30 s check with the incision at 5, 10, 25 mm, then 90 s "
-            "with the large step at 20 s), over loopback DDS; beside it `rcm simulate --experiment closed-loop` on "
-            "the same seed (the in-process bench, 200 Hz).")
-    rows = ["| seed | setup | live estimate error (mm) | excitation: samples recorded / rows sent, pacing | "
-            "across processes: onset to < 2 N for good (s) / RMS after settling (N) / wrong moves / peak (N) | "
-            "in process: the same |",
-            "|---|---|---|---|---|---|"]
-    for s in seeds:
-        j, b = runs[s], bench[s]
-        loop = j.get("closed_loop") or {}
-        ex = (j.get("phases") or [{}])[0]
-        setup = (j.get("setup") or {}).get("ready")
-        err = j.get("estimate_error_m")
-        pacing = ex.get("pacing_error")
+    minutes = (time.monotonic() - started) / 60
+    head = (f"Measured by `bench/live_procedure_report.py --seeds {','.join(map(str, seeds))} --full-seeds "
+            f"{','.join(map(str, full_seeds))} --rate {args.rate:g} --time-scale {args.time_scale:g}` on {stamp}, "
+            f"{cpu_model()}, {os.cpu_count()} cores shared with other work (load average {load:.1f} at the end), "
+            f"{minutes:.0f} min in all. Each run: `rcm_sim_psm_dds --rate {args.rate:g} --teleop --software-rcm` "
+            f"(its clock {args.time_scale:g} times the wall's) and `rcm_procedure_dds --simulator --power "
+            "--software-rcm --incision-motion large_step --measured-timeout-s 5` over loopback DDS, three processes "
+            "in the loop (simulator, monitor, procedure).")
+    rows = ["| seed | across processes: onset to < 2 N for good (s) / RMS after settling (N) / wrong moves / peak (N) "
+            "| in process (the bench) | the check's live estimate error (mm) |",
+            "|---|---|---|---|"]
+    for s_ in seeds:
+        loop, b = (live[s_].get("closed_loop") or {}), bench[s_]
+        err = live[s_].get("estimate_error_m")
         rows.append(
-            f"| {s} | {'ready' if setup else 'not ready' if setup is not None else '-'} | "
-            f"{'-' if err is None else f'{1e3 * err:.2f}'} | {ex.get('samples_recorded', '-')} / "
-            f"{ex.get('rows_sent', '-')}, {'-' if pacing is None else f'{100 * pacing:+.3f} %'} | "
+            f"| {s_} | "
             + (f"{fmt_s(loop.get('time_to_below_2n_s'))} / {loop['rms_force_after_settle_n']:.2f} / "
                f"{loop['wrong_direction_moves']} / {loop['peak_force_n']:.1f}" if loop else "-")
             + f" | {fmt_s(b['time_to_below_2n_s'])} / {b['rms_force_after_settle_n']:.2f} / "
-              f"{b['wrong_direction_moves']} / {b['peak_force_n']:.1f} |")
+              f"{b['wrong_direction_moves']} / {b['peak_force_n']:.1f} | {'-' if err is None else f'{1e3 * err:.2f}'} |")
 
     def meets(r):
         t = r.get("time_to_below_2n_s")
         return t is not None and t <= 5.0
 
-    loops = [runs[s]["closed_loop"] for s in seeds if runs[s].get("closed_loop")]
-    benches = [bench[s] for s in seeds]
+    loops = [live[s_]["closed_loop"] for s_ in seeds if live[s_].get("closed_loop")]
+    benches = [bench[s_] for s_ in seeds]
 
     def summary(rs, what):
         if not rs:
-            return f"{what}: no run"
+            return f"{what}: no run."
         t = [r["time_to_below_2n_s"] for r in rs if r["time_to_below_2n_s"] is not None]
         return (f"{what}: force below 2 N for good within 5 s of the step on {sum(meets(r) for r in rs)} of "
                 f"{len(rs)} seeds, RMS force after settling below 1 N on "
@@ -202,27 +204,41 @@ def main():
                 f"2 N {statistics.median(t) if t else float('nan'):.1f} s, median RMS after settling "
                 f"{statistics.median(r['rms_force_after_settle_n'] for r in rs):.2f} N.")
 
-    setup_seeds = seeds[:args.setup_seeds]
-    ready = [s for s in setup_seeds if (runs[s].get("setup") or {}).get("ready")]
-    close = [s for s in ready if runs[s].get("estimate_error_m") is not None and runs[s]["estimate_error_m"] <= 1e-3]
-    phases = [p for s in seeds for p in runs[s].get("phases", [])]
+    full = ["| seed | `rcm setup` | what it found missing | excitation: samples recorded / rows sent, pacing, RMS "
+            "tracking error of yaw (mrad) |", "|---|---|---|---|"]
+    for s_ in full_seeds:
+        j = runs[s_]
+        ex = (j.get("phases") or [{}])[0]
+        setup = j.get("setup") or {}
+        pacing = ex.get("pacing_error")
+        rms = (ex.get("rms_tracking_error") or {}).get("outer_yaw")
+        missing = "; ".join(m.split(":")[0] for m in setup.get("missing") or []) or "-"
+        full.append(f"| {s_} | {'ready' if setup.get('ready') else 'not ready' if setup else '-'} "
+                    f"(force error {setup.get('force_error_n') or float('nan'):.1f} N) | {missing} | "
+                    f"{ex.get('samples_recorded', '-')} / {ex.get('rows_sent', '-')}, "
+                    f"{'-' if pacing is None else f'{100 * pacing:+.3f} %'}, "
+                    f"{'-' if rms is None else f'{1e3 * rms:.2f}'} |")
+    ready = [s_ for s_ in full_seeds if (runs[s_].get("setup") or {}).get("ready")]
+    phases = [p for j in list(runs.values()) + list(live.values()) for p in j.get("phases", [])]
     rate = args.rate
     lost = sum(abs(p["samples_recorded"] - (round(p["recorded_span_s"] * rate) + 1)) for p in phases
                if p["samples_recorded"])
     pacing = [abs(p["pacing_error"]) for p in phases if p.get("pacing_error") is not None]
-    text = [head, "", *rows, "",
-            summary(loops, "Across processes"), summary(benches, "In process (the bench)"),
-            f"`rcm setup` ready on {len(ready)} of {len(setup_seeds)} seeds ({', '.join(map(str, setup_seeds))}); the "
-            f"check's live estimate within 1 mm of the simulator's truth on {len(close)} of them.",
-            f"The player, every phase of every seed ({len(phases)} phases): samples recorded against the arm's "
-            f"stamps' span at {rate:g} Hz differ by {lost} in all (none lost, none doubled when 0); the largest "
-            f"pacing error {100 * max(pacing) if pacing else float('nan'):.4f} % of a file's duration.",
+    text = [head, "",
+            "The loop on the large step, on the in-process bench's own setup (its session and free-space model, "
+            "`rcm_procedure_dds --session --model-file`), so that only the processes differ: the estimator reads "
+            f"measured_js at {rate:g} Hz over DDS (the bench: 200 Hz in one process), commands the shift on "
+            "`/PSM1/rcm/shift`, and the simulator moves its RCM.", "", *rows, "",
+            summary(loops, "Across processes"), summary(benches, "In process (the bench)"), "",
+            "The whole procedure from the excitation on:", "", *full, "",
+            f"`rcm setup` ready on {len(ready)} of {len(full_seeds)} seeds. "
+            f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
+            f"span at {rate:g} Hz differ by {lost} in all; the largest pacing error "
+            f"{100 * max(pacing) if pacing else float('nan'):.4f} % of a file's duration.",
             "",
-            "The figures across processes are one run per seed, on a machine shared with other work: a "
-            "setpoint or a shift that DDS delivers late counts "
-            f"{args.time_scale:g} times in the arm's time. The in-process bench prepares its estimator on its own "
-            "session (15 min of teleoperated free space), the procedure on what it recorded (2 min of excitation); "
-            "both run the same arm, tissue, step and correction."]
+            "A `servo_jp` that misses the arm's period moves it in a step: on a machine this busy the excitation "
+            "streamed over DDS moves in such steps, the free-space model fitted on it errs by a newton-metre, and "
+            "`rcm setup` says why it is not ready. Stream on a quiet machine, and read `rcm setup`'s force error."]
     block = "\n".join(text)
     print(block)
     bench_lines = []

@@ -68,6 +68,9 @@ void ProcedureOptions::check(const std::function<InputLocation(const std::string
     }
   }
   player.check([&](const std::string& name) { return flag("--" + name); });
+  if (session.empty() != model_file.empty())
+    throw InputError(flag(session.empty() ? "--session" : "--model-file"),
+                     "--session and --model-file go together: a setup made before");
   const fs::path here = get_program_directory();
   if (rcm.empty()) rcm = (here / "rcm").string();
   if (monitor.empty()) monitor = (here / "rcm_monitor_dds").string();
@@ -153,9 +156,11 @@ void Procedure::write_session() {
 }
 
 bool Procedure::start_monitor(const std::string& segment, bool loop) {
+  const bool given = !o_.session.empty();
   std::vector<std::string> args = {o_.monitor,
-                                   "--session", (o_.out / "session.json").string(),
-                                   "--model-file", (o_.out / "setup" / "free_space_model.json").string(),
+                                   "--session", given ? o_.session : (o_.out / "session.json").string(),
+                                   "--model-file",
+                                   given ? o_.model_file : (o_.out / "setup" / "free_space_model.json").string(),
                                    "--arm", o_.arm,
                                    "--domain", std::to_string(o_.domain),
                                    "--seed", std::to_string(o_.seed),
@@ -362,7 +367,10 @@ int Procedure::run_phases() {
   say(fmt::format("setup: ready (the model's force error {:.2f} N; setup/setup.json)",
                   setup["model"].value("force_error_n", 0.0)));
 
-  // 5. Live.
+  return run_live_phase();
+}
+
+int Procedure::run_live_phase() {
   bool ok = true;
   if (o_.simulator) {
     if (o_.check_s > 0) ok = run_check() && ok;
@@ -370,7 +378,7 @@ int Procedure::run_phases() {
   } else {
     ok = run_live();
   }
-  write_session();
+  if (o_.session.empty()) write_session();
   return ok || interrupted_() ? 0 : 4;
 }
 
@@ -394,7 +402,12 @@ int Procedure::run() {
     say("refused: " + why);
   } else {
     say(fmt::format("the arm is {}{}", arm_->get_state().state, arm_->get_state().homed ? ", homed" : ", not homed"));
-    status = run_phases();
+    if (o_.session.empty()) {
+      status = run_phases();
+    } else {
+      say(fmt::format("live only, on the setup of {} and {}", o_.session, o_.model_file));
+      status = run_live_phase();
+    }
   }
   stop_monitor();
   report_["exit"] = status;

@@ -45,6 +45,9 @@ struct ProcedureOptions {
   std::string max_tracking_error_text;
   PlayerOptions player;
   std::string rcm, monitor;  // programs; empty: beside this one
+  // Both given: a setup made before (a session and its model); the procedure
+  // goes straight to the live phase.
+  std::string session, model_file;
   // Throws InputError at `flag(name)`; fills rcm, monitor and the players' limits.
   void check(const std::function<InputLocation(const std::string&)>& flag);
 };
@@ -59,6 +62,7 @@ class Procedure {
 
  private:
   int run_phases();
+  int run_live_phase();
   void say(const std::string& line);
   // Plays or records one phase into out/`file` (empty: not kept); false when it did not finish.
   bool play(const std::string& name, TrajectoryPlayer& player, const std::string& file);

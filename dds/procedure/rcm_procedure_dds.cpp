@@ -102,6 +102,9 @@ int run(int argc, char** argv) {
                  "players: stop beyond this |measured - setpoint| per joint, comma separated (rad or m)");
   app.add_option("--measured-timeout-s", o.player.measured_timeout_s, "players: stop when no measured_js came for this long (s, wall)")
       ->capture_default_str();
+  app.add_option("--session", o.session,
+                 "with --model-file: a setup made before; go straight to the live phase (rcm-session/1)");
+  app.add_option("--model-file", o.model_file, "with --session: its free-space model (free_space_model.json)");
   app.add_option("--rcm", o.rcm, "the rcm program (default: beside this one)");
   app.add_option("--monitor", o.monitor, "the rcm_monitor_dds program (default: beside this one)");
   app.add_option("--domain", o.domain, "DDS domain (default: ROS_DOMAIN_ID, else 0)");
