@@ -68,7 +68,8 @@ void LiveObserver::poll() {
   for (auto it = pending_.begin(); it != pending_.end(); ++it)
     if (is_whole(it->second)) last_whole = it;
   if (last_whole == pending_.end()) return;
-  for (auto it = pending_.begin(); it != std::next(last_whole);) {
+  const auto end = std::next(last_whole);  // before last_whole itself is erased
+  for (auto it = pending_.begin(); it != end;) {
     if (is_whole(it->second)) process(it->first, it->second);
     it = pending_.erase(it);
   }
