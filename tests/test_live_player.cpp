@@ -228,7 +228,9 @@ TEST(TrajectoryPlayer, StopsOnTrackingErrorAndHoldsTheArm) {
 TEST(TrajectoryPlayer, RejectsBadMeasuredJsAndRecordsOnly) {
   Bench b(500.0);
   b.make_ready();
-  TrajectoryPlayer player(1.0, {});  // record 1 s of the arm's time
+  rcm::PlayerOptions o;
+  o.max_tracking_error = {1e-9};  // beyond any arm's: a recorder reports it, never stops on it
+  TrajectoryPlayer player(1.0, o);  // record 1 s of the arm's time
   for (int k = 0; k < 100; ++k) b.step(player);
   ASSERT_EQ(player.phase(), PlayerPhase::streaming);
   std::vector<double> nan_position = b.position;
@@ -241,7 +243,10 @@ TEST(TrajectoryPlayer, RejectsBadMeasuredJsAndRecordsOnly) {
   b.play(player);
   ASSERT_EQ(player.phase(), PlayerPhase::done) << player.summary().message;
   EXPECT_EQ(player.summary().rows_sent, 0u);
+  EXPECT_GT(player.summary().max_tracking_error[0], 1e-9);
   EXPECT_EQ(b.s.counters.servo_accepted + b.s.counters.move_accepted, 0u) << "a recorder commands nothing";
+  EXPECT_EQ(player.summary().rows_sent, 0u);
+  EXPECT_GT(player.summary().max_tracking_error[0], 1e-9);
   EXPECT_EQ(static_cast<long>(player.summary().samples_recorded), 501);
   EXPECT_NEAR(player.summary().recorded_span_s, 1.0, 1e-6);
 }

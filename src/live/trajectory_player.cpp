@@ -249,7 +249,10 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
     }
     ++error_count_;
     for (std::size_t j = 0; j < n; ++j) summary_.rms_tracking_error[j] = std::sqrt(error_sq_sum_[j] / error_count_);
-    for (std::size_t j = 0; j < n; ++j)
+    // A recorder commands nothing: whoever moves the arm (a surgeon, the
+    // simulator's teleoperation) answers for its tracking, which tissue may
+    // pull millimetres off; the error is reported, not acted on.
+    for (std::size_t j = 0; !record_only_ && j < n; ++j)
       if (std::abs(measured_[j] - reference[j]) > limit(options_.max_tracking_error, j)) {
         stop(fmt::format("tracking error on {} ({}): {:.4g} beyond --max-tracking-error {:g}; the arm was told to "
                          "hold where it is",

@@ -21,9 +21,10 @@
 // console, the simulator's teleoperation).
 //
 // Safety stops, checked on every message and tick: the operating state leaves
-// ENABLED; no measured_js for measured_timeout_s of wall time; a joint's
-// tracking error (measured against the arm's setpoint_js, or against the last
-// row sent when the arm publishes no setpoint) beyond max_tracking_error. A
+// ENABLED; no measured_js for measured_timeout_s of wall time; while playing,
+// a joint's tracking error (measured against the arm's setpoint_js, or against
+// the last row sent when the arm publishes no setpoint) beyond
+// max_tracking_error (a recorder reports it only). A
 // stop ends streaming; after a tracking error it commands the arm to hold
 // where it is. A bad measured_js (lengths, NaN, a stamp zero or not after the
 // last) is rejected and counted, never recorded.
