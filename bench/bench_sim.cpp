@@ -45,8 +45,7 @@ BENCHMARK(BM_DefaultSessionToDisk)->Unit(benchmark::kSecond)->Iterations(1)->Use
 // One publishing period of the simulated PSM behind CRTK (rcm_sim_psm_dds's
 // arm, without the middleware): a servo_jp taken, the physics steps of the
 // period (the tissue engaged), the sample published. Target: real time at
-// 1.5 kHz with a core to spare, i.e. well under the period of 667 us;
-// `share_of_period` is the step's cost over its period.
+// 1.5 kHz with a core to spare, i.e. well under the period of 667 us.
 static void BM_SimulatedPsmStep(benchmark::State& state) {
   SimulatedPsmOptions o;
   o.rate_hz = static_cast<double>(state.range(0));
@@ -64,8 +63,6 @@ static void BM_SimulatedPsmStep(benchmark::State& state) {
     benchmark::DoNotOptimize(s.sample.effort.data());
   }
   state.counters["physics_steps"] = psm.substeps();
-  state.counters["share_of_period"] =
-      benchmark::Counter(1.0 / o.rate_hz, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
 }
 BENCHMARK(BM_SimulatedPsmStep)->Arg(200)->Arg(1000)->Arg(1500)->Unit(benchmark::kMicrosecond);
 
