@@ -15,7 +15,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
-.PHONY: deps build test build-sanitize test-sanitize demo bench coverage learning-curve docs-figures docs-cli soak fuzz fuzz-deps clean
+.PHONY: deps build test build-sanitize test-sanitize demo live-demo bench coverage learning-curve docs-figures docs-cli soak fuzz fuzz-deps clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -72,6 +72,14 @@ test-sanitize: build-sanitize
 
 demo: build
 	$(BUILD)/bin/rcm demo --out demo-out
+
+# Docking to the first estimate on the robot's own interfaces (CRTK over
+# loopback DDS) against the simulated PSM: excitation, baseline, calibration,
+# rcm setup, the live estimate, then a 35 mm step of the incision with the loop
+# closed across processes (docs/howto-procedure.md). About 3 minutes on 2
+# cores; writes live-demo-out/live_demo.json.
+live-demo: build
+	$(PYTHON) bench/live_demo.py --build $(BUILD) --out live-demo-out
 
 # Every Google Benchmark program, the rosbag2 anchors (sqlite3, zstd), the live
 # nodes' end-to-end tests (their per-sample timings), PyTorch beside LibTorch and

@@ -37,6 +37,9 @@ PROGRAMS = [
     ("rcm", "the command-line program: every offline step, from a simulated bench to a study"),
     ("rcm_monitor_node", "the online estimator on a live dVRK over ROS 1 (built with ROS 1)"),
     ("rcm_monitor_dds", "the online estimator on a live dVRK over ROS 2, on Cyclone DDS (built with Cyclone DDS)"),
+    ("rcm_procedure_dds", "docking to the first estimate on a CRTK arm over ROS 2 (built with Cyclone DDS)"),
+    ("rcm_play_dds", "plays a joint trajectory on a CRTK arm over ROS 2 and records it (built with Cyclone DDS)"),
+    ("rcm_sim_psm_dds", "a simulated dVRK Classic PSM on CRTK topics over ROS 2 (built with Cyclone DDS)"),
 ]
 
 HEADER = """# Command reference
