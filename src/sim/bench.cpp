@@ -314,15 +314,12 @@ SimulatedTrial simulate_trial(const SimConfig& config, const Eigen::Vector3d& mi
   Eigen::Vector3d side = (end - P.q0).unaryExpr([](double d) { return d < 0.0 ? -1.0 : 1.0; });
   const double hold_s = P.static_hold_s / P.static_approaches;
   double t = P.trial_s;
-  // A joint that ends the trial nearer q0 than the approach offset would reach
-  // its first hold too close for the friction to settle on its side: the
-  // return then passes through q0 + side x offset first, as the later approaches do.
-  if (((end - P.q0).cwiseAbs().array() < P.static_approach_offset.array()).any()) {
-    ref.add_move(t, 0.5 * P.static_return_s, P.q0 + side.cwiseProduct(P.static_approach_offset));
-    ref.add_move(t + 0.5 * P.static_return_s, 0.5 * P.static_return_s, P.q0);
-  } else {
-    ref.add_move(t, P.static_return_s, P.q0);
-  }
+  // The return leaves the trial's path with its velocity, which may swing a
+  // joint past q0 before it comes back: it ends through q0 + side x offset, so
+  // that every joint's first hold ends a motion from that side, as the later
+  // approaches do.
+  ref.add_move(t, 2.0 * P.static_return_s / 3.0, P.q0 + side.cwiseProduct(P.static_approach_offset));
+  ref.add_move(t + 2.0 * P.static_return_s / 3.0, P.static_return_s / 3.0, P.q0);
   t += P.static_return_s;
   for (int a = 0; a < P.static_approaches; ++a) {
     ref.add_hold(t, P.q0);
