@@ -277,10 +277,15 @@ def main():
             if name.startswith("study_") and os.path.exists(done):
                 with open(done) as f:
                     results.append(json.load(f))
-        wall = 0.0
         if os.path.exists(summary_path):
             with open(summary_path) as f:
                 wall = json.load(f).get("wall_s", 0.0)
+        else:  # tasks run elsewhere: from the first task's config to the last study's end
+            folders = [os.path.join(work, n) for n in os.listdir(work) if os.path.isdir(os.path.join(work, n))]
+            first = min(os.path.getmtime(os.path.join(d, "config.json")) for d in folders
+                        if os.path.exists(os.path.join(d, "config.json")))
+            wall = max(os.path.getmtime(os.path.join(work, n, "task.json")) for n in os.listdir(work)
+                       if n.startswith("study_") and os.path.exists(os.path.join(work, n, "task.json"))) - first
         if not results:
             sys.exit(f"no finished study task in {work}")
         publish_block(DOC, BEGIN, END, tables(results, wall, args.jobs), write=not args.no_doc)
