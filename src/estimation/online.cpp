@@ -108,8 +108,10 @@ int get_best_hypothesis(const OnlineEstimator::Workspace& ws) {
 }  // namespace
 
 const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, const Eigen::Vector3d& q,
-                                                    const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau) const {
+                                                    const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau_measured) const {
   const OnlineEstimatorOptions& o = options_;
+  // The free-space model's torque offset the calibration found (0 when not fitted).
+  const Eigen::Vector3d dtau = dtau_measured - tissue_.torque_offset;
   const double dt = ws.started ? std::max(time - ws.last_time, o.min_dt_s) : o.min_dt_s;
   // What one sample can tell: samples a correlation time apart are independent,
   // so a sample after a gap in the stream weighs as one such sample, not as the
