@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include <filesystem>
+#include <memory>
 #include <string>
 
 #include "rcm/io/message_recording.hpp"
@@ -21,6 +22,11 @@ TopicReadOptions get_topic_options(const RecordingReadOptions& read);
 void add_topic_options(CLI::App& cmd);
 // A rosbag2 recording with `options`; prints its warnings and skipped-message
 // count to stderr and keeps its read info for find_rosbag2_info().
+// A rosbag2 recording read as the CLI reads it: its warnings and skipped
+// messages printed once it has been read, its info then kept for find_rosbag2_info().
+std::unique_ptr<Rosbag2RecordingReader> open_rosbag2(const std::filesystem::path& path,
+                                                     const TopicReadOptions& options,
+                                                     std::size_t chunk_rows = kDefaultChunkRows);
 Recording load_rosbag2(const std::filesystem::path& path, const TopicReadOptions& options);
 // The read info of a rosbag2 recording loaded in this run (by path as given), or null.
 const Rosbag2ReadInfo* find_rosbag2_info(const std::string& path);
