@@ -12,6 +12,7 @@
 #include "command_registry.hpp"
 #include "message_cli.hpp"
 #include "rcm/io/recording.hpp"
+#include "rcm/io/recording_reader.hpp"
 #include "rcm/io/rosbag2.hpp"
 #if RCM_HAVE_ROS
 #include "rcm/ros/bag_reader.hpp"
@@ -34,29 +35,35 @@ struct ReadInfo {
   std::string force_frame_id, format;
 };
 
-rcm::Recording read(const Options& o, const rcm::TopicReadOptions& options, ReadInfo& info) {
+// The bag's reader; `info` is filled by get_info() once it has been read.
+std::unique_ptr<rcm::MessageRecordingReader> open(const Options& o, const rcm::TopicReadOptions& options) {
   const std::filesystem::path in = o.in;
-  if (rcm::is_rosbag2_path(in)) {
-    const rcm::Recording rec = rcm::cli::load_rosbag2(in, options);
-    const rcm::Rosbag2ReadInfo& r = *rcm::cli::find_rosbag2_info(o.in);
-    info = {r.joint_names, r.time_origin_ns, options.time == rcm::MessageTime::receive ? "receive_time" : "header_stamp",
-            r.messages, r.zero_stamp_messages, r.force_messages, r.force_frame_id, "rosbag2 (" + r.storage + ")"};
-    return rec;
-  }
+  if (rcm::is_rosbag2_path(in)) return rcm::cli::open_rosbag2(in, options);
   if (in.extension() == ".bag") {
 #if RCM_HAVE_ROS
-    rcm::BagReadInfo r;
-    const rcm::Recording rec = rcm::load_bag_recording(in, options, &r);
-    info = {r.joint_names, r.time_origin_ns, r.bag_time ? "bag_time" : "header_stamp", r.messages, 0,
-            r.force_messages, r.force_frame_id, "rosbag"};
-    return rec;
+    return rcm::open_bag_recording(in, options);
 #else
-    return rcm::load_recording(in);  // the .bag reader of a build without ROS says why not
+    (void)rcm::open_recording(in);  // the .bag reader of a build without ROS says why not
 #endif
   }
   rcm::InputLocation where;
   where.file = o.in;
   throw rcm::InputError(where, "not a bag: convert reads a rosbag2 directory, a .db3 or .mcap file, or a ROS 1 .bag");
+}
+
+ReadInfo get_info(const rcm::MessageRecordingReader& reader, const rcm::TopicReadOptions& options) {
+  if (const auto* b = dynamic_cast<const rcm::Rosbag2RecordingReader*>(&reader)) {
+    const rcm::Rosbag2ReadInfo& r = b->info();
+    return {r.joint_names, r.time_origin_ns, options.time == rcm::MessageTime::receive ? "receive_time" : "header_stamp",
+            r.messages, r.zero_stamp_messages, r.force_messages, r.force_frame_id, "rosbag2 (" + r.storage + ")"};
+  }
+#if RCM_HAVE_ROS
+  const rcm::BagReadInfo& r = static_cast<const rcm::BagRecordingReader&>(reader).info();
+  return {r.joint_names, r.time_origin_ns, r.bag_time ? "bag_time" : "header_stamp", r.messages, 0,
+          r.force_messages, r.force_frame_id, "rosbag"};
+#else
+  return {};
+#endif
 }
 
 void run(Options o) {
@@ -74,11 +81,22 @@ void run(Options o) {
     for (const auto& n : bag.joint_names)
       if (n.empty()) throw rcm::InputError(rcm::cli::flag_location("--joint-names"), "empty joint name");
   }
-  ReadInfo info;
-  const rcm::Recording rec = read(o, bag, info);
-  rcm::save_recording(o.out, rec);
-  const Eigen::Index T = rec.time.size();
-  const double duration = T > 1 ? rec.time(T - 1) - rec.time(0) : 0.0;
+  // Chunk by chunk into the output's temporary: memory does not grow with the bag.
+  const auto reader = open(o, bag);
+  rcm::RecordingWriter writer(o.out, reader->num_joints(), reader->has_force());
+  rcm::Recording chunk;
+  double first_time = 0.0, last_time = 0.0;
+  while (reader->read_chunk(chunk)) {
+    if (writer.samples() == 0) first_time = chunk.time(0);
+    last_time = chunk.time(chunk.time.size() - 1);
+    writer.write(chunk);
+  }
+  writer.commit();
+  const ReadInfo info = get_info(*reader, bag);
+  const auto T = static_cast<Eigen::Index>(writer.samples());
+  const double duration = T > 1 ? last_time - first_time : 0.0;
+  const std::size_t repeated = reader->repeated_rows();
+  const bool removed = reader->repeated_rows_removed();
   if (o.json) {
     nlohmann::json j = {{"input", o.in},
                         {"output", o.out},
@@ -87,13 +105,13 @@ void run(Options o) {
                         {"messages", info.messages},
                         {"zero_stamp_messages", info.zero_stamp_messages},
                         {"samples", T},
-                        {"joints", rec.num_joints()},
+                        {"joints", reader->num_joints()},
                         {"joint_names", info.joint_names},
                         {"duration_s", duration},
                         {"time_source", info.time_source},
                         {"time_origin_ns", info.time_origin_ns},
-                        {"repeated_samples", rec.repeated_rows},
-                        {"repeated_samples_removed", rec.repeated_rows_removed},
+                        {"repeated_samples", repeated},
+                        {"repeated_samples_removed", removed},
                         {"force_topic", bag.force_topic.empty() ? nlohmann::json(nullptr) : nlohmann::json(bag.force_topic)},
                         {"force_messages", info.force_messages},
                         {"force_frame_id", info.force_frame_id}};
@@ -102,15 +120,15 @@ void run(Options o) {
   }
   std::string names;
   for (const auto& n : info.joint_names) names += (names.empty() ? "" : ", ") + n;
-  std::cout << fmt::format("{} {}: {} samples, {} joints ({}), {:.3f} s\n", o.in, bag.topic, T, rec.num_joints(),
+  std::cout << fmt::format("{} {}: {} samples, {} joints ({}), {:.3f} s\n", o.in, bag.topic, T, reader->num_joints(),
                            names.empty() ? std::string("no names, by position") : names, duration);
   const std::string time = info.time_source == "bag_time"       ? "bag receive time (header stamps are zero)"
                            : info.time_source == "receive_time" ? "receive time (--time receive)"
                                                                 : "header.stamp";
   std::cout << fmt::format("  time: {} - origin {}.{:09d} s{}\n", time,
                            info.time_origin_ns / 1000000000, info.time_origin_ns % 1000000000,
-                           rec.repeated_rows ? fmt::format("; {} repeated samples{}", rec.repeated_rows,
-                                                           rec.repeated_rows_removed ? " removed" : " kept (--dedupe drops them)")
+                           repeated ? fmt::format("; {} repeated samples{}", repeated,
+                                                           removed ? " removed" : " kept (--dedupe drops them)")
                                              : std::string());
   if (info.zero_stamp_messages > 0)
     std::cout << fmt::format("  skipped: {} of {} messages with a zero header.stamp (invalid data)\n",
@@ -124,7 +142,10 @@ void run(Options o) {
 const bool registered = rcm::cli::register_command({"convert", 15, [](CLI::App& app) {
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
-      "convert", "Convert a bag's sensor_msgs/JointState topic (and a force topic) to an rcm CSV recording");
+      "convert",
+      "Convert a bag's sensor_msgs/JointState topic (and a force topic) to an rcm CSV recording. Streams: the bag is "
+      "read and the CSV written a chunk at a time, so memory does not grow with the recording (a ROS 1 bag's index "
+      "is held by rosbag_storage)");
   cmd->add_option("BAG", o->in, "input: rosbag2 directory, .db3 or .mcap file, or ROS 1 .bag")->required();
   cmd->add_option("CSV", o->out, "output recording (rcm CSV layout)")->required();
   rcm::cli::add_topic_options(*cmd);

@@ -9,6 +9,7 @@
 
 #include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/io/atomic_file.hpp"
 #include "rcm/io/json_file.hpp"
 #include "csv_parts.hpp"
 
@@ -191,16 +192,31 @@ void validate_recording(const Recording& r) {
     }
 }
 
-void save_recording(const std::filesystem::path& path, const Recording& r) {
-  validate_recording(r);
-  const int N = r.num_joints();
-  std::string out;
-  out.reserve(static_cast<std::size_t>(r.time.size()) * static_cast<std::size_t>(3 * N + 4) * 14 + 256);
-  out += "time";
+RecordingWriter::RecordingWriter(const std::filesystem::path& path, int joints, bool has_force)
+    : file_(path), joints_(joints), has_force_(has_force) {
+  std::string header = "time";
   for (const char* prefix : {"position_", "velocity_", "effort_"})
-    for (int j = 1; j <= N; ++j) (out += ',') += prefix + std::to_string(j);
-  if (r.force) out += ",force_x,force_y,force_z";
-  out += '\n';
+    for (int j = 1; j <= joints; ++j) (header += ',') += prefix + std::to_string(j);
+  if (has_force) header += ",force_x,force_y,force_z";
+  header += '\n';
+  file_.append(header);
+}
+
+void RecordingWriter::write(const Recording& r) {
+  if (r.num_samples() == 0) return;
+  validate_recording(r);
+  if (r.num_joints() != joints_ || r.has_force() != has_force_)
+    throw std::invalid_argument("RecordingWriter: a chunk of another shape than the file's");
+  if (samples_ > 0 && !(r.time[0] > last_time_)) {
+    InputLocation where;
+    where.file = r.source.empty() ? "<recording>" : r.source;
+    where.field = "time";
+    where.line = r.line.empty() ? 0 : r.line.front();
+    throw InputError(where, "time must increase strictly (sample " + std::to_string(samples_) + ")");
+  }
+  const int N = joints_;
+  std::string& out = text_;
+  out.clear();
   char buf[32];
   auto put = [&](double v) {
     const auto res = std::to_chars(buf, buf + sizeof buf, v);  // shortest round-trip form
@@ -220,7 +236,18 @@ void save_recording(const std::filesystem::path& path, const Recording& r) {
       }
     out += '\n';
   }
-  write_file_atomic(path, out);
+  file_.append(out);
+  samples_ += r.num_samples();
+  last_time_ = r.time[r.time.size() - 1];
+}
+
+void RecordingWriter::commit() { file_.commit(); }
+
+void save_recording(const std::filesystem::path& path, const Recording& r) {
+  validate_recording(r);
+  RecordingWriter writer(path, r.num_joints(), r.has_force());
+  writer.write(r);
+  writer.commit();
 }
 
 const OptionTable<RecordingReadOptions>& get_option_table(OptionTag<RecordingReadOptions>) {
