@@ -8,8 +8,8 @@ the session for `rcm monitor` and the free space for the model of `rcm force`
 and `rcm dynamics eval`), or a recording CSV given with --recording (a real
 one: its folder may be outside the project). It is tiled to each length: copy
 k starts one median interval after copy k - 1 ends, so time keeps increasing.
-Each length is written as CSV and as an MCAP file (bench/make_recording_bag,
-the same samples; `rcm convert` reads the MCAP).
+Each length is written as CSV and, by `rcm convert`, as an MCAP file of the
+same samples (`rcm convert` to CSV then reads the MCAP).
 
 Each command runs as a child process; its peak resident memory is the
 child's own maximum RSS (os.wait4), its time the wall clock. With --before
@@ -88,7 +88,6 @@ def main():
     args = ap.parse_args()
     build = os.path.abspath(args.build)
     rcm = os.path.join(build, "bin", "rcm")
-    make_bag = os.path.join(build, "bin", "make_recording_bag")
     lengths = [int(float(x)) for x in args.rows.split(",")]
     work = args.work or tempfile.mkdtemp(prefix="rcm_stream_memory_")
     os.makedirs(work, exist_ok=True)
@@ -123,7 +122,7 @@ def main():
             csv = os.path.join(work, f"tiled_{rows}.csv")
             bag = os.path.join(work, f"tiled_{rows}.mcap")
             tile_csv(source, rows, csv)
-            run([make_bag, source, str(rows), bag])
+            run([rcm, "convert", csv, bag], stdout=subprocess.DEVNULL)
             out = os.path.join(work, "out")
             os.makedirs(out, exist_ok=True)
             for label, prog in [("after", rcm)] + ([("before", args.before)] if args.before else []):

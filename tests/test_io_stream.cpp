@@ -242,11 +242,11 @@ TEST(RecordingStream, Rosbag2ChunksAreTheWholeRecordingInEveryStorage) {
   const rcm::Recording rec = make_message_recording(300);
   struct Case {
     std::string name;
-    rcm::test::Rosbag2WriteOptions options;
+    rcm::Rosbag2WriteOptions options;
   };
   std::vector<Case> cases(4);
   cases[0].name = "run.db3";
-  cases[0].options.storage = rcm::test::Rosbag2WriteOptions::Storage::sqlite3;
+  cases[0].options.storage = rcm::Rosbag2WriteOptions::Storage::sqlite3;
   cases[1].name = "run.mcap";  // zstd chunks of 4 kB: a chunk boundary every few dozen samples
   cases[1].options.mcap_chunk_bytes = 4096;
   cases[2].name = "lz4.mcap";
@@ -287,7 +287,7 @@ TEST(RecordingStream, ABadMessageInALaterChunkIsNamed) {
   rcm::Recording rec = make_message_recording(200);
   rec.effort(150, 2) = std::nan("");
   const fs::path path = dir.path() / "bad.mcap";
-  rcm::test::Rosbag2WriteOptions w;
+  rcm::Rosbag2WriteOptions w;
   w.mcap_chunk_bytes = 4096;
   rcm::test::write_rosbag2(path, rec, w);
   const auto reader = rcm::open_rosbag2_recording(path, {}, 16);
