@@ -12,6 +12,7 @@
 #include <random>
 #include <sstream>
 
+#include "io/rosbag2/cdr.hpp"
 #include "io/stream_median.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/recording_reader.hpp"
@@ -283,13 +284,22 @@ TEST(RecordingStream, Rosbag2ChunksAreTheWholeRecordingInEveryStorage) {
 }
 
 TEST(RecordingStream, ABadMessageInALaterChunkIsNamed) {
+  // 200 JointState messages written raw; message 150 has a NaN effort.
   TempDir dir;
-  rcm::Recording rec = make_message_recording(200);
-  rec.effort(150, 2) = std::nan("");
-  const fs::path path = dir.path() / "bad.mcap";
-  rcm::Rosbag2WriteOptions w;
-  w.mcap_chunk_bytes = 4096;
-  rcm::test::write_rosbag2(path, rec, w);
+  const fs::path path = dir.path() / "bad.db3";
+  std::vector<rcm::test::BagMessage> messages;
+  for (int k = 0; k < 200; ++k) {
+    rcm::cdr::JointState js;
+    const std::int64_t t = 1700000000000000000 + 2000000LL * k;
+    js.header.sec = static_cast<std::int32_t>(t / 1000000000);
+    js.header.nanosec = static_cast<std::uint32_t>(t % 1000000000);
+    js.name = {"a", "b", "c"};
+    js.position = {0.01 * k, 0.2, 0.3};
+    js.velocity = {1.0, 2.0, 3.0};
+    js.effort = {0.1, 0.2, k == 150 ? std::nan("") : 0.3};
+    messages.push_back({1, t + 500000, rcm::cdr::encode(js)});
+  }
+  rcm::test::write_db3(path, 3, {{"/PSM1/measured_js", "sensor_msgs/msg/JointState"}}, messages);
   const auto reader = rcm::open_rosbag2_recording(path, {}, 16);
   rcm::Recording chunk;
   std::size_t before = 0;

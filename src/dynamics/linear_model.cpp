@@ -308,6 +308,8 @@ class LinearSequencePredictor final : public TorqueSequencePredictor {
         N_(model.num_joints()),
         M_(model.num_outputs()),
         half_(static_cast<std::size_t>(M_), 0.0),
+        q_(N_),
+        qd_(N_),
         qdd_(Eigen::VectorXd::Zero(M_)),
         tau_(M_) {
     const auto& p = model.parameters();
@@ -355,8 +357,11 @@ class LinearSequencePredictor final : public TorqueSequencePredictor {
           qdd_[j] = slopes_[static_cast<std::size_t>(j)].compute(
               c, begin, end, [&](Eigen::Index k) { return time_at(k); },
               [&](Eigen::Index k) { return value_at(k, N_ + j); });
-      const double* q = &samples_[(next_ - base_) * static_cast<std::size_t>(2 * N_)];
-      model_.compute_step_with_acceleration(*ws_, t_c, q, q + N_, qdd_.data(), tau_.data());
+      for (int j = 0; j < N_; ++j) {
+        q_[j] = value_at(c, j);
+        qd_[j] = value_at(c, N_ + j);
+      }
+      model_.compute_step_with_acceleration(*ws_, t_c, q_.data(), qd_.data(), qdd_.data(), tau_.data());
       rows_.insert(rows_.end(), tau_.data(), tau_.data() + M_);
       ++next_;
       // The samples below the lowest window edge of sample c are not reached again.
@@ -378,7 +383,7 @@ class LinearSequencePredictor final : public TorqueSequencePredictor {
   int N_, M_;
   std::vector<detail::ZeroPhaseSlope> slopes_;
   std::vector<double> half_;
-  Eigen::VectorXd qdd_, tau_;
+  Eigen::VectorXd q_, qd_, qdd_, tau_;
   std::deque<double> times_, samples_;  // samples base_, base_ + 1, ...: time; q and qd (N each)
   std::size_t base_ = 0, count_ = 0, next_ = 0;
   std::vector<double> rows_;

@@ -33,9 +33,9 @@ class Cursor::Reader {
   // (then the summary and footer have been checked).
   bool next(MessageRef& m) {
     while (true) {
-      if (chunk_size_ > 0) {
+      if (in_chunk_) {
         if (next_in_chunk(m)) return true;
-        chunk_size_ = 0;
+        in_chunk_ = false;
         ++result_.chunks;
       }
       if (done_) return false;
@@ -360,6 +360,7 @@ class Cursor::Reader {
     chunk_start_ = start;
     chunk_size_ = uncompressed_size;
     chunk_pos_ = 0;
+    in_chunk_ = true;
   }
 
   // Decompresses into records_, growing it only as output actually arrives, so
@@ -462,7 +463,7 @@ class Cursor::Reader {
   bool data_crc_on_ = true;
   std::uint32_t data_crc_ = 0;
   std::uint64_t summary_begin_ = 0;  // first byte after DataEnd
-  bool seen_header_ = false, in_summary_ = false, done_ = false;
+  bool seen_header_ = false, in_summary_ = false, done_ = false, in_chunk_ = false;
   // The decompressed chunk being read: its offset in the file, size, and the next record.
   std::uint64_t chunk_start_ = 0, chunk_size_ = 0, chunk_pos_ = 0;
   ReadResult result_;

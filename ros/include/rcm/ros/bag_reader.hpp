@@ -1,7 +1,7 @@
 #pragma once
 // Rosbag recordings: the sensor_msgs/JointState topic of a bag (the dVRK's CRTK
 // /PSM1/measured_js) read into an rcm::Recording, held to the CSV reader's
-// rules by the builder that every message reader shares
+// rules by the reader that every message format shares
 // (io/message_recording.hpp), and optionally a geometry_msgs/WrenchStamped
 // topic as the evaluation-only force columns.
 //
