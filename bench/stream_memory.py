@@ -55,6 +55,12 @@ def measure(cmd, stdout=subprocess.DEVNULL):
     return usage.ru_maxrss / 1024.0, wall  # ru_maxrss is in KiB on Linux
 
 
+def rows_text(n):
+    """1e5 for 100000; the number itself when it is not a power of ten."""
+    text = f"{n:.0e}".replace("e+0", "e").replace("e+", "e")
+    return text if float(text) == n else str(n)
+
+
 def tile_csv(src, rows, dst):
     """Writes the first `rows` samples of `src` repeated end to end, time shifted."""
     with open(src) as f:
@@ -106,15 +112,15 @@ def main():
 
         def commands(prog, csv, bag, out):
             return [
-                ("inspect", "CSV", [prog, "inspect", csv]),
-                ("inspect", "MCAP", [prog, "inspect", bag]),
-                ("convert", "MCAP", [prog, "convert", bag, os.path.join(out, "converted.csv")]),
-                ("force", "CSV", [prog, "force", "--model", model, "--offset", "0.03", csv,
-                                  "--out", os.path.join(out, "force.csv")]),
-                ("monitor --out", "CSV", [prog, "monitor", "--session", session_json, csv, "--quiet",
-                                          "--out", os.path.join(out, "monitor.csv")]),
-                ("monitor", "MCAP", [prog, "monitor", "--session", session_json, bag, "--quiet"]),
-                ("dynamics eval", "CSV", [prog, "dynamics", "eval", model, csv]),
+                ("`inspect`", "CSV", [prog, "inspect", csv]),
+                ("`inspect`", "MCAP", [prog, "inspect", bag]),
+                ("`convert` to CSV", "MCAP", [prog, "convert", bag, os.path.join(out, "converted.csv")]),
+                ("`force --out`", "CSV", [prog, "force", "--model", model, "--offset", "0.03", csv,
+                                          "--out", os.path.join(out, "force.csv")]),
+                ("`monitor --out`", "CSV", [prog, "monitor", "--session", session_json, csv, "--quiet",
+                                            "--out", os.path.join(out, "monitor.csv")]),
+                ("`monitor`", "MCAP", [prog, "monitor", "--session", session_json, bag, "--quiet"]),
+                ("`dynamics eval`", "CSV", [prog, "dynamics", "eval", model, csv]),
             ]
 
         results = {}  # (command, input, rows) -> {"after": (mb, s), "before": (mb, s)}
@@ -134,33 +140,31 @@ def main():
                 os.remove(f)
 
         load = os.getloadavg()[0]
-        with_before = bool(args.before)
-        head = "| command | input | rows | peak RSS | wall |" + (" before: peak RSS | before: wall |" if with_before else "")
-        lines = [f"`bench/stream_memory.py` on {datetime.datetime.now():%Y-%m-%d %H:%M} ({os.cpu_count()} cores of "
-                 f"{cpu_model()}, load average {load:.1f} at the end); the recording: "
-                 f"{'a given CSV' if args.recording else 'a simulated trial (rcm simulate --quick)'} tiled to each "
-                 "length; peak resident memory of the command's process and its wall clock"
-                 + (", beside the same commands of the version before streaming (`before`)" if with_before else "")
-                 + ":", "", head, "|---|---|---|---|---|" + ("---|---|" if with_before else "")]
-        for (name, kind, rows), r in results.items():
-            mb, s = r["after"]
-            line = f"| `rcm {name}` | {kind} | {rows:.0e} | {mb:.0f} MB | {s:.2f} s |".replace("e+0", "e")
-            if with_before:
-                line += (f" {r['before'][0]:.0f} MB | {r['before'][1]:.2f} s |" if "before" in r else " | |")
-            lines.append(line)
+        before_rows = [n for n in lengths if n <= args.before_max_rows] if args.before else []
+        cell = lambda r: f"{r[0]:.0f} MB, {r[1]:.1f} s"
+        head = ("| command | input | " + " | ".join(rows_text(n) + " rows" for n in lengths) +
+                "".join(f" | before, {rows_text(n)}" for n in before_rows) + " |")
+        lines = [f"`bench/stream_memory.py`, {datetime.datetime.now():%Y-%m-%d %H:%M}, {os.cpu_count()} cores of "
+                 f"{cpu_model()}, load average {load:.1f} at the end. Peak resident memory and wall clock of each "
+                 f"command on {'a given recording' if args.recording else 'a simulated trial'} tiled to each length"
+                 + ("; `before`: the version that loaded the whole recording" if before_rows else "") + ".",
+                 "", head, "|---|---|" + "---|" * (len(lengths) + len(before_rows))]
+        for name, kind in dict.fromkeys((n, k) for (n, k, _) in results):
+            r = [results[(name, kind, n)] for n in lengths]
+            lines.append(f"| {name} | {kind} | " + " | ".join(cell(x["after"]) for x in r) +
+                         "".join(f" | {cell(results[(name, kind, n)]['before'])}" for n in before_rows) + " |")
         # What the table says, from its own numbers.
         first, last = lengths[0], lengths[-1]
         growth = [results[(n, k, last)]["after"][0] / results[(n, k, first)]["after"][0]
-                  for (n, k, r) in results if r == first and (n, k, last) in results]
-        ratios = [results[(n, k, last)]["after"][1] / results[(n, k, lengths[-2])]["after"][1]
-                  for (n, k, r) in results if r == last and len(lengths) >= 2 and (n, k, lengths[-2]) in results]
-        lines += ["", f"From {first:.0e} to {last:.0e} rows the peak memory of a command changes by a factor of "
-                  f"{min(growth):.2f} to {max(growth):.2f}; ten times the rows take "
-                  f"{min(ratios):.1f} to {max(ratios):.1f} times as long. `rcm monitor` and `rcm force` include the "
-                  "free-space model's fit or load, whose memory does not depend on the replayed recording; the "
-                  "monitor's settling time keeps the run's estimates in a temporary file (32 bytes per sample), "
-                  "on disk, not in memory."]
-        publish_block(DOC, *MARKERS, "\n".join(lines).replace("1e5", "1e5"), write=args.write)
+                  for (n, k) in dict.fromkeys((n, k) for (n, k, _) in results)]
+        times = [results[(n, k, last)]["after"][1] / results[(n, k, lengths[-2])]["after"][1]
+                 for (n, k) in dict.fromkeys((n, k) for (n, k, _) in results)] if len(lengths) > 1 else [1.0]
+        lines += ["", f"From {rows_text(first)} to {rows_text(last)} rows peak memory changes by a factor of "
+                  f"{min(growth):.2f} to {max(growth):.2f}; the last tenfold length takes {min(times):.1f} to "
+                  f"{max(times):.1f} times as long (wall clock on a shared machine: compare within a column). "
+                  "`force` and `monitor` include loading or fitting the model; the monitor's trace for the settling "
+                  "time is on disk (32 bytes a sample)."]
+        publish_block(DOC, *MARKERS, "\n".join(lines), write=args.write)
 
         # The chunked CSV read's throughput (Google Benchmark).
         bench = os.path.join(build, "bin", "bench_recording_read")
@@ -168,13 +172,13 @@ def main():
             out_json = os.path.join(work, "bench_recording_read.json")
             run([bench, "--benchmark_format=console", f"--benchmark_out={out_json}", "--benchmark_out_format=json"],
                 stdout=sys.stderr)
-            rows = [f"`bench_recording_read` on {datetime.datetime.now():%Y-%m-%d %H:%M} ({os.cpu_count()} cores of "
-                    f"{cpu_model()}): a 200 000-row CSV (7 joints with force, 1.5 kHz), read in chunks of N rows "
-                    "(`open_recording`), whole (`load_recording`) and summarized as `rcm inspect` does; wall clock, "
-                    "3 iterations.", "", "| benchmark | wall | rows/s | file |", "|---|---|---|---|"]
+            rows = [f"`bench_recording_read`, {datetime.datetime.now():%Y-%m-%d %H:%M}: a CSV of 200 000 rows (7 "
+                    "joints with force) read in chunks of N rows, whole, and summarized as `rcm inspect` does; rows/s "
+                    "over the wall clock.", "", "| benchmark | wall | CPU | rows/s |", "|---|---|---|---|"]
             for b in json.load(open(out_json))["benchmarks"]:
-                rows.append(f"| `{b['name']}` | {b['real_time']:.1f} {b['time_unit']} | {b['rows/s']:.3g} | "
-                            f"{b['file_MB']:.0f} MB |")
+                name = b["name"].replace("/iterations:3/real_time", "")
+                rows.append(f"| `{name}` | {b['real_time']:.0f} {b['time_unit']} | {b['cpu_time']:.0f} "
+                            f"{b['time_unit']} | {b['rows/s']:.3g} |")
             publish_block(DOC, *READ_MARKERS, "\n".join(rows), write=args.write)
     finally:
         if not args.work:

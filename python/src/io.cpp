@@ -271,7 +271,7 @@ void bind_io(py::module_& m) {
         return "<rcm.RecordingSummary " + std::to_string(s.samples) + " samples, " + std::to_string(s.joints) +
                " joints, " + std::to_string(s.duration_s) + " s, " + std::to_string(s.rate_hz) + " Hz>";
       });
-  m.def("summarize_recording", &summarize_recording, py::arg("recording"),
+  m.def("summarize_recording", py::overload_cast<const Recording&>(&summarize_recording), py::arg("recording"),
         "Samples, joints, duration, rate, jitter, repeated rows and per-joint ranges (rcm inspect).");
 
   py::class_<CalibrationSpec>(m, "CalibrationSpec", "Step 2: teleoperation under a pure, known coaxial offset")
