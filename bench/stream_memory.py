@@ -173,10 +173,11 @@ def main():
             run([bench, "--benchmark_format=console", f"--benchmark_out={out_json}", "--benchmark_out_format=json"],
                 stdout=sys.stderr)
             rows = [f"`bench_recording_read`, {datetime.datetime.now():%Y-%m-%d %H:%M}: a CSV of 200 000 rows (7 "
-                    "joints with force) read in chunks of N rows, whole, and summarized as `rcm inspect` does; rows/s "
-                    "over the wall clock.", "", "| benchmark | wall | CPU | rows/s |", "|---|---|---|---|"]
+                    "joints with force) read in chunks of 8192 rows, whole, and summarized as `rcm inspect` does.", "", "| benchmark | wall | CPU | rows/s |", "|---|---|---|---|"]
             for b in json.load(open(out_json))["benchmarks"]:
                 name = b["name"].replace("/iterations:3/real_time", "")
+                if name.endswith("/1024") or name.endswith("/65536"):
+                    continue  # the chunk size barely matters: the default's row says it
                 rows.append(f"| `{name}` | {b['real_time']:.0f} {b['time_unit']} | {b['cpu_time']:.0f} "
                             f"{b['time_unit']} | {b['rows/s']:.3g} |")
             publish_block(DOC, *READ_MARKERS, "\n".join(rows), write=args.write)

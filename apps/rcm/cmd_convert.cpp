@@ -239,9 +239,7 @@ const bool registered = rcm::cli::register_command({"convert", 15, [](CLI::App& 
   CLI::App* cmd = app.add_subcommand(
       "convert",
       "Convert a bag's sensor_msgs/JointState topic (and a force topic) to an rcm CSV recording, or a recording to "
-      "a rosbag2 bag (OUT ending in .mcap or .db3). To CSV it streams: the bag is read and the CSV written a chunk "
-      "at a time, so memory does not grow with the recording (a ROS 1 bag's index is held by rosbag_storage); to a "
-      "bag it holds the whole recording");
+      "a rosbag2 bag (OUT ending in .mcap or .db3); to CSV in constant memory");
   cmd->add_option("IN", o->in, "input: rosbag2 directory, .db3 or .mcap file, ROS 1 .bag, or (to a bag) a CSV recording")
       ->required();
   cmd->add_option("OUT", o->out,

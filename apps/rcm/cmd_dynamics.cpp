@@ -374,14 +374,10 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->callback([args] { run_fit(*args); });
 
   auto* ev = dyn->add_subcommand(
-      "eval", "Per-joint RMSE and NRMSE (%) of a model on recordings (Table II). Streams each recording through the "
-              "model: memory does not grow with their length (the offline estimate holds only what the model looks "
-              "ahead and behind: the linear model's zero-phase window, a network's output delay)");
+      "eval", "Per-joint RMSE and NRMSE (%) of a model on recordings (Table II); streams in constant memory");
   ev->add_option("model", args->model_path, "model file")->required();
   ev->add_option("recordings", args->recordings, "recordings (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
-  ev->add_option("--predictions", args->predictions,
-                 "also write the predicted torque of every sample to this CSV (written as it streams, renamed into "
-                 "place at the end)");
+  ev->add_option("--predictions", args->predictions, "also write the predicted torque of every sample to this CSV");
   ev->add_flag("--streaming", args->streaming,
                "run the model one sample at a time, causally, as the live robot does (default: the offline "
                "estimate, where linear and hybrid may take qddot from later samples; an lstm with an output "

@@ -153,16 +153,12 @@ const bool registered = rcm::cli::register_command({"force", 35, [](CLI::App& ap
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "force", "Incision force series of a recording (paper Eq. 6, f = J_D^-T (tau - tau_fs)); RMSE per axis against the "
-               "recording's force columns when present. Streams: memory does not grow with the recording; the model's "
-               "whole-recording estimate holds only the samples it looks ahead and behind (the linear model's "
-               "zero-phase window, a network's output delay)");
+               "recording's force columns when present; streams in constant memory");
   cmd->add_option("--model", o->model_path, "free-space torque model (from `rcm dynamics fit`)")->required();
   cmd->add_option("--offset", o->offset, "coaxial offset D in m")->required();
   cmd->add_option("--q0", o->q0, "docking configuration q0 (rad, rad, m; default: the recording's first sample)");
   cmd->add_option("RECORDING", o->recording, "recording (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
-  cmd->add_option("--out", o->out,
-                  "write the series as CSV: time,force_x,force_y,force_z,theta,condition,status (written as it "
-                  "streams, renamed into place at the end)");
+  cmd->add_option("--out", o->out, "write the series as CSV: time,force_x,force_y,force_z,theta,condition,status");
   cmd->add_option("--max-condition", o->max_condition,
                   "condition number of J_D above which a sample is flagged ill-conditioned (default: the library's)");
   cmd->add_option("--robot", o->robot, "built-in robot name or rcm-robot/1 JSON file");

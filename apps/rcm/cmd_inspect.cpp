@@ -202,9 +202,7 @@ const bool registered = rcm::cli::register_command({"inspect", 10, [](CLI::App& 
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "inspect",
-      "Validate and summarize a recording or a session (.json). Reads the recording in chunks: memory does not grow "
-      "with its length (a recording with more than 65,536 distinct sampling intervals is read twice for the exact "
-      "median interval)");
+      "Validate and summarize a recording or a session (.json), read in chunks in constant memory");
   cmd->add_option("FILE", o->file,
                   "recording (rcm or rostopic CSV, ROS 1 .bag, rosbag2 directory, .db3 or .mcap) or session manifest")
       ->required();

@@ -236,9 +236,7 @@ const bool registered = rcm::cli::register_command({"monitor", 65, [](CLI::App& 
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "monitor", "Replay a recording as a stream through the online estimator: running estimate of all three offsets, "
-                 "onset of the misalignment and incision-force alarms. The recording is read a chunk at a time, so "
-                 "memory does not grow with its length; the settling time needs the whole run's estimates, which go "
-                 "to a temporary file (32 bytes per sample) rather than to memory");
+                 "onset of the misalignment and incision-force alarms; streams in constant memory");
   cmd->add_option("--session", o->session, "rcm-session/1 manifest (free-space data, q0, calibration)")->required();
   cmd->add_option("RECORDING", o->recording, "recording to replay (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   rcm::cli::add_free_space_flags(cmd, o->study);
@@ -249,9 +247,7 @@ const bool registered = rcm::cli::register_command({"monitor", 65, [](CLI::App& 
   o->correction.add(cmd, "--tolerance", {"tolerance_m"});
   o->correction.add(cmd, "--compensate-limit", {"compensate_limit_m"});
   o->correction.add(cmd, "--max-shift-rate", {"max_rate_m_per_s"});
-  cmd->add_option("--out", o->out,
-                  "write the running estimate and correction of every sample as CSV (written as the replay goes, "
-                  "renamed into place at its end)");
+  cmd->add_option("--out", o->out, "write the running estimate and correction of every sample as CSV");
   rcm::cli::add_options_file_flag(cmd, o->options_file);
   cmd->add_flag("--quiet", o->quiet, "print only events and the summary");
   cmd->add_flag("--json", o->json, "print one JSON object at the end");

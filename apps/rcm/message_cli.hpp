@@ -20,10 +20,9 @@ TopicReadOptions& get_topic_options();
 TopicReadOptions get_topic_options(const RecordingReadOptions& read);
 // Adds --topic, --force-topic and --time to `cmd` (once).
 void add_topic_options(CLI::App& cmd);
-// A rosbag2 recording with `options`; prints its warnings and skipped-message
-// count to stderr and keeps its read info for find_rosbag2_info().
-// A rosbag2 recording read as the CLI reads it: its warnings and skipped
-// messages printed once it has been read, its info then kept for find_rosbag2_info().
+// A rosbag2 recording with `options`, in chunks; once it has been read to its
+// end, its warnings and skipped-message count go to stderr and its read info
+// is kept for find_rosbag2_info(). load_rosbag2: every chunk.
 std::unique_ptr<Rosbag2RecordingReader> open_rosbag2(const std::filesystem::path& path,
                                                      const TopicReadOptions& options,
                                                      std::size_t chunk_rows = kDefaultChunkRows);
