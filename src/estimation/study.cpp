@@ -12,6 +12,7 @@
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/force/incision_force.hpp"
 #include "rcm/io/json_file.hpp"
+#include "rcm/io/recording_reader.hpp"
 
 namespace rcm {
 namespace {
@@ -224,9 +225,12 @@ void check_study_recordings(const Session& session, const StudyOptions& options)
     paths.push_back(spec.recording);
     if (spec.static_recording) paths.push_back(*spec.static_recording);
   }
+  // Read through in chunks, every check made and nothing kept: memory does not grow with the files' length.
+  Recording chunk;
   for (const auto& path : paths) {
     throw_if_interrupted("checking the session's recordings");
-    (void)load_recording(path, read);
+    const auto reader = open_recording(path, read);
+    while (reader->read_chunk(chunk)) throw_if_interrupted("checking the session's recordings");
   }
 }
 
