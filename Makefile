@@ -10,7 +10,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libeigen3-dev libceres-dev libcli11-dev nlohmann-json3-dev libfmt-dev \
   libgtest-dev libgmock-dev libbenchmark-dev \
   libtorch-dev libopenblas0-openmp \
-  pybind11-dev python3-dev python3-numpy python3-torch python3-scipy \
+  pybind11-dev python3-dev python3-numpy python3-torch python3-scipy python3-dask python3-distributed \
   gnuplot-nox \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev

@@ -1,10 +1,12 @@
-// The Python module `rcm`: rcm::core (no LibTorch) for Python. See docs/python.md.
+// The compiled half of the Python package `rcm`: rcm::core (no LibTorch) for
+// Python, as the extension `rcm._core`, whose every public name the package
+// (python/rcm/__init__.py) re-exports. See docs/python.md.
 
 #include "common.hpp"
 
 namespace py = pybind11;
 
-PYBIND11_MODULE(rcm, m) {
+PYBIND11_MODULE(_core, m) {
   m.doc() =
       "Sensorless RCM misalignment estimation for the dVRK PSM (the rcm C++ library).\n\n"
       "SI units throughout (m, rad, s, N, N m). Arrays are numpy float64; T x N arrays have one row per\n"
@@ -49,4 +51,5 @@ PYBIND11_MODULE(rcm, m) {
   rcm::python::bind_online(m);
   rcm::python::bind_study(m);
   rcm::python::bind_sim(m, sim);
+  rcm::python::bind_plot(m);
 }
