@@ -90,7 +90,7 @@ def require_distributed():
 def open_client(scheduler=None, workers=None):
     """A distributed.Client: connected to `scheduler` ("tcp://host:port"), or to
     a LocalCluster of `workers` processes (default: os.cpu_count()) of one thread
-    each, listening on 127.0.0.1 only, without a dashboard; closed on exit."""
+    each, listening on 127.0.0.1 only; closed on exit."""
     distributed = require_distributed()
     if scheduler:
         if workers:
@@ -101,8 +101,14 @@ def open_client(scheduler=None, workers=None):
     n = int(workers) if workers else (os.cpu_count() or 1)
     if n < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
-    with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+    # Every listening socket on the loopback interface: the HTTP servers (health
+    # and metrics routes) that the scheduler and each worker start even without
+    # a dashboard would otherwise listen on every interface.
+    loopback = "127.0.0.1"
+    with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=loopback,
+                                  scheduler_kwargs={"dashboard": False, "dashboard_address": f"{loopback}:0"},
+                                  worker_dashboard_address=f"{loopback}:0") as cluster, \
+            distributed.Client(cluster) as client:
         yield client
 
 

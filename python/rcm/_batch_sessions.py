@@ -321,7 +321,12 @@ def main(argv=None):
         state = f"done in {result.seconds:.1f} s" if result.ok else f"FAILED: {result.error}"
         print(f"[{done[0]}/{len(a.sessions)}] {name}: {state}", file=sys.stderr, flush=True)
 
-    summary = run_sessions(a.sessions, a.out, options, scheduler=a.scheduler, workers=a.workers, on_result=progress)
+    try:
+        summary = run_sessions(a.sessions, a.out, options, scheduler=a.scheduler, workers=a.workers,
+                               on_result=progress)
+    except OSError as exc:  # no scheduler at that address, or the output folder cannot be written
+        print(f"rcm batch: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
     if a.json:
         print(json.dumps(summary, indent=2))
     else:

@@ -110,6 +110,35 @@ def pids_with_marker(marker):
     return out
 
 
+def listening_addresses(pids):
+    """host:port of every TCP socket the processes `pids` listen on (IPv4 and
+    IPv6), from /proc/net/tcp{,6} and the processes' file descriptors."""
+    inodes = set()
+    for pid in pids:
+        for fd in os.listdir(f"/proc/{pid}/fd"):
+            try:
+                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+            except OSError:
+                continue
+            if target.startswith("socket:["):
+                inodes.add(target[8:-1])
+    out = []
+    for table, v6 in (("/proc/net/tcp", False), ("/proc/net/tcp6", True)):
+        with open(table) as f:
+            for line in f.readlines()[1:]:
+                cells = line.split()
+                if cells[3] != "0A" or cells[9] not in inodes:  # 0A: LISTEN
+                    continue
+                host, port = cells[1].split(":")
+                raw = bytes.fromhex(host)
+                if v6:
+                    address = ":".join(raw[i:i + 4][::-1].hex() for i in range(0, 16, 4))
+                else:
+                    address = ".".join(str(b) for b in raw[::-1])
+                out.append(f"{address}:{int(port, 16)}")
+    return out
+
+
 def square_or_refuse(x):
     if x < 0:
         raise rcm.InputError(f"x = {x}")
@@ -143,6 +172,10 @@ class TestBatch(unittest.TestCase):
             addresses = [info["address"]] + list(info["workers"]) + [w["nanny"] for w in info["workers"].values()]
             for address in addresses:
                 self.assertTrue(address.startswith("tcp://127.0.0.1:"), address)
+            # Every socket they listen on, the HTTP servers included.
+            sockets = listening_addresses([os.getpid(), *client.run(os.getpid).values()])
+            self.assertGreaterEqual(len(sockets), 4, sockets)  # scheduler, nanny, worker and their HTTP servers
+            self.assertEqual([a for a in sockets if not a.startswith("127.0.0.1:")], [])
             self.assertEqual([w["nthreads"] for w in info["workers"].values()], [1])
             summary = rcm.batch.run_sessions(list(b["sessions"].values()), out, b["options"], client=client)
             # The plain map: results in the tasks' order, a failure located and not stopping the others.
