@@ -327,6 +327,10 @@ def main(argv=None):
     except OSError as exc:  # no scheduler at that address, or the output folder cannot be written
         print(f"rcm batch: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    except KeyboardInterrupt:
+        print(f"rcm batch: interrupted; the sessions finished before are in {a.out}, each whole; no summary written",
+              file=sys.stderr)
+        return 130
     if a.json:
         print(json.dumps(summary, indent=2))
     else:
