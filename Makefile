@@ -15,7 +15,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
-.PHONY: deps build test build-sanitize test-sanitize demo bench coverage learning-curve docs-figures soak fuzz fuzz-deps clean
+.PHONY: deps build test build-sanitize test-sanitize demo bench coverage learning-curve batch-speed docs-figures soak fuzz fuzz-deps clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -89,8 +89,18 @@ coverage: build
 # length of teleoperation and excitation data (about 10 minutes on 2 cores);
 # writes its table and figure into docs/dynamics.md. REAL=DIR adds the curve of
 # real recordings (NAME_full.csv / NAME_half.csv pairs).
+# SCHEDULER=tcp://HOST:8786 runs the independent runs of the learning curve and
+# of the closed-loop bench on that Dask scheduler's workers instead of a local
+# cluster (docs/howto-batch.md); the tables are the same.
+SCHEDULER ?=
 learning-curve: build
-	$(PYTHON) bench/learning_curve.py --build $(BUILD) $(if $(REAL),--real $(REAL))
+	$(PYTHON) bench/learning_curve.py --build $(BUILD) $(if $(REAL),--real $(REAL)) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
+
+# `rcm batch` on 8 simulated sessions with 1 and 2 workers against `rcm run` one
+# after another, results compared (about 30 minutes on 2 cores); writes its
+# table into docs/validation.md.
+batch-speed: build
+	$(PYTHON) bench/batch_speed.py --build $(BUILD)
 
 # The figures the README quotes, from runs on this machine, with the date and
 # machine: the demo's table and wall times (README, docs/benchmarks.md), the
@@ -98,7 +108,7 @@ learning-curve: build
 # (docs/simulator.md, docs/compensation.md). About 30 minutes on 2 cores.
 docs-figures: build
 	$(PYTHON) bench/demo_table.py --build $(BUILD)
-	$(PYTHON) bench/closed_loop_report.py --build $(BUILD)
+	$(PYTHON) bench/closed_loop_report.py --build $(BUILD) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
 
 # The long reliability runs (about 25 minutes on 2 cores): the live stream soak,

@@ -11,7 +11,8 @@ PYBIND11_MODULE(_core, m) {
       "Sensorless RCM misalignment estimation for the dVRK PSM (the rcm C++ library).\n\n"
       "SI units throughout (m, rad, s, N, N m). Arrays are numpy float64; T x N arrays have one row per\n"
       "sample. Bad input raises rcm.InputError (a ValueError) naming the file, line and column or field.\n"
-      "Submodules: rcm.dynamics (free-space torque models), rcm.sim (the simulated bench).";
+      "Submodules: rcm.dynamics (free-space torque models), rcm.sim (the simulated bench), rcm.batch (many\n"
+      "sessions or seeds side by side on Dask; docs/howto-batch.md).";
   m.attr("__version__") = RCM_VERSION;
 
   // rcm.InputError: the C++ InputError with its location kept as attributes, so
