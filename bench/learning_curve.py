@@ -20,7 +20,7 @@ method's bootstrap is turned off there: it sets the intervals, not the
 estimate, and is most of the run's time.
 
 The table (mean over the seeds and their range) and a figure go between the
-learning-curve markers of docs/dynamics.md and into
+learning-curve markers of docs/validation-free-space.md (with --doc) and into
 docs/figures/learning_curve.png, with the date and machine (a run of network
 kinds alone: the table only, between the learning-curve-networks markers); `--json FILE` keeps
 every point. `--real DIR` adds a torque-only curve on real recordings: DIR holds
@@ -56,7 +56,7 @@ import time
 from doc_tables import add_cluster_flags, cpu_model, open_runner, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "dynamics.md")
+DOC = os.path.join(ROOT, "docs", "validation-free-space.md")
 FIGURE = os.path.join(ROOT, "docs", "figures", "learning_curve.png")
 # The linear curve's block; a run of network kinds alone (their fits take
 # minutes each, so fewer seeds and lengths) goes to its own block.
@@ -366,7 +366,9 @@ def main():
                                    "sees at the same path; the default, a temporary directory here, serves a local "
                                    "cluster only)")
     add_cluster_flags(ap)
-    ap.add_argument("--no-doc", action="store_true", help="print the table instead of writing docs/")
+    ap.add_argument("--no-doc", action="store_true", help="print the table only (the default; kept for scripts)")
+    ap.add_argument("--doc", action="store_true",
+                    help="also write the table and figure into docs/validation-free-space.md")
     args = ap.parse_args()
     rcm = os.path.abspath(args.rcm or os.path.join(args.build, "bin", "rcm"))
     seeds = [int(s) for s in args.seeds.split(",")][:1 if args.quick else None]
@@ -411,7 +413,7 @@ def main():
                            "machine": f"{os.cpu_count()} cores of {cpu_model()}", "wall_s": wall,
                            "points": points, "summary": summary, "ratio": ratio, "largest_rise_percent": rise,
                            "real": real}, f, indent=1)
-        if not (args.no_doc or args.quick):
+        if args.doc and not (args.no_doc or args.quick):
             if "linear" in args.models:
                 figure(summary, "linear", args.data, FIGURE, work)
                 block += ("\n\n![held-out NRMSE and mean e against the length of free-space data, linear model]"

@@ -1,7 +1,7 @@
 """Sensorless RCM misalignment estimation for the dVRK PSM (the rcm C++ library).
 
 The package re-exports everything the compiled extension `rcm._core` defines
-(docs/python.md), so `rcm.load_recording`, `rcm.InputError`, `rcm.dynamics` and
+(docs/howto-python.md), so `rcm.load_recording`, `rcm.InputError`, `rcm.dynamics` and
 `rcm.sim` are the extension's own objects. `rcm.batch` (docs/howto-batch.md)
 runs studies and other independent work on a Dask cluster; it is imported on
 first use, so `import rcm` needs no Dask.

@@ -1,6 +1,6 @@
 // The compiled half of the Python package `rcm`: rcm::core (no LibTorch) for
 // Python, as the extension `rcm._core`, whose every public name the package
-// (python/rcm/__init__.py) re-exports. See docs/python.md.
+// (python/rcm/__init__.py) re-exports. See docs/howto-python.md.
 
 #include "common.hpp"
 
