@@ -125,11 +125,12 @@ const bool registered = rcm::cli::register_command({"batch", 65, [](CLI::App& ap
   o->study.add(cmd, "--D0", {"three_step.D_initial"}, "initial guess of D (unset: the middle of its bounds)");
   rcm::cli::add_options_file_flag(cmd, o->options_file);
   cmd->add_flag("--json", o->json, "print summary.json on stdout instead of summary.md");
-  cmd->footer(
-      std::string("Python: RCM_PYTHON, else " RCM_PYTHON_EXECUTABLE
-      ", with python3-dask and python3-distributed; the package rcm installed beside this program or in its "
-      "build tree, else on the interpreter's own path. Sessions are read by the workers at their absolute paths "
-      "(on a cluster, a file system every machine sees); the results come back here.\n") + cmd->get_footer());
+  cmd->footer(std::string("Python: RCM_PYTHON, else the interpreter rcm was built for (Debian's /usr/bin/python3), "
+                          "with python3-dask and python3-distributed; the package rcm installed beside this program "
+                          "or in its build tree, else on the interpreter's own path. Sessions are read by the workers "
+                          "at their absolute paths (on a cluster, a file system every machine sees); the results come "
+                          "back here.\n") +
+              cmd->get_footer());
   cmd->callback([o] { run(*o); });
 }});
 

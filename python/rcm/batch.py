@@ -75,17 +75,20 @@ def fit_models(recording_sets, fit_options=None, **cluster):
     return map_tasks(compute_fit, [([os.path.abspath(p) for p in paths], opts) for paths in recording_sets], **cluster)
 
 
-def compute_evaluation(model_file, recording):
-    """A saved model's per-joint error on a recording (`rcm dynamics eval`):
-    [{'index', 'rmse', 'nrmse_percent', 'range'}]."""
+def compute_evaluation(model_file, recordings):
+    """A saved model's per-joint error on one recording or a list of them, as
+    `rcm dynamics eval MODEL RECORDINGS...`: [{'index', 'rmse', 'nrmse_percent', 'range'}]."""
+    paths = [recordings] if isinstance(recordings, (str, os.PathLike)) else list(recordings)
     model = rcm.dynamics.load_torque_model(model_file)
-    errors = rcm.dynamics.evaluate_torque_model(model, rcm.load_recording(recording))
+    errors = rcm.dynamics.evaluate_torque_model(model, [rcm.load_recording(p) for p in paths])
     return [{"index": e.index, "rmse": e.rmse, "nrmse_percent": e.nrmse_percent, "range": e.range} for e in errors]
 
 
 def evaluate_models(pairs, **cluster):
-    """compute_evaluation on each (model file, recording) pair."""
-    return map_tasks(compute_evaluation, [(os.path.abspath(m), os.path.abspath(r)) for m, r in pairs], **cluster)
+    """compute_evaluation on each (model file, recording or list of recordings) pair."""
+    def absolute(r):
+        return os.path.abspath(r) if isinstance(r, (str, os.PathLike)) else [os.path.abspath(p) for p in r]
+    return map_tasks(compute_evaluation, [(os.path.abspath(m), absolute(r)) for m, r in pairs], **cluster)
 
 
 def compute_simulation(config, out_dir):

@@ -180,6 +180,14 @@ class TestBatch(unittest.TestCase):
             summary = rcm.batch.run_sessions(list(b["sessions"].values()), out, b["options"], client=client)
             # The plain map: results in the tasks' order, a failure located and not stopping the others.
             results = rcm.batch.map_tasks(square_or_refuse, [3, -1, 4], client=client)
+            # A fit and an evaluation on a worker: the same model and errors as in this process.
+            free = os.path.join(_state["session_dir"], "free_space.csv")
+            fit = rcm.batch.fit_models([[free]], client=client)[0]
+            evaluation = rcm.batch.evaluate_models([(_state["model_path"], free)], client=client)[0]
+        self.assertEqual(without_timings(fit.value["model"]), without_timings(_state["fit"].model.to_json()))
+        here = rcm.dynamics.evaluate_torque_model(_state["fit"].model, [_state["free"]])
+        self.assertEqual([(e["rmse"], e["nrmse_percent"]) for e in evaluation.value],
+                         [(e.rmse, e.nrmse_percent) for e in here])
         self.assertEqual([r.value for r in results], [9, None, 16])
         self.assertEqual((results[1].error.type, results[1].error.message), ("InputError", "x = -1"))
         with self.assertRaises(rcm.batch.BatchError):
