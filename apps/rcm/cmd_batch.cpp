@@ -121,7 +121,14 @@ const bool registered = rcm::cli::register_command({"batch", 65, [](CLI::App& ap
       ->excludes(scheduler);
   o->study.add(cmd, "--method", {"method"});
   o->study.add(cmd, "--static-step", {"static_step"});
-  rcm::cli::add_free_space_flags(cmd, o->study);
+  // rcm run's free-space flags but --max-train-minutes: the workers fit the linear model only.
+  o->study.add(cmd, "--model", {"model_kind"},
+               "free-space model to fit: linear (the workers have no LibTorch; fit a network once with `rcm dynamics "
+               "fit` and give it with --model-file)");
+  o->study.add(cmd, "--model-file", {"model_file"},
+               "use a saved free-space model of any kind (e.g. free_space_model.json of `rcm run`) for every session");
+  o->study.add(cmd, "--seed", {"fit.seed", "joint.seed"}, "seed of the model fit and of the joint method's bootstrap");
+  o->study.add(cmd, "--dedupe", {"read.dedupe"}, "drop repeated rows of every recording");
   o->study.add(cmd, "--D0", {"three_step.D_initial"}, "initial guess of D (unset: the middle of its bounds)");
   rcm::cli::add_options_file_flag(cmd, o->options_file);
   cmd->add_flag("--json", o->json, "print summary.json on stdout instead of summary.md");
