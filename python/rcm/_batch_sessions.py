@@ -36,9 +36,9 @@ def _study_options(options):
 
 
 def _make_study_options(options):
-    o = rcm.StudyOptions.from_dict(options)
-    o.verbose = False  # workers print nothing; results do not depend on it
-    return o
+    # Workers print nothing (the study's and the fit's progress); results do not depend on it.
+    quiet = dict(options, verbose=False, fit=dict(options.get("fit", {}), verbose=False))
+    return rcm.StudyOptions.from_dict(quiet)
 
 
 def _read_tree(root):
