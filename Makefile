@@ -10,12 +10,12 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libeigen3-dev libceres-dev libcli11-dev nlohmann-json3-dev libfmt-dev \
   libgtest-dev libgmock-dev libbenchmark-dev \
   libtorch-dev libopenblas0-openmp \
-  pybind11-dev python3-dev python3-numpy python3-torch python3-scipy \
+  pybind11-dev python3-dev python3-numpy python3-torch python3-scipy python3-dask python3-distributed \
   gnuplot-nox \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
-.PHONY: deps build test build-sanitize test-sanitize demo live-demo bench coverage learning-curve docs-figures docs-cli soak fuzz fuzz-deps clean
+.PHONY: deps build test build-sanitize test-sanitize demo live-demo bench coverage learning-curve batch-speed docs-figures docs-cli soak fuzz fuzz-deps clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -105,8 +105,18 @@ coverage: build
 # prints its table (bench/learning_curve.py --doc writes it and its figure into
 # docs/validation-free-space.md). REAL=DIR adds the curve of
 # real recordings (NAME_full.csv / NAME_half.csv pairs).
+# SCHEDULER=tcp://HOST:8786 runs the independent runs of the learning curve and
+# of the closed-loop bench on that Dask scheduler's workers instead of a local
+# cluster (docs/howto-batch.md); the tables are the same.
+SCHEDULER ?=
 learning-curve: build
-	$(PYTHON) bench/learning_curve.py --build $(BUILD) $(if $(REAL),--real $(REAL))
+	$(PYTHON) bench/learning_curve.py --build $(BUILD) $(if $(REAL),--real $(REAL)) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
+
+# `rcm batch` on 8 simulated sessions with 1 and 2 workers against `rcm run` one
+# after another, results compared (about 30 minutes on 2 cores); writes its
+# table into docs/validation-speed.md.
+batch-speed: build
+	$(PYTHON) bench/batch_speed.py --build $(BUILD)
 
 # The accuracy figures of docs/validation.md, from runs on this machine, with the
 # date and machine: the worst-case tables (make coverage), the demo's table with
@@ -114,7 +124,7 @@ learning-curve: build
 # closed-loop bench.
 docs-figures: coverage
 	$(PYTHON) bench/demo_table.py --build $(BUILD) --coverage-summary $(COVERAGE_WORK)/summary.json
-	$(PYTHON) bench/closed_loop_report.py --build $(BUILD)
+	$(PYTHON) bench/closed_loop_report.py --build $(BUILD) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 
 # docs/cli.md, the command reference, from every program's --help and the files of
 # a quick study (tools/gen_cli_reference.py; the ctest docs_cli_reference checks it).
