@@ -121,7 +121,7 @@ TEST(ClosedLoopBench, TheCorrectionBringsTheRcmBackWithoutAWrongMove) {
       // Breathing swings the true remaining offset across zero faster than the
       // estimate follows: some moves made on the lagging estimate point against
       // the motion at that instant, how many moving with round-off in the
-      // free-space fit (docs/compensation.md); most do not.
+      // free-space fit; most do not.
       EXPECT_LT(2 * closed["wrong_direction_moves"].get<int>(), closed["moves"].get<int>());
     } else {
       EXPECT_EQ(closed["wrong_direction_moves"].get<int>(), 0);
@@ -134,7 +134,7 @@ TEST(ClosedLoopBench, TheCorrectionBringsTheRcmBackWithoutAWrongMove) {
   }
   // The drift ends under 2 N for good. A step may leave the RCM near the
   // tolerance, where the last millimetres wait for their interval with the
-  // force near 2 N (docs/compensation.md, "What limits it"): whether it then
+  // force near 2 N: whether it then
   // stays under 2 N to the end moves with round-off in the free-space fit, its
   // RMS stays under 2 N. The breathing's own motion keeps it above.
   EXPECT_TRUE(j["scenarios"]["drift"]["closed"]["time_to_below_2n_s"].is_number());

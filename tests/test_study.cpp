@@ -317,7 +317,7 @@ TEST(Study, HystereticFrictionJointIntervalsCoverAndBalancedHoldsBeatTheLastHold
 // part of the missing weight as the model's torque offset on the insertion and
 // no estimate gets worse; the rest grows with the pivot as the tissue's torque
 // does, and a calibration at one offset cannot tell it from the tissue law
-// (docs/estimation.md, "Correcting the free-space model's bias").
+// (docs/methods.md, "Correcting the free-space model's bias").
 TEST(Study, JointIntervalsWidenWhenTheFreeSpaceModelMissesAPayload) {
   std::random_device rd;
   const fs::path dir = fs::temp_directory_path() / ("rcm_test_study_payload_" + std::to_string(rd()));

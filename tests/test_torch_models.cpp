@@ -86,7 +86,7 @@ TEST_P(EveryModelKind, FitPredictStreamSaveLoadAndMetrics) {
   const auto again = evaluate_on_segments(model, {rec}, split.test);
   // The model learned something: on the fitted part (train + validation) it
   // beats predicting the mean by far. (Generalization from one synthetic minute
-  // is not asserted here; it is measured on the simulated bench, docs/dynamics.md.)
+  // is not asserted here; docs/validation-free-space.md measures it.)
   const Eigen::Index fitted = split.validation.back().end;
   const Eigen::MatrixXd measured = rec.effort.topRows(fitted);
   const Eigen::RowVectorXd mean = measured.colwise().mean();

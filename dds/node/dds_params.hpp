@@ -1,6 +1,6 @@
 #pragma once
 // rcm_monitor_dds's parameters from a ROS 2 parameters file (YAML), read before
-// the flags so that the flags override it (docs/ros2.md, "Parameters").
+// the flags so that the flags override it (docs/howto-ros2.md).
 
 #include <string>
 

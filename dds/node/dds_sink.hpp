@@ -1,6 +1,6 @@
 #pragma once
 // rcm_monitor_dds's side of rcm::MonitorSink: Cyclone DDS writers for the
-// node's topics (ROS 2 types and QoS, docs/ros2.md) fed from a queue by a
+// node's topics (ROS 2 types and QoS, docs/howto-ros2.md) fed from a queue by a
 // publisher thread, and a stderr logger in ROS 2's format.
 
 #include <dds/dds.h>

@@ -6,7 +6,7 @@
 // publish and log is rcm::MonitorNode (live/, shared with the ROS 1 node).
 // This file reads the parameters (a ROS 2 parameters file: dds_params.cpp,
 // then the flags) and takes the joint states from Cyclone; the sink that
-// writes the outputs is dds_sink.cpp. Topics, QoS, parameters: docs/ros2.md.
+// writes the outputs is dds_sink.cpp. Topics, QoS, parameters: docs/howto-ros2.md.
 //
 //   rcm_monitor_dds --session session.json --model-file free_space_model.json [--arm PSM1] [--params-file P.yaml]
 

@@ -214,7 +214,7 @@ def _summary_markdown(rows, header):
                          f"{_mm(t.get('error_m'))} |")
     findings = [(row["name"], f) for row in rows if row["ok"] for f in row["setup"]["missing"] + row["setup"]["notes"]]
     if findings:
-        lines += ["", "Setup findings (`rcm setup`'s checks with the study's model; docs/setup.md):", ""]
+        lines += ["", "Setup findings (`rcm setup`'s checks with the study's model; docs/howto-setup.md):", ""]
         lines += [f"- {name}: {f['severity']}: {f['check']}: {f['message']}" for name, f in findings]
     failed = [row for row in rows if not row["ok"]]
     if failed:

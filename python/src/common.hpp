@@ -2,7 +2,7 @@
 // Shared by the translation units of the Python module: array conversion with
 // located errors, read-only views of Eigen data, JSON <-> Python.
 //
-// Conversion rule (docs/python.md, "Arrays"): every array argument goes through
+// Conversion rule (docs/howto-python.md, "Arrays, options and errors"): every array argument goes through
 // numpy.asarray, then must have exactly the expected number of dimensions (a
 // 1-D array is never reshaped into a T x 1 matrix) and a dtype whose values
 // float64 holds exactly: floating point up to 64 bits, or integers that are all

@@ -1,4 +1,4 @@
-// The networks' parameters in model files (docs/dynamics.md, "Model file"):
+// The networks' parameters in model files (docs/formats.md, "Free-space model"):
 // dense stacks, LSTM layers and the input normalization, saved bit-exact and
 // loaded with errors naming the file and the JSON field.
 #include <fmt/format.h>

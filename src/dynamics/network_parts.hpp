@@ -14,7 +14,7 @@ void check_stack(const DenseStack& stack, const char* what);
 // Throws std::invalid_argument when the normalization does not fit `joints` inputs and `outputs` outputs.
 void check_normalization(const Normalization& normalization, int joints, int outputs);
 
-// The model file's "parameters" pieces (docs/dynamics.md, "Model file").
+// The model file's "parameters" pieces (docs/formats.md, "Free-space model").
 nlohmann::json save_stack(const DenseStack& stack);
 nlohmann::json save_lstm(const LstmNetwork& network);
 nlohmann::json save_normalization(const Normalization& normalization);

@@ -1,4 +1,4 @@
-// results.json of a study (rcm-results/1 of session-format.md, with extra fields).
+// results.json of a study (rcm-results/1 of docs/formats.md, with extra fields).
 #include <cmath>
 
 #include "rcm/dynamics/metrics.hpp"

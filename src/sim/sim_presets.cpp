@@ -35,7 +35,7 @@ SimConfig make_default_config() {
   c.arm.gravity_base_m_s2 = Eigen::Vector3d(0.0, 0.0, -9.81);
   c.arm.insertion_counterbalance_n = 7.0;
   // The elastic element along the real Classic PSM's insertion: rcm's fit
-  // finds 1.6-2.0 N/m on its recordings (docs/dynamics.md).
+  // finds 1.6-2.0 N/m on its recordings.
   c.arm.insertion_stiffness_n_per_m = 1.8;
   apply_arm_preset(c, "rigid");
   apply_friction_preset(c, "real");

@@ -1,6 +1,6 @@
 #include "rcm/tissue/tissue_fit.hpp"
 
-// The expression search of the tissue law (paper V-D, docs/tissue.md): every
+// The expression search of the tissue law (paper V-D, docs/methods.md): every
 // structure over the library up to max_complexity, in canonical order, fitted
 // (tissue_structure_fit.cpp), duplicates dropped, and the front selected
 // (tissue_selection.cpp).

@@ -1,6 +1,6 @@
 // The parameters of one candidate structure of the tissue law: its design
 // matrix, the outer constants by least squares, and all constants jointly by
-// Ceres (paper V-D; docs/tissue.md).
+// Ceres (paper V-D; docs/methods.md).
 
 #include <ceres/ceres.h>
 

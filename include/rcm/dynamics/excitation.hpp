@@ -1,6 +1,6 @@
 #pragma once
 // Excitation trajectories for free-space data collection (`rcm excite`,
-// docs/dynamics.md "Excitation trajectories").
+// docs/methods.md, "Excitation design").
 //
 // A finite Fourier series per joint (Swevers et al.), joints 1-3:
 //   q_j(t) = q0_j + c_j + sum_{k=1..H} a_jk / (w k) sin(w k t) - b_jk / (w k) cos(w k t),

@@ -23,7 +23,7 @@ struct FitOptions {
   double validation_fraction = 0.2;
   int num_outputs = 0;              // joints to predict (1..M); 0 = every recorded joint
 
-  // Networks (0 = chosen from the amount of data, see docs/dynamics.md).
+  // Networks (0 = chosen from the amount of data, see `rcm dynamics fit --help`).
   int hidden_size = 0;
   int num_layers = 0;
   int head_hidden = 64;
@@ -130,7 +130,7 @@ struct FitResult {
 // and by run_study, prepare_monitor and fit_free_space_step when
 // StudyOptions::model_kind is unset (the Python module, the examples). Linear:
 // on a real arm it is the kind that holds across speed and payload (the
-// networks learn the one path they are shown; docs/dynamics.md), it fits in
+// networks learn the one path they are shown; docs/validation-free-space.md), it fits in
 // seconds, and every program can fit it, with or without LibTorch.
 TorqueModelKind get_default_model_kind();
 
@@ -152,31 +152,31 @@ struct TimeSplit {
 // Direction-feature scales a fit of `kind` uses when FitOptions leaves them
 // unset: {0.01, 0.03, 0.1} for lstm; none for hybrid, whose residual network
 // with them read the encoder-chatter spikes of long static holds as direction
-// and moved the hold torque (docs/dynamics.md, "Direction features"); none for
+// and moved the hold torque; none for
 // mlp and linear.
 std::vector<double> get_default_velocity_tanh_scales(TorqueModelKind kind);
 // Acceleration-feature time constants when FitOptions leaves them unset: {0.03}
 // (s) for lstm, whose test error on yaw and pitch they cut by a third to a
 // half; none for hybrid, whose model-based part has its own qddot and whose
-// trials did not gain from them (docs/dynamics.md, "Acceleration features");
+// trials did not gain from them;
 // none for mlp (memoryless) and linear.
 std::vector<double> get_default_acceleration_filters_s(TorqueModelKind kind);
 // Dahl-feature fractions of the range of motion when FitOptions leaves them
 // unset: {3e-5, 3e-4, 3e-3} for lstm, a decade either side of the model-based
 // fit's usual choice, since the bristle displacement of a real joint is not
 // known in advance; none for hybrid, whose model-based part has its own Dahl
-// state; none for mlp (memoryless) and linear (docs/dynamics.md, "Dahl features").
+// state; none for mlp (memoryless) and linear.
 std::vector<double> get_default_dahl_fractions(TorqueModelKind kind);
 // Loss balance when FitOptions leaves it unset: 0.5 for lstm, whose test NRMSE
 // on yaw and pitch it cut from 0.84 / 0.90 % to 0.69 / 0.78 % with insertion
 // kept at 5.26 %, where 1 (0.66 / 0.75 / 5.36 %) takes insertion past the
 // paper's 5.3 %; 0 for hybrid (not measured with it), mlp (one network per
-// joint, each on its own loss) and linear (docs/dynamics.md, "Loss balance").
+// joint, each on its own loss) and linear.
 double get_default_loss_balance(TorqueModelKind kind);
 // Output delay when FitOptions leaves it unset: 0.04 s for lstm, with which its
 // test NRMSE went from 0.69 / 0.78 / 5.26 % to 0.59 / 0.65 / 5.26 % (the causal
 // network's remaining error was the late qddot of fast motion), at 40 ms of
-// latency online; 0 for every other kind (docs/dynamics.md, "Output delay").
+// latency online; 0 for every other kind.
 double get_default_output_delay_s(TorqueModelKind kind);
 // The delay of FitOptions in samples of `sample_period_s` for a fit of `kind`:
 // throws InputError naming output_delay_s when it exceeds options.burn_in

@@ -43,7 +43,7 @@
 // rate-dependent terms, which a fit at one speed then scales wrongly to the
 // other. On yaw the longer state makes no difference across speeds on the
 // real arm and spoils the holding torque after the short approaches of static
-// holds on the simulated one (docs/dynamics.md).
+// holds on the simulated one.
 // Viscous and Coulomb coefficients are kept >= 0 (active set), but for the
 // rigid-body fit's viscous one, which may bend a sqrt-viscous one over.
 // Where the fitted rate-dependent friction bends over (a negative viscous

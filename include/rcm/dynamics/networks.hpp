@@ -67,15 +67,13 @@ struct Normalization {
   // f * num_joints + k; empty: the network sees [q, qdot] only. Direction
   // features exist because drawing the friction step at qdot = 0 from
   // z-normalized qdot needs input weights of ~100, which Adam grows only over
-  // far more updates than a 10-minute fit makes (docs/dynamics.md, "Direction
-  // features").
+  // far more updates than a 10-minute fit makes.
   Eigen::VectorXf velocity_tanh_scale;
   // K time constants (s) of the causal acceleration signals (AccelerationFilter)
   // and their K x num_joints scales (feature f of joint k at f * num_joints + k);
   // both empty: none. They exist because the inertial torque needs qddot, which
   // the LSTM would otherwise have to learn to differentiate from noisy qdot; the
-  // raw difference of consecutive samples is mostly encoder noise
-  // (docs/dynamics.md, "Acceleration features").
+  // raw difference of consecutive samples is mostly encoder noise.
   Eigen::VectorXf acceleration_filter_s;
   Eigen::VectorXf acceleration_scale;
   // D x num_joints characteristic displacements x_c (joint units, feature f of
@@ -83,8 +81,7 @@ struct Normalization {
   // (they lie in [-1, 1]); empty: none. They exist because the friction at rest
   // and just after a reversal is set by the direction of the last motion and
   // the displacement since, a memory over arbitrarily long holds that the LSTM's
-  // state did not learn to keep in a 10-minute fit (docs/dynamics.md, "Dahl
-  // features").
+  // state did not learn to keep in a 10-minute fit.
   Eigen::VectorXf dahl_displacement;
   int network_inputs(int joints) const {
     return 2 * joints +

@@ -20,7 +20,7 @@
 // yaw and pitch depends on it. On the real PSM a mass on the insertion stage
 // sits about half a metre up the instrument from the RCM, and without its
 // inertia the refitted model misses a good part of the yaw and pitch torque
-// at full speed (docs/dynamics.md). Friction and the configuration-dependent
+// at full speed (docs/validation-free-space.md). Friction and the configuration-dependent
 // inertia are kept.
 
 #include <Eigen/Core>

@@ -4,7 +4,7 @@
 //
 // A free-space model is trustworthy where its data went: on the real PSM a model
 // fitted at one speed mispredicts at twice the velocity and four times the
-// acceleration by 0.2-0.3 N m (docs/dynamics.md), 6-10 N at the incision at
+// acceleration by 0.2-0.3 N m (docs/validation-free-space.md), 6-10 N at the incision at
 // D = 30 mm. Every offset the estimator reports downstream of such a torque is
 // confidently wrong, so the live path flags each sample whose position,
 // velocity or acceleration leaves what the fit saw (with a margin), and the

@@ -100,7 +100,7 @@ class TorqueModel {
   // streaming at another rate pairs by (the networks step on their own clock).
   double get_output_delay_s() const { return output_delay() * info_.sample_period_s; }
 
-  // Body of the model file (see docs/dynamics.md); `info` is written by the caller.
+  // Body of the model file (see docs/formats.md); `info` is written by the caller.
   virtual nlohmann::json save_parameters() const = 0;
 
   // Whole-recording prediction behind predict_torque(): T x num_outputs from the
@@ -161,7 +161,7 @@ int find_delayed_sample(int count, double target, TimeAt time_at, int hint = 1) 
 
 // Runs the model over a whole recording from the reset state: T x num_outputs
 // (model.predict_sequence: compute_step() per sample, or a model's non-causal
-// batch estimate; see docs/dynamics.md). Throws InputError if the recording has
+// batch estimate; see docs/methods.md, "Acceleration"). Throws InputError if the recording has
 // fewer joints than the model reads.
 Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording);
 Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& time,

@@ -24,7 +24,7 @@ FitResult fit_torque_model(TorqueModelKind kind, const std::vector<Recording>& r
 
 // TorchScript module with forward(x: [B, T, 2N] raw [q, qdot], h0: [L, B, H],
 // c0: [L, B, H]) -> (tau [B, T, M] in joint units, hN, cN); normalization inside.
-// Layout in docs/dynamics.md.
+// Layout in docs/formats.md, "Free-space model".
 void export_torchscript(const LstmTorqueModel& model, const std::filesystem::path& path);
 
 // Reads a TorchScript LSTM (trained in PyTorch) with the documented attributes:

@@ -53,7 +53,7 @@ struct CorrectionOptions {
   double confidence_z = 1.96;          // the 95 % interval
   // Above this fit cost the model does not explain the residual: hold. 1.5 is
   // a perfect fit; 10 is an RMS innovation of about 2.6 free-space-model sigma
-  // (docs/compensation.md has what it separates on the bench).
+  // (docs/validation.md, the closed loop, has what it separates on the bench).
   double max_fit_cost = 10.0;
   double release_fraction = 0.5;       // back to hold below this fraction of the tolerance
   // A sample after a gap in the stream moves the RCM by at most this much time

@@ -33,7 +33,7 @@
 
 namespace rcm {
 
-// The node parameters, one declaration for every node (docs/ros.md, docs/ros2.md).
+// The node parameters, one declaration for every node (docs/cli-programs.md).
 struct MonitorNodeParameters {
   std::string session, model_file;
   std::string arm = "PSM1";

@@ -47,7 +47,7 @@ struct TissueFitOptions {
   double polish_margin = 0.05;
   // Fitted candidates whose predictions differ by less than this fraction of the
   // best RMS residual everywhere on the data range are one law: only the first
-  // in canonical order is kept (see docs/tissue.md).
+  // in canonical order is kept (see docs/methods.md).
   double duplicate_tolerance = 0.01;
 
   // Selection (PySR): a front entry must beat every simpler one by more than

@@ -23,7 +23,7 @@ using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point t0);
 
-// Documented thresholds (docs/dynamics.md).
+// Thresholds documented by `rcm dynamics fit --help` (docs/cli.md).
 constexpr std::size_t kFewSamplesNetwork = 24000;   // 2 min at 200 Hz: below, "too few to trust"
 constexpr std::size_t kSmallDataNetwork = 60000;    // 5 min at 200 Hz: below, a small network
 
