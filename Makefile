@@ -126,8 +126,9 @@ docs-figures: coverage
 	$(PYTHON) bench/demo_table.py --build $(BUILD) --coverage-summary $(COVERAGE_WORK)/summary.json
 	$(PYTHON) bench/closed_loop_report.py --build $(BUILD) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 
-# docs/cli.md, the command reference, from every program's --help and the files of
-# a quick study (tools/gen_cli_reference.py; the ctest docs_cli_reference checks it).
+# The command reference, docs/cli.md (rcm), docs/cli-programs.md (the nodes and DDS
+# tools) and docs/cli-files.md, from every program's --help and the files of a quick
+# study (tools/gen_cli_reference.py; the ctest docs_cli_reference checks them).
 docs-cli: build
 	$(PYTHON) tools/gen_cli_reference.py --build $(BUILD)
 

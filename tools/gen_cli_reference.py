@@ -1,16 +1,17 @@
 #!/usr/bin/env python3
-"""Writes docs/cli.md and docs/cli-files.md, the reference, from the programs themselves.
+"""Writes the reference pages docs/cli.md, docs/cli-programs.md and docs/cli-files.md from the programs.
 
 Every section comes from a program: each command and subcommand of `rcm`
 (found in `rcm --help`, then in each command's own help), its `--help` with
 every flag, default and unit (the study options are the footer of `rcm run
 --help`, from their option tables), the `--help` of every other program in
 PROGRAMS, and the fields of the model and results files that a quick study
-writes. The study options and the files' fields go on docs/cli-files.md, the
-rest on docs/cli.md. Nothing in either page is typed by hand.
+writes. `rcm` goes on docs/cli.md, the other programs (the nodes, the DDS
+tools) on docs/cli-programs.md, the study options and the files' fields on
+docs/cli-files.md. Nothing in them is typed by hand.
 
-    /usr/bin/python3 tools/gen_cli_reference.py --build build            # rewrite docs/cli.md
-    /usr/bin/python3 tools/gen_cli_reference.py --build build --check    # fail if it differs
+    /usr/bin/python3 tools/gen_cli_reference.py --build build            # rewrite the pages
+    /usr/bin/python3 tools/gen_cli_reference.py --build build --check    # fail if one differs
 
 --study DIR takes the results.json and free_space_model.json of an `rcm run`
 already made (the ctest passes the tutorial's); without it a quick study is
@@ -29,36 +30,42 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "cli.md")
+PROGRAMS_DOC = os.path.join(ROOT, "docs", "cli-programs.md")
 FILES_DOC = os.path.join(ROOT, "docs", "cli-files.md")
 
-# Every program rcm installs, in the order of the page: (name, what it is).
-# A new program gets one line here.
+# Every program rcm installs, in the order of the pages: (name, when it is built). The first
+# goes on docs/cli.md, the others on docs/cli-programs.md. A new program gets one line here.
 PROGRAMS = [
-    ("rcm", "the command-line program: every offline step, from a simulated bench to a study"),
-    ("rcm_monitor_node", "the online estimator on a live dVRK over ROS 1 (built with ROS 1)"),
-    ("rcm_monitor_dds", "the online estimator on a live dVRK over ROS 2, on Cyclone DDS (built with Cyclone DDS)"),
-    ("rcm_procedure_dds", "docking to the first estimate on a CRTK arm over ROS 2 (built with Cyclone DDS)"),
-    ("rcm_play_dds", "plays a joint trajectory on a CRTK arm over ROS 2 and records it (built with Cyclone DDS)"),
-    ("rcm_sim_psm_dds", "a simulated dVRK Classic PSM on CRTK topics over ROS 2 (built with Cyclone DDS)"),
+    ("rcm", "always"),
+    ("rcm_monitor_node", "with ROS 1"),
+    ("rcm_monitor_dds", "with Cyclone DDS"),
+    ("rcm_procedure_dds", "with Cyclone DDS"),
+    ("rcm_play_dds", "with Cyclone DDS"),
+    ("rcm_sim_psm_dds", "with Cyclone DDS"),
 ]
 
-HEADER = """# Command reference
+GENERATED = """Written by `tools/gen_cli_reference.py` from the programs' `--help` (`make docs-cli`); the
+ctest `docs_cli_reference` fails when they disagree. Do not edit by hand."""
 
-Every program, command and flag of rcm, with its default and unit. This page
-and [cli-files.md](cli-files.md) (the study options and the fields of the
-files rcm writes) are written by `tools/gen_cli_reference.py` from the
-programs' own `--help` and from the files of the tutorial's study; `make
-docs-cli` rewrites them, and the ctest `docs_cli_reference` fails when they
-and the programs disagree. Do not edit them by hand.
-"""
+HEADER = """# Command reference: `rcm`
+
+Every command and flag of `rcm`, with its default and unit. The live nodes and
+the DDS tools: [cli-programs.md](cli-programs.md). The study options and the
+files' fields: [cli-files.md](cli-files.md).
+""" + GENERATED + "\n"
+
+PROGRAMS_HEADER = """# Command reference: the nodes and DDS tools
+
+Every flag or parameter of the live nodes and the ROS 2 (DDS) tools, with its
+default and unit. `rcm` itself: [cli.md](cli.md).
+""" + GENERATED + "\n"
 
 FILES_HEADER = """# Reference: options and files
 
-The fields of the JSON files rcm reads and writes, from the programs
-themselves: the study options (from their option tables, as `rcm run --help`
-prints them), the free-space model file and the results file (from the
-tutorial's study). Written by `tools/gen_cli_reference.py`, with
-[cli.md](cli.md); what the files mean: [formats.md](formats.md).
+The study options (from their option tables) and the fields of the model and
+results files (from the tutorial's study). Written by
+`tools/gen_cli_reference.py`, with [cli.md](cli.md); what the files mean:
+[formats.md](formats.md).
 """
 
 
@@ -111,16 +118,16 @@ def program_sections(binary, name):
 # configuration keys are a file's fields, not flags, and fill pages; the study
 # options, which three commands print alike, are on docs/cli-files.md.
 NAMED_SECTIONS = {
-    "Configuration (--config FILE": "  (every key with its default: `rcm simulate --help` or `rcm simulate --print-config`)",
-    "Study options (--options FILE": "  (every field with its default and unit: docs/cli-files.md, \"Study options\")",
+    "Configuration (--config FILE": "Configuration (--config FILE): every key with its default: `rcm simulate --help` or `--print-config`",
+    "Study options (--options FILE": "Study options (--options FILE): every field with its default and unit: docs/cli-files.md",
 }
 STUDY_OPTIONS = "Study options (--options FILE"
 
 
 def compact(text, heading, seen):
-    """The help as the page prints it: a section that an earlier command printed alike (the study
-    options of `--options FILE`, the bag flags) is named, not repeated; the padding that aligns
-    CLI11's columns is cut to two spaces, a wrapped line's indent to six."""
+    """The help as the page prints it: a section or a flag that an earlier command printed alike (the
+    study options of `--options FILE`, the bag flags, the seed) is named, not repeated; the padding
+    that aligns CLI11's columns is cut to two spaces, a wrapped line's indent to six."""
     sections, current = [], []
     for line in text.splitlines():
         if not line.strip():
@@ -143,16 +150,44 @@ def compact(text, heading, seen):
         if head.startswith(STUDY_OPTIONS):
             seen.setdefault(STUDY_OPTIONS, "\n".join(re.sub(r"(?<=\S) {3,}", "  ", l) for l in lines[1:]))
         if named is not None:
-            out.append("\n".join([head.rstrip(":") + ":" if head.endswith(":") else head, named]))
+            out.append(named)
             continue
         if head.endswith(":") and not head.startswith(" ") and len(lines) > 3:
             if body in seen:
                 out.append(f"{head}\n  (the same as under `{seen[body]}`)")
                 continue
             seen[body] = heading
-        out.append("\n".join(re.sub(r"(?<=\S) {3,}", "  ", re.sub(r"^ {7,}", "      ", l)) for l in lines
-                             if l.split() != ["-h,--help", "Print", "this", "help", "message", "and", "exit"]))
+        lines = [re.sub(r"(?<=\S) {3,}", "  ", re.sub(r"^ {7,}", "      ", l)) for l in lines
+                 if l.split() != ["-h,--help", "Print", "this", "help", "message", "and", "exit"]]
+        out.append("\n".join(name_repeated_flags(lines, heading, seen)))
     return "\n\n".join(out)
+
+
+def name_repeated_flags(lines, heading, seen):
+    """A flag whose whole help an earlier section of the same page printed word for word (the seed,
+    the model file, the DDS domain of several commands) keeps its name and type here and points
+    there for its help, default and unit, when that is shorter."""
+    entries = []
+    for line in lines:
+        if entries and re.match(r"^ {6}\S", line):  # a wrapped flag's help
+            entries[-1].append(line)
+        else:
+            entries.append([line])
+    page = "cli" if heading.split()[0] == PROGRAMS[0][0] else "programs"
+    out = []
+    for entry in entries:
+        text = "\n".join(entry)
+        m = re.match(r"^  (-\S+(?: [A-Z][A-Z:]*(?:=\S+)?)?)(?:  |\n|$)", text)
+        key = ("flag", page, text)
+        if m and key in seen:
+            short = f"  {m.group(1)}  (as under `{seen[key]}`)"
+            if len(short) + 20 < len(text):
+                out.append(short)
+                continue
+        if m:
+            seen.setdefault(key, heading)
+        out.extend(entry)
+    return out
 
 
 def is_array_record(v):
@@ -207,15 +242,20 @@ def field_block(path):
     an array, `x{}` an object listed on its own line, `x[{}]` an array of objects, `(text)`)."""
     with open(path) as f:
         objects = json_objects(json.load(f), "", {})
-    lines, first = [], {}
+    lines, first, alike = [], {}, {}
     for obj, fields in objects.items():
         listed = ", ".join(describe_field(k, v) for k, v in fields.items())
         if listed in first:  # an object laid out as an earlier one (a solver report, an error summary)
-            lines.append(f"{obj or '(top level)'}: as {first[listed]}")
+            alike.setdefault(first[listed], []).append(obj)
             continue
         first[listed] = obj
-        lines.append(f"{obj or '(top level)'}: {listed}")
-    return "```text\n" + "\n".join(lines) + "\n```"
+        lines.append((obj, f"{obj or '(top level)'}: {listed}"))
+    out = []
+    for obj, line in lines:
+        out.append(line)
+        if obj in alike:
+            out.append(f"{', '.join(alike[obj])}: as {obj}")
+    return "```text\n" + "\n".join(out) + "\n```"
 
 
 def make_study(build, work):
@@ -236,48 +276,63 @@ def old_sections(text):
     return kept
 
 
+def usage_only(line, heading):
+    """A usage line that says no more than the section's heading: the command takes flags only."""
+    return line.strip() == f"Usage: {heading} [OPTIONS]"
+
+
 def generate(build, study_dir, current):
-    bodies, missing = [], []
+    bodies, missing = {}, []
     seen = {}
     kept = old_sections(current)
-    for name, what in PROGRAMS:
+    for name, built in PROGRAMS:
         binary = os.path.join(build, "bin", name)
         if not os.path.exists(binary):
             missing.append(name)
             if name in kept:
-                bodies.append(kept[name])
+                bodies[name] = kept[name]
             continue
         # A command whose help holds only its subcommands has no section of its own.
         sections = [sec for sec in program_sections(binary, name)
                     if not (sec[0] != name and "Options:" not in sec[2].replace("Options:\n  -h,--help", "")
                             and "Subcommands:" in sec[2] and "Positionals:" not in sec[2])]
         body = [f"<!-- program:{name}:begin -->"]
-        for k, (heading, summary, text) in enumerate(sections):
-            text = compact(text, heading, seen)
-            summary = summary or what
-            if text.splitlines()[0].strip() == summary.strip():
-                text = "\n".join(text.splitlines()[1:])
-            body.append(f"## {heading}\n\n{summary}\n\n```text\n{text}\n```\n")
+        for heading, summary, text in sections:
+            lines = compact(text, heading, seen).splitlines()
+            if not summary:
+                # A program's banner, "name: what it is" (rcm: "rcm VERSION -- what it is"), is its summary.
+                banner = re.match(rf"^{re.escape(name)}(?::| \S+ --) (.*)$", lines[0])
+                summary = banner.group(1) if banner else ""
+                lines = lines[1:] if banner else lines
+                if built != "always":
+                    summary = (summary + f" (built {built})").strip()
+            elif lines[0].strip() == summary.strip():
+                lines = lines[1:]
+            lines = [l for l in lines if not usage_only(l, heading)]
+            while lines and not lines[0].strip():
+                lines = lines[1:]
+            body.append(f"## {heading}\n\n{summary}\n\n```text\n" + "\n".join(lines) + "\n```\n")
         body.append(f"<!-- program:{name}:end -->")
-        bodies.append("\n".join(body))
+        bodies[name] = "\n".join(body)
     files = [FILES_HEADER]
     if STUDY_OPTIONS in seen:
         files.append("## Study options (`--options FILE`)\n\nA JSON object of any of these fields, nested as "
-                     "the dots say, read by `rcm run`, `rcm setup` and `rcm monitor` (`--options FILE`; the flags "
-                     "override it); the same fields are Python's `rcm.StudyOptions`. Each line: the field, what it "
-                     "is (unit; limits) [type, default].\n\n```text\n" + seen[STUDY_OPTIONS] + "\n```\n")
+                     "the dots say, for `rcm run`, `rcm setup` and `rcm monitor` (flags override it), and Python's "
+                     "`rcm.StudyOptions`. Each line: the field, what it is (unit; limits) [type, default].\n\n```text\n" + seen[STUDY_OPTIONS] + "\n```\n")
     legend = ("One line per object: its path, then its fields. A field is a number unless marked: `x[]` an "
               "array, `x{}` an object with a line of its own, `x[{}]` an array of objects (`x[]` on its line), "
               "`(text)`, `(true|false)`; `or null` when it may be absent.")
     files.append("## Model file (rcm-torque-model/1)\n\nThe fields of `free_space_model.json` (the default "
-                 "`linear` kind), as `rcm setup`, `rcm run` and `rcm dynamics fit` write it; arrays of numbers are "
-                 "stored as `{shape, dtype, data}`, the data in base64 ([formats.md](formats.md)). " + legend + "\n\n"
+                 "`linear` kind); arrays of numbers are `{shape, dtype, data}` ([formats.md](formats.md)). " + legend + "\n\n"
                  + field_block(os.path.join(study_dir, "free_space_model.json")) + "\n")
-    files.append("## Results file (rcm-results/1)\n\nThe fields of `results.json`, as `rcm run` writes it with its "
-                 "defaults (joint method, three-step beside it) and `rcm run --json` prints it. Units are SI "
-                 "(m, N, N m, s). The contract's fields: [formats.md](formats.md#results-rcm-results1).\n\n"
+    files.append("## Results file (rcm-results/1)\n\nThe fields of `results.json` from `rcm run` with its "
+                 "defaults. Units are SI (m, N, N m, s). The contract's fields: "
+                 "[formats.md](formats.md#results-rcm-results1).\n\n"
                  + field_block(os.path.join(study_dir, "results.json")) + "\n")
-    return "\n".join([HEADER] + bodies), "\n".join(files), missing
+    first = [PROGRAMS[0][0]]
+    others = [name for name, _ in PROGRAMS[1:]]
+    return ("\n".join([HEADER] + [bodies[n] for n in first if n in bodies]),
+            "\n".join([PROGRAMS_HEADER] + [bodies[n] for n in others if n in bodies]), "\n".join(files), missing)
 
 
 def slug(heading):
@@ -291,14 +346,14 @@ def main():
     ap.add_argument("--study", help="folder with results.json and free_space_model.json of the tutorial's study")
     ap.add_argument("--check", action="store_true", help="compare with the pages instead of writing them")
     args = ap.parse_args()
-    current = {doc: open(doc).read() if os.path.exists(doc) else "" for doc in (DOC, FILES_DOC)}
+    current = {doc: open(doc).read() if os.path.exists(doc) else "" for doc in (DOC, PROGRAMS_DOC, FILES_DOC)}
     with tempfile.TemporaryDirectory() as work:
         study = args.study or make_study(args.build, os.path.join(work, "tutorial"))
-        cli, files, missing = generate(args.build, study, current[DOC])
+        cli, programs, files, missing = generate(args.build, study, current[DOC] + current[PROGRAMS_DOC])
     for name in missing:
         print(f"{name}: not built here; its section is kept as it was, unchecked", file=sys.stderr)
     status = 0
-    for doc, text in ((DOC, cli), (FILES_DOC, files)):
+    for doc, text in ((DOC, cli), (PROGRAMS_DOC, programs), (FILES_DOC, files)):
         rel = os.path.relpath(doc, ROOT)
         if args.check:
             if text == current[doc]:
