@@ -148,13 +148,13 @@ def compact(text, heading, seen):
             continue
         named = next((v for k, v in NAMED_SECTIONS.items() if head.startswith(k)), None)
         if head.startswith(STUDY_OPTIONS):
-            seen.setdefault(STUDY_OPTIONS, "\n".join(re.sub(r"(?<=\S) {3,}", "  ", l) for l in lines[1:]))
+            seen.setdefault(STUDY_OPTIONS, "\n".join(dedent(re.sub(r"(?<=\S) {3,}", "  ", l)) for l in lines[1:]))
         if named is not None:
             out.append(named)
             continue
         if head.endswith(":") and not head.startswith(" ") and len(lines) > 3:
             if body in seen:
-                out.append(f"{head}\n  (the same as under `{seen[body]}`)")
+                out.append(f"{head} as under `{seen[body]}`")
                 continue
             seen[body] = heading
         lines = [re.sub(r"(?<=\S) {3,}", "  ", re.sub(r"^ {7,}", "      ", l)) for l in lines
@@ -276,6 +276,12 @@ def old_sections(text):
     return kept
 
 
+def dedent(line):
+    """An entry of a help section (a flag, a parameter) starts the line, its wrapped help four spaces in:
+    the section's heading, ending in a colon, says what the entries are."""
+    return re.sub(r"^ {6}(?=\S)", "    ", re.sub(r"^  (?=\S)", "", line))
+
+
 def usage_only(line, heading):
     """A usage line that says no more than the section's heading: the command takes flags only."""
     return line.strip() == f"Usage: {heading} [OPTIONS]"
@@ -308,7 +314,7 @@ def generate(build, study_dir, current):
                     summary = (summary + f" (built {built})").strip()
             elif lines[0].strip() == summary.strip():
                 lines = lines[1:]
-            lines = [l for l in lines if not usage_only(l, heading)]
+            lines = [dedent(l) for l in lines if not usage_only(l, heading)]
             while lines and not lines[0].strip():
                 lines = lines[1:]
             body.append(f"## {heading}\n\n{summary}\n\n```text\n" + "\n".join(lines) + "\n```\n")
@@ -316,12 +322,11 @@ def generate(build, study_dir, current):
         bodies[name] = "\n".join(body)
     files = [FILES_HEADER]
     if STUDY_OPTIONS in seen:
-        files.append("## Study options (`--options FILE`)\n\nA JSON object of any of these fields, nested as "
-                     "the dots say, for `rcm run`, `rcm setup` and `rcm monitor` (flags override it), and Python's "
-                     "`rcm.StudyOptions`. Each line: the field, what it is (unit; limits) [type, default].\n\n```text\n" + seen[STUDY_OPTIONS] + "\n```\n")
-    legend = ("One line per object: its path, then its fields. A field is a number unless marked: `x[]` an "
-              "array, `x{}` an object with a line of its own, `x[{}]` an array of objects (`x[]` on its line), "
-              "`(text)`, `(true|false)`; `or null` when it may be absent.")
+        files.append("## Study options (`--options FILE`)\n\nAny of these fields, nested as the dots say, for "
+                     "`rcm run`, `rcm setup`, `rcm monitor` and Python's `rcm.StudyOptions`. Each line: the field, "
+                     "what it is (unit; limits) [type, default].\n\n```text\n" + seen[STUDY_OPTIONS] + "\n```\n")
+    legend = ("One line per object: its path, then its fields, numbers unless marked: `x[]` an array, `x{}` "
+              "an object (its own line), `x[{}]` an array of objects, `(text)`, `(true|false)`, `or null`.")
     files.append("## Model file (rcm-torque-model/1)\n\nThe fields of `free_space_model.json` (the default "
                  "`linear` kind); arrays of numbers are `{shape, dtype, data}` ([formats.md](formats.md)). " + legend + "\n\n"
                  + field_block(os.path.join(study_dir, "free_space_model.json")) + "\n")
