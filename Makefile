@@ -15,7 +15,7 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
-.PHONY: deps build test build-sanitize test-sanitize demo bench coverage learning-curve docs-figures soak fuzz fuzz-deps clean
+.PHONY: deps build test build-sanitize test-sanitize demo live-demo bench coverage learning-curve docs-figures docs-cli soak fuzz fuzz-deps clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -50,7 +50,7 @@ test: build
 # (heap, stack and global overflows, use after free and leaks are still caught).
 # UBSan's null, alignment and pointer-overflow checks are off: on Eigen's
 # pointer arithmetic they lengthen the instrumented build most (the compile
-# column of docs/reliability.md's table); a null dereference still faults and
+# column of bench/sanitizer_cost.py's table); a null dereference still faults and
 # ASan reports it with its stack, as it does an access out of bounds.
 # The random-session property test runs one session of two trials instrumented.
 SANITIZE_BUILD ?= build-sanitize
@@ -73,38 +73,51 @@ test-sanitize: build-sanitize
 demo: build
 	$(BUILD)/bin/rcm demo --out demo-out
 
+# Docking to the first estimate on the robot's own interfaces (CRTK over
+# loopback DDS) against the simulated PSM: excitation, baseline, calibration,
+# rcm setup, the live estimate, then a 35 mm step of the incision with the loop
+# closed across processes (docs/howto-procedure.md). About 3 minutes on 2
+# cores; writes live-demo-out/live_demo.json.
+live-demo: build
+	$(PYTHON) bench/live_demo.py --build $(BUILD) --out live-demo-out
+
 # Every Google Benchmark program, the rosbag2 anchors (sqlite3, zstd), the live
 # nodes' end-to-end tests (their per-sample timings), PyTorch beside LibTorch and
-# the scipy cross-check; writes their tables into docs/benchmarks.md.
+# the scipy cross-check; writes their tables into docs/validation-speed.md.
 bench: build
 	$(PYTHON) bench/run_benchmarks.py --build $(BUILD)
 
 # Interval coverage and method errors per friction model, free-space path and
-# length (about 15 minutes on 2 cores); writes its table into docs/estimation.md.
+# length (about 15 minutes on 2 cores); writes its table into docs/validation.md.
 COVERAGE_SEEDS ?= 1,2
 coverage: build
 	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
 
 # The free-space model's held-out torque error and estimate error against the
 # length of teleoperation and excitation data (about 10 minutes on 2 cores);
-# writes its table and figure into docs/dynamics.md. REAL=DIR adds the curve of
+# prints its table (bench/learning_curve.py --doc writes it and its figure into
+# docs/validation-free-space.md). REAL=DIR adds the curve of
 # real recordings (NAME_full.csv / NAME_half.csv pairs).
 learning-curve: build
 	$(PYTHON) bench/learning_curve.py --build $(BUILD) $(if $(REAL),--real $(REAL))
 
-# The figures the README quotes, from runs on this machine, with the date and
-# machine: the demo's table and wall times (README, docs/benchmarks.md), the
-# coverage table (README, docs/estimation.md) and the closed-loop bench
-# (docs/simulator.md, docs/compensation.md). About 30 minutes on 2 cores.
+# The accuracy figures of docs/validation.md, from runs on this machine, with the
+# date and machine: the demo's table (and its wall times, docs/validation-speed.md),
+# the coverage table and the closed-loop bench. About 30 minutes on 2 cores.
 docs-figures: build
 	$(PYTHON) bench/demo_table.py --build $(BUILD)
 	$(PYTHON) bench/closed_loop_report.py --build $(BUILD)
 	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
 
+# docs/cli.md, the command reference, from every program's --help and the files of
+# a quick study (tools/gen_cli_reference.py; the ctest docs_cli_reference checks it).
+docs-cli: build
+	$(PYTHON) tools/gen_cli_reference.py --build $(BUILD)
+
 # The long reliability runs (about 25 minutes on 2 cores): the live stream soak,
 # SOAK_MESSAGES joint-state messages with faults through the live nodes'
 # per-message path, and the estimate's properties on 200 random sessions' trials;
-# writes their tables into docs/reliability.md.
+# writes their tables into docs/validation-reliability.md.
 SOAK_MESSAGES ?= 10000000
 soak: build
 	$(PYTHON) bench/soak_report.py --build $(BUILD) --messages $(SOAK_MESSAGES)
@@ -112,7 +125,7 @@ soak: build
 # libFuzzer on every reader of outside data (docs/reliability.md, "Fuzzing"):
 # a clang build with ASan and UBSan in FUZZ_BUILD, then each target for
 # FUZZ_SECONDS on a scratch corpus seeded from fuzz/corpus (the repository's
-# corpus is never grown). FUZZ_TARGETS="mcap cdr" runs some; FUZZ_DOC=docs/reliability.md
+# corpus is never grown). FUZZ_TARGETS="mcap cdr" runs some; FUZZ_DOC=docs/validation-reliability.md
 # writes the figures table there. Fails when any target finds a bug.
 FUZZ_BUILD ?= build-fuzz
 FUZZ_SECONDS ?= 60

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """How long the CI's work takes from scratch (`.ci/run`: `make test`, then
 `make test-sanitize`), phase by phase, in fresh build directories; writes the
-table into docs/reliability.md between its markers.
+table into docs/validation-reliability.md between its markers.
 
     /usr/bin/python3 bench/ci_timing.py [--work /tmp/rcm-ci-timing]
 
@@ -19,7 +19,7 @@ import time
 from doc_tables import cpu_model, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "reliability.md")
+DOC = os.path.join(ROOT, "docs", "validation-reliability.md")
 BEGIN, END = "<!-- ci-timing:begin -->", "<!-- ci-timing:end -->"
 
 

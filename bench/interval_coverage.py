@@ -9,8 +9,7 @@ the 5 x 3 grid of offsets (D = 10..50 mm, radial [0, 0], [10, 15] and [-12, 8]
 mm), runs `rcm run` with its defaults (joint method, three-step beside it, the
 default free-space model) and once more with the paper's last-hold static step
 on the same fitted model, and writes the table between the coverage markers of
-docs/estimation.md, with the date and machine, and the hysteretic bench's rows
-between the README's coverage-table markers.
+docs/validation.md, with the date and machine.
 
 Run with Debian's Python: /usr/bin/python3 bench/interval_coverage.py --build build
 """
@@ -25,10 +24,8 @@ import tempfile
 from doc_tables import cpu_model, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "estimation.md")
+DOC = os.path.join(ROOT, "docs", "validation.md")
 BEGIN, END = "<!-- coverage:begin -->", "<!-- coverage:end -->"
-README = os.path.join(ROOT, "README.md")
-README_MARKERS = ("<!-- coverage-table:begin -->", "<!-- coverage-table:end -->")
 GRID = {"protocol": {"radial_offsets_m": [[0.0, 0.0], [0.010, 0.015], [-0.012, 0.008]]}}
 
 
@@ -135,25 +132,10 @@ def main():
                      f"{100 * cov[0]:.0f} / {100 * cov[1]:.0f} / {100 * cov[2]:.0f} % | {pair('balanced')} | "
                      f"{pair('last')} | {pair('paper')} |")
     block = "\n".join(lines)
-    # The README's summary: the hysteretic bench (the real arm's friction).
-    summary = ["| free space | joint mean e, D > 20 / <= 20 mm | joint 95 % intervals covering x / y / D | "
-               "three-step, two holds balanced | three-step, the paper's one hold |", "|---|---|---|---|---|"]
-    for fr, path, mins, n, e, cov in rows:
-        if fr != "hysteretic":
-            continue
-        pair = lambda k: f"{1e3 * e[k][0]:.2f} / {1e3 * e[k][1]:.2f} mm"
-        summary.append(f"| {mins:g} min {path} | {pair('joint')} | "
-                       f"{100 * cov[0]:.0f} / {100 * cov[1]:.0f} / {100 * cov[2]:.0f} % | {pair('balanced')} | "
-                       f"{pair('paper')} |")
-    summary += ["", f"{rows[0][3] if rows else 0} trials per row (seeds {args.seeds}, "
-                f"{datetime.date.today().isoformat()}, `make coverage`)."]
     print(block)
     if not args.no_doc:
         write_block(DOC, BEGIN, END, block)
         print(f"wrote {DOC}", file=sys.stderr)
-        if any(r[0] == "hysteretic" for r in rows):
-            write_block(README, *README_MARKERS, "\n".join(summary))
-            print(f"wrote {README}", file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ method's bootstrap is turned off there: it sets the intervals, not the
 estimate, and is most of the run's time.
 
 The table (mean over the seeds and their range) and a figure go between the
-learning-curve markers of docs/dynamics.md and into
+learning-curve markers of docs/validation-free-space.md (with --doc) and into
 docs/figures/learning_curve.png, with the date and machine (a run of network
 kinds alone: the table only, between the learning-curve-networks markers); `--json FILE` keeps
 every point. `--real DIR` adds a torque-only curve on real recordings: DIR holds
@@ -49,7 +49,7 @@ import time
 from doc_tables import cpu_model, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "dynamics.md")
+DOC = os.path.join(ROOT, "docs", "validation-free-space.md")
 FIGURE = os.path.join(ROOT, "docs", "figures", "learning_curve.png")
 # The linear curve's block; a run of network kinds alone (their fits take
 # minutes each, so fewer seeds and lengths) goes to its own block.
@@ -337,7 +337,9 @@ def main():
     ap.add_argument("--quick", action="store_true", help="the first seed, 0.5-2 min, torque only, no docs")
     ap.add_argument("--json", help="write every point to this file")
     ap.add_argument("--keep", help="keep the recordings and models in this directory")
-    ap.add_argument("--no-doc", action="store_true", help="print the table instead of writing docs/")
+    ap.add_argument("--no-doc", action="store_true", help="print the table only (the default; kept for scripts)")
+    ap.add_argument("--doc", action="store_true",
+                    help="also write the table and figure into docs/validation-free-space.md")
     args = ap.parse_args()
     rcm = args.rcm or os.path.join(args.build, "bin", "rcm")
     seeds = [int(s) for s in args.seeds.split(",")][:1 if args.quick else None]
@@ -385,7 +387,7 @@ def main():
                            "machine": f"{os.cpu_count()} cores of {cpu_model()}", "wall_s": wall,
                            "points": points, "summary": summary, "ratio": ratio, "largest_rise_percent": rise,
                            "real": real}, f, indent=1)
-        if not (args.no_doc or args.quick):
+        if args.doc and not (args.no_doc or args.quick):
             if "linear" in args.models:
                 figure(summary, "linear", args.data, FIGURE, work)
                 block += ("\n\n![held-out NRMSE and mean e against the length of free-space data, linear model]"

@@ -11,7 +11,7 @@
 for a few seeds. Robot time is the recordings' own duration as `rcm setup`
 counts it; computation is the wall time of `rcm setup` (fit, learning curve,
 tissue model, checks) on this machine. The table goes between the markers of
-docs/setup.md with the date and machine:
+docs/validation.md with the date and machine:
 
     /usr/bin/python3 bench/ready_time.py [--build build] [--seeds 1,2,3] [--no-doc]
 """
@@ -29,7 +29,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from doc_tables import cpu_model, run, write_block  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "setup.md")
+DOC = os.path.join(ROOT, "docs", "validation.md")
 BEGIN, END = "<!-- ready-time:begin -->", "<!-- ready-time:end -->"
 
 
@@ -100,7 +100,7 @@ def main():
     ap.add_argument("--trial-s", type=float, default=30.0)
     ap.add_argument("--keep", help="keep the sessions and reports in this directory")
     ap.add_argument("--json", help="write every figure to this file")
-    ap.add_argument("--no-doc", action="store_true", help="print the table instead of writing docs/setup.md")
+    ap.add_argument("--no-doc", action="store_true", help="print the table instead of writing docs/validation.md")
     args = ap.parse_args()
     rcm = os.path.join(args.build, "bin", "rcm")
     work = args.keep or tempfile.mkdtemp(prefix="rcm_ready_")

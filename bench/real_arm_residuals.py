@@ -9,11 +9,11 @@ pitch, insertion) is fitted with `rcm dynamics fit` and scored with
    error the residual causes at D = 30 mm and theta = 20 deg (J_D from
    `rcm kinematics`), and the share of test samples outside the model's
    training regime;
-2. explains the linear models' test residuals: the share (R^2) that each group
+2. with --explain, explains the linear models' test residuals: the share (R^2) that each group
    of terms absorbs when regressed on them after the fact (rcm's own
    regressors, through its Python module), their RMS by speed tercile and their
    mean by direction of motion;
-3. draws the mean residual against velocity per joint;
+3. with --explain, draws the mean residual against velocity per joint;
 4. with --payload-split, re-identifies a payload change (`rcm dynamics
    payload`) on the first seconds of a recording with the new payload and
    scores the result on another one;
@@ -27,8 +27,9 @@ pitch, insertion) is fitted with `rcm dynamics fit` and scored with
 Run with Debian's Python (numpy, gnuplot) and the built module:
   PYTHONPATH=build/python /usr/bin/python3 bench/real_arm_residuals.py --build build \\
       --split "LABEL=DIR/fast.csv:DIR/slow.csv" ... [--models "linear|linear, generic|hybrid"]
-The tables go between the real-arm markers of docs/dynamics.md, with the date
-and machine, and the figure to docs/figures/real_arm_residual_velocity.png.
+The tables go between the real-arm markers of docs/validation-free-space.md,
+with the date and machine; with --explain, items 2 and 3 too, and the figure
+to docs/figures/real_arm_residual_velocity.png.
 The recordings stay where they are; nothing of them is copied.
 """
 import argparse
@@ -48,7 +49,7 @@ from recording_arrays import load, zero_phase_acceleration
 import rcm  # build/python on PYTHONPATH
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "dynamics.md")
+DOC = os.path.join(ROOT, "docs", "validation-free-space.md")
 FIGURE = os.path.join(ROOT, "docs", "figures", "real_arm_residual_velocity.png")
 BEGIN, END = "<!-- real-arm:begin -->", "<!-- real-arm:end -->"
 PAYLOAD_BEGIN, PAYLOAD_END = "<!-- real-arm-payload:begin -->", "<!-- real-arm-payload:end -->"
@@ -144,6 +145,29 @@ MODELS = {"linear": [], "linear, no insertion stiffness": ["--no-insertion-stiff
           "linear, generic": ["--generic-structure"], "linear, streamed": [],
           "linear, causal, streamed": ["--no-live-zero-phase"],
           "hybrid": [], "lstm": []}
+# What each model of the torque table is, in its header (only the models run).
+MODEL_NOTES = {"linear": "the default fit, inertia tied by the bodies of a remote-centre arm, Coulomb levels "
+                         "that vary along the travel where they predict better, a stiffness along the insertion",
+               "linear, no insertion stiffness": "`--no-insertion-stiffness`",
+               "linear, constant Coulomb": "`--constant-coulomb`, one Coulomb level per joint",
+               "linear, free inertia": "`--free-inertia`, the 19 inertia coefficients free",
+               "linear, generic": "`--generic-structure`, the free potential and constant armature",
+               "linear, streamed": "the default fit scored by `rcm dynamics eval --streaming`, compute_step sample "
+                                   "by sample, what the live robot gets (its zero-phase qddot live, the torque "
+                                   "trailing by the half window)",
+               "linear, causal, streamed": "`--no-live-zero-phase` scored the same way, qddot causal, no delay"}
+
+
+def describe_torque_table(kinds, seed, max_minutes):
+    """The header of the torque error table, naming the models that were run."""
+    notes = [f"`{k}`: {MODEL_NOTES[k]}" for k in kinds if k in MODEL_NOTES]
+    if any(k in ("hybrid", "lstm") for k in kinds):
+        notes.append(f"networks with `--max-minutes {max_minutes}`")
+    return (f"**Torque error** (`rcm dynamics fit --model M --seed {seed}` on the first, `rcm dynamics eval` on the "
+            "second; " + "; ".join(notes) + "), and the RMS incision force error the residual causes at "
+            "D = 30 mm, theta = 20 deg (yaw 20 deg from q0 = [0, 0, 0.12 m]):\n")
+
+
 # Scored as the live robot gets it: compute_step sample by sample (the default
 # fit's zero-phase qddot, its torque trailing by the half window; or causal).
 EVAL_FLAGS = {"linear, streamed": ["--streaming"], "linear, causal, streamed": ["--streaming"]}
@@ -314,7 +338,11 @@ def main():
                          "potential), hybrid, lstm")
     ap.add_argument("--max-minutes", default="3", help="wall-clock budget of each network fit")
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--no-doc", action="store_true", help="print the tables instead of writing docs/dynamics.md")
+    ap.add_argument("--no-doc", action="store_true",
+                    help="print the tables instead of writing docs/validation-free-space.md")
+    ap.add_argument("--explain", action="store_true",
+                    help="add what the linear models' residuals are made of (R^2 per group of terms, the Coulomb "
+                         "level along the travel) and the figure of the mean residual against velocity")
     ap.add_argument("--payload-split", action="append", default=[],
                     help="LABEL=TRAIN.csv:REFIT.csv:TEST.csv: the linear model fitted on TRAIN, its payload "
                          "re-identified on the first --refit-seconds of REFIT, scored on TEST")
@@ -350,18 +378,7 @@ def main():
                "Each split fits on its first recording and scores on its second.\n")
 
     # 1. rcm's models.
-    out.append(f"**Torque error** (`rcm dynamics fit --model M --seed {args.seed}` on the first, `rcm dynamics eval` on the "
-               "second; `linear`: the default fit, inertia tied by the bodies of a remote-centre arm, Coulomb levels "
-               "that vary along the travel where they predict better, a stiffness along the insertion; `linear, no insertion "
-               "stiffness`: `--no-insertion-stiffness`; `linear, constant Coulomb`: "
-               "`--constant-coulomb`, one Coulomb level per joint; `linear, free "
-               "inertia`: `--free-inertia`, the 19 inertia coefficients free; `linear, generic`: `--generic-structure`, "
-               "the free potential and constant armature; `linear, streamed`: the default fit scored by "
-               "`rcm dynamics eval --streaming`, compute_step sample by sample, what the live robot gets (its "
-               "zero-phase qddot live, the torque trailing by the half window); `linear, causal, streamed`: "
-               "`--no-live-zero-phase` scored the same way, qddot causal, no delay; networks "
-               f"with `--max-minutes {args.max_minutes}`), and the RMS incision force error the residual causes at "
-               "D = 30 mm, theta = 20 deg (yaw 20 deg from q0 = [0, 0, 0.12 m]):\n")
+    out.append(describe_torque_table(kinds, args.seed, args.max_minutes))
     out.append("| split | model | RMSE yaw / pitch (N m) / insertion (N) | NRMSE % | force error (N) | test samples out of regime |")
     out.append("|---|---|---|---|---|---|")
     residuals = {}
@@ -404,7 +421,7 @@ def main():
             out.append(f"| {label} | " + " | ".join(f"{x:.2f}" for x in ratio) +
                        f" | {int((ratio <= 0.5).sum())} of 3 |")
 
-    if profiles:
+    if profiles and args.explain:
         out.append("\n**The Coulomb level the default fit kept along each joint's travel** (`linear`: the Dahl "
                    "state's coefficient at each knot, from the low to the high end of the range it was fitted on; "
                    "a joint without a row kept a constant level):\n")
@@ -425,39 +442,42 @@ def main():
             data[path] = features(load(path))
         return data[path]
 
-    # 2. What the linear models' test residuals are made of.
+    # 2. What the linear models' test residuals are made of (--explain).
     explained_kinds = [k for k in ("linear, generic", "linear, constant Coulomb", "linear") if k in kinds]
-    names = list(groups(get(splits[0][2])).keys())
-    out.append("\n**What the residual is made of.** R^2: the share of each joint's test residual (its mean square) that "
-               "each group of terms absorbs when regressed on it after the fact, an upper bound on what adding the "
-               "group could gain (the groups overlap; 0: nothing). Speed terciles: RMS of the residual over the slowest, middle and fastest "
-               "third of the samples by |qd|. Direction: mean residual while the joint moves up minus while it moves "
-               "down. Free potential and armature: the structure `--generic-structure` fits; rigid-body inertia: "
-               "rcm's 19 Lagrange terms (both regressors from rcm's Python module); Dahl states at 0.3 % and 3 % of "
-               "each joint's range; Coulomb along the travel: the first Dahl state times six piecewise-linear knots "
-               "over the joint's range.\n")
-    out.append("| split | model | joint | RMS | " + " | ".join(f"R^2 {n}" for n in names) +
-               " | RMS by speed tercile | direction |")
-    out.append("|---|---|---|---|" + "---|" * len(names) + "---|---|")
-    for label, train, test in splits:
-        d = get(test)
-        for kind in explained_kinds:
-            r = residuals[(label, kind)]
-            r2 = {n: explained(r, Y) for n, Y in groups(d).items()}
-            for j in range(3):
-                speed = np.abs(d["qd"][:, j])
-                edges = np.quantile(speed, [1 / 3, 2 / 3])
-                bins = [speed <= edges[0], (speed > edges[0]) & (speed <= edges[1]), speed > edges[1]]
-                terc = " / ".join(f"{np.sqrt((r[b, j] ** 2).mean()):.3f}" for b in bins)
-                up, down = d["qd"][:, j] > 0, d["qd"][:, j] < 0
-                direction = r[up, j].mean() - r[down, j].mean()
-                out.append(f"| {label} | {kind} | {JOINTS[j]} | {np.sqrt((r[:, j] ** 2).mean()):.3f} {UNITS[j]} | " +
-                           " | ".join(f"{r2[n][j]:.2f}" for n in names) + f" | {terc} | {direction:+.3f} |")
+    if not args.explain:
+        explained_kinds = []
+    names = list(groups(get(splits[0][2])).keys()) if explained_kinds else []
+    if explained_kinds:
+        out.append("\n**What the residual is made of.** R^2: the share of each joint's test residual (its mean square) that "
+                   "each group of terms absorbs when regressed on it after the fact, an upper bound on what adding the "
+                   "group could gain (the groups overlap; 0: nothing). Speed terciles: RMS of the residual over the slowest, middle and fastest "
+                   "third of the samples by |qd|. Direction: mean residual while the joint moves up minus while it moves "
+                   "down. Free potential and armature: the structure `--generic-structure` fits; rigid-body inertia: "
+                   "rcm's 19 Lagrange terms (both regressors from rcm's Python module); Dahl states at 0.3 % and 3 % of "
+                   "each joint's range; Coulomb along the travel: the first Dahl state times six piecewise-linear knots "
+                   "over the joint's range.\n")
+        out.append("| split | model | joint | RMS | " + " | ".join(f"R^2 {n}" for n in names) +
+                   " | RMS by speed tercile | direction |")
+        out.append("|---|---|---|---|" + "---|" * len(names) + "---|---|")
+        for label, train, test in splits:
+            d = get(test)
+            for kind in explained_kinds:
+                r = residuals[(label, kind)]
+                r2 = {n: explained(r, Y) for n, Y in groups(d).items()}
+                for j in range(3):
+                    speed = np.abs(d["qd"][:, j])
+                    edges = np.quantile(speed, [1 / 3, 2 / 3])
+                    bins = [speed <= edges[0], (speed > edges[0]) & (speed <= edges[1]), speed > edges[1]]
+                    terc = " / ".join(f"{np.sqrt((r[b, j] ** 2).mean()):.3f}" for b in bins)
+                    up, down = d["qd"][:, j] > 0, d["qd"][:, j] < 0
+                    direction = r[up, j].mean() - r[down, j].mean()
+                    out.append(f"| {label} | {kind} | {JOINTS[j]} | {np.sqrt((r[:, j] ** 2).mean()):.3f} {UNITS[j]} | " +
+                               " | ".join(f"{r2[n][j]:.2f}" for n in names) + f" | {terc} | {direction:+.3f} |")
 
     # 3. Figure: mean residual against velocity, per model, on the first two splits.
     with tempfile.TemporaryDirectory() as work:
         plots = []
-        for k, (label, train, test) in enumerate(splits[:2]):
+        for k, (label, train, test) in enumerate(splits[:2] if explained_kinds else []):
             d = get(test)
             for kind in explained_kinds:
                 r = residuals[(label, kind)]

@@ -16,7 +16,7 @@ beyond what the fit found, in kg m^2 (yaw, pitch) and kg (insertion).
 Beside them, the real Classic PSM1 recordings' figures for the same protocol
 (--real DIR: psm1_105g_insertion_full.csv, ..._half.csv and the 205 g pair,
 fitted and scored the same way; they stay where they are). The table goes
-between the speed-effect markers of docs/simulator.md, with the date and
+with --doc, between the speed-effect markers of docs/validation-free-space.md, with the date and
 machine.
 
   /usr/bin/python3 bench/sim_speed_effect.py --build build [--seeds 1,2,3] [--arms cable,rigid] [--real DIR] [--no-doc]
@@ -35,7 +35,7 @@ from doc_tables import cpu_model, run, write_block
 from recording_arrays import load, zero_phase_acceleration
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOCS = [os.path.join(ROOT, "docs", "simulator.md")]
+DOCS = [os.path.join(ROOT, "docs", "validation-free-space.md")]
 BEGIN, END = "<!-- speed-effect:begin -->", "<!-- speed-effect:end -->"
 JOINTS = ("yaw", "pitch", "insertion")
 # The real Classic PSM1 recordings of the same protocol (one excitation path,
@@ -113,7 +113,8 @@ def main():
     ap.add_argument("--config", help="a JSON file passed to every rcm simulate (--config)")
     ap.add_argument("--keep", help="keep the recordings and models in this directory")
     ap.add_argument("--real", help="directory of the real PSM1 recordings (REAL above); without it, no real rows")
-    ap.add_argument("--no-doc", action="store_true", help="print the table instead of writing docs/")
+    ap.add_argument("--no-doc", action="store_true", help="print the table only (the default; kept for scripts)")
+    ap.add_argument("--doc", action="store_true", help="also write the table into docs/validation-free-space.md")
     args = ap.parse_args()
     rcm = os.path.join(args.build, "bin", "rcm")
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -165,7 +166,7 @@ def main():
                          f"{fmt3(ratio, 1)} | {' / '.join(f'{v:.0%}' for v in x['hf'])} | "
                          f"{' / '.join(f'{v:.0%}' for v in x['qdd_r2'])} | {fmt3(x['qdd_coef'])} |")
     block = "\n".join(lines)
-    if args.no_doc:
+    if args.no_doc or not args.doc:
         print(block)
         return
     for doc in DOCS:

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""`make soak`: the long reliability runs, and their figures in docs/reliability.md.
+"""`make soak`: the long reliability runs, and their figures in docs/validation-reliability.md.
 
 1. The live stream soak: simulates a quick session and fits a linear free-space
    model on it (as the live tests do), then runs tests/soak_live.cpp (ten million
@@ -21,7 +21,7 @@ import sys
 from doc_tables import cpu_model, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "reliability.md")
+DOC = os.path.join(ROOT, "docs", "validation-reliability.md")
 BEGIN, END = "<!-- soak:begin -->", "<!-- soak:end -->"
 PROPERTY_BEGIN, PROPERTY_END = "<!-- properties:begin -->", "<!-- properties:end -->"
 

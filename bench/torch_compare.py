@@ -2,14 +2,14 @@
 """Side-by-side LSTM comparison: PyTorch (Debian python3-torch) vs rcm's LibTorch
 training and Eigen streaming kernel, in one run. Run with /usr/bin/python3:
 
-    /usr/bin/python3 bench/torch_compare.py BUILD_DIR [--write docs/benchmarks.md]
+    /usr/bin/python3 bench/torch_compare.py BUILD_DIR [--write docs/validation-speed.md]
 
 Same shapes as bench/bench_torch_lstm.cpp: 12 inputs (6 joints), 1 x 128 (the
 default) and 2 x 128 LSTM, head 64 (tanh), 6 outputs; streaming = one sample with
 state carried, one thread; training = one Adam update of the 1 x 128 network on
 32 streams x 100 samples, 2 threads. Also writes
 BUILD_DIR/pytorch_lstm.pt, a TorchScript module in the layout that
-`rcm dynamics import` reads (docs/dynamics.md).
+`rcm dynamics import` reads (docs/methods.md).
 """
 import json
 import os

@@ -3,7 +3,7 @@
 # ATLAS). Linked ahead of libblas.so.3 (the OpenBLAS alternative), ATLAS's
 # single-threaded sgemm_ then won the symbol lookup for LibTorch too: training
 # ran 2.6x slower than with OpenBLAS, and --threads 2 was no faster than 1
-# (docs/benchmarks.md, "BLAS"). The generic libblas/liblapack provide every BLAS
+# (README.md, "Dependencies"). The generic libblas/liblapack provide every BLAS
 # and LAPACK symbol Ceres and SuiteSparse call. Set BLA_VENDOR to Generic before
 # finding Ceres, and call this after.
 function(rcm_remove_atlas_from_ceres)

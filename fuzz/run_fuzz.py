@@ -134,7 +134,7 @@ def main():
     ap.add_argument("--seconds", type=int, default=60, help="per target")
     ap.add_argument("--scratch", default=os.path.join("/tmp", f"rcm-fuzz-{os.getuid()}"),
                     help="scratch corpora, logs and crash inputs (outside the repository)")
-    ap.add_argument("--doc", help="Markdown file whose fuzz table to replace (docs/reliability.md)")
+    ap.add_argument("--doc", help="Markdown file whose fuzz table to replace (docs/validation-reliability.md)")
     ap.add_argument("targets", nargs="*", help="targets to run (default: every fuzz_* in BUILD/bin)")
     ap.add_argument("--libfuzzer", nargs=argparse.REMAINDER, default=[], help="extra libFuzzer flags")
     args = ap.parse_args()

@@ -64,8 +64,8 @@ TEST(Correction, HoldsWithoutOnsetWhileUnsureAndWithinTolerance) {
   EXPECT_EQ(c.action, CorrectionAction::hold);
   EXPECT_EQ(c.reason, HoldReason::not_confident);
   EXPECT_EQ(c.distance_low_m, 0.0);
-  // Sure, but small: 1.5 mm.
-  c = corrector.compute_correction(ws, make_estimate(0.02, Eigen::Vector3d(0.0, 0.0, 0.0015), 0.0002));
+  // Sure, but small: 1 mm.
+  c = corrector.compute_correction(ws, make_estimate(0.02, Eigen::Vector3d(0.0, 0.0, 0.001), 0.0002));
   EXPECT_EQ(c.action, CorrectionAction::hold);
   EXPECT_EQ(c.reason, HoldReason::within_tolerance);
   // A non-finite estimate holds too.
@@ -196,15 +196,15 @@ TEST(Correction, RepositionsBeyondTheLimitAndCountsTheShiftInEffect) {
 
 TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
   const RcmCorrector corrector(make_frame(), {});
-  // An estimate that flickers across the 2 mm tolerance changes the advice at
-  // most once: a wide interval (2.1 mm +- 2.0 mm, wider than the move) holds
-  // throughout; a narrow one (+- 0.2 mm) acts from the first 2.1 mm on and
+  // An estimate that flickers across the 1.5 mm tolerance changes the advice at
+  // most once: a wide interval (1.6 mm +- 2.0 mm, wider than the move) holds
+  // throughout; a narrow one (+- 0.2 mm) acts from the first 1.6 mm on and
   // keeps acting, the estimate never falling under half the tolerance.
   for (const double sd : {0.001, 0.0001}) {
     auto ws = corrector.create_workspace();
     int changes = 0;
     for (int k = 0; k < 1000; ++k) {
-      const double d = (k % 2 ? 0.0021 : 0.0019);
+      const double d = (k % 2 ? 0.0016 : 0.0014);
       const auto& c = corrector.compute_correction(ws, make_estimate(k * 0.01, Eigen::Vector3d(d, 0, 0), sd));
       if (k == 0) EXPECT_EQ(c.reason, HoldReason::not_confident);  // neither sure within nor beyond
       if (k == 1) EXPECT_EQ(c.action, sd > 0.0005 ? CorrectionAction::hold : CorrectionAction::compensate);
@@ -213,17 +213,17 @@ TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
     EXPECT_EQ(changes, sd > 0.0005 ? 0 : 1) << "sd " << sd;
   }
   // Out of tolerance, the lower bound under it, the interval narrower than the
-  // move (2.5 mm, 1.5 to 3.5 mm): a shift, by no more than the lower bound.
+  // move (2.0 mm, 1.0 to 3.0 mm): a shift, by no more than the lower bound.
   {
     CorrectionOptions fast;
     fast.max_rate_m_per_s = 1.0;  // the rate limit out of the way
     const RcmCorrector quick(make_frame(), fast);
     auto ws = quick.create_workspace();
     const double sd = 0.0005;
-    const auto& c = quick.compute_correction(ws, make_estimate(0, Eigen::Vector3d(0.0025, 0, 0), sd));
+    const auto& c = quick.compute_correction(ws, make_estimate(0, Eigen::Vector3d(0.002, 0, 0), sd));
     EXPECT_EQ(c.action, CorrectionAction::compensate);
-    const auto& next = quick.compute_correction(ws, make_estimate(0.1, Eigen::Vector3d(0.0025, 0, 0), sd));
-    EXPECT_NEAR(next.step_base.norm(), 0.0025 - 1.96 * sd, 1e-12) << "the step is capped by the lower bound";
+    const auto& next = quick.compute_correction(ws, make_estimate(0.1, Eigen::Vector3d(0.002, 0, 0), sd));
+    EXPECT_NEAR(next.step_base.norm(), 0.002 - 1.96 * sd, 1e-12) << "the step is capped by the lower bound";
     // An interval wider than the move holds, its lower bound past the
     // tolerance or not (a restarted estimate: 43 mm, 3.8 to 82 mm).
     auto ws2 = corrector.create_workspace();
@@ -249,13 +249,14 @@ TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
     EXPECT_EQ(c.reason, HoldReason::not_confident);
     EXPECT_TRUE(c.step_base.isZero());
   }
-  // Sure within (upper bound 1.7 mm); a wider interval (upper bound 3 mm) keeps it so, 4.2 mm does not.
+  // Sure within (upper bound 1.3 mm); a wider interval (upper bound 2.7 mm,
+  // under twice the tolerance) keeps it so, 3.8 mm does not.
   auto ws3 = corrector.create_workspace();
-  EXPECT_EQ(corrector.compute_correction(ws3, make_estimate(0, Eigen::Vector3d(0.0015, 0, 0), 0.0001)).reason,
+  EXPECT_EQ(corrector.compute_correction(ws3, make_estimate(0, Eigen::Vector3d(0.0011, 0, 0), 0.0001)).reason,
             HoldReason::within_tolerance);
-  EXPECT_EQ(corrector.compute_correction(ws3, make_estimate(0.01, Eigen::Vector3d(0.0015, 0, 0), 0.0008)).reason,
+  EXPECT_EQ(corrector.compute_correction(ws3, make_estimate(0.01, Eigen::Vector3d(0.0011, 0, 0), 0.0008)).reason,
             HoldReason::within_tolerance);
-  EXPECT_EQ(corrector.compute_correction(ws3, make_estimate(0.02, Eigen::Vector3d(0.0015, 0, 0), 0.0014)).reason,
+  EXPECT_EQ(corrector.compute_correction(ws3, make_estimate(0.02, Eigen::Vector3d(0.0011, 0, 0), 0.0014)).reason,
             HoldReason::not_confident);
   // Once acting, it keeps acting until the estimate falls under half the tolerance.
   auto ws2 = corrector.create_workspace();
@@ -263,7 +264,7 @@ TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
             CorrectionAction::compensate);
   EXPECT_EQ(corrector.compute_correction(ws2, make_estimate(0.01, Eigen::Vector3d(0.0015, 0, 0), 0.0001)).action,
             CorrectionAction::compensate);
-  const auto& done = corrector.compute_correction(ws2, make_estimate(0.02, Eigen::Vector3d(0.0009, 0, 0), 0.0001));
+  const auto& done = corrector.compute_correction(ws2, make_estimate(0.02, Eigen::Vector3d(0.0006, 0, 0), 0.0001));
   EXPECT_EQ(done.action, CorrectionAction::hold);
   EXPECT_EQ(done.reason, HoldReason::within_tolerance);
 }
@@ -388,11 +389,16 @@ TEST(CorrectionLoop, ClosesTheLoopOnTheJointModelWithoutAWrongMove) {
       applied = c.applied_base;  // the arm carries the step out
     }
     const Eigen::Vector3d remaining = docked - R.transpose() * applied;
-    EXPECT_LT(remaining.norm(), 0.002) << docked.transpose() << " -> " << remaining.transpose();
+    // Within the default tolerance, where the corrector holds: sure of it, or
+    // with a 95 % upper bound still over it (the release threshold is half the
+    // tolerance, under an interval of about +-0.7 mm here), never acting again.
+    EXPECT_LT(remaining.norm(), loop.corrector().options().tolerance_m) << docked.transpose() << " -> " << remaining.transpose();
     EXPECT_EQ(wrong_moves, 0) << docked.transpose();
     EXPECT_GT(compensating, 0);
     EXPECT_EQ(ws.corrector.output.action, CorrectionAction::hold) << docked.transpose();
-    EXPECT_EQ(ws.corrector.output.reason, HoldReason::within_tolerance) << docked.transpose();
+    EXPECT_TRUE(ws.corrector.output.reason == HoldReason::within_tolerance ||
+                ws.corrector.output.reason == HoldReason::not_confident)
+        << docked.transpose();
     // The estimate follows the RCM: what remains, not the docked offset.
     EXPECT_LT((rcm::get_online_output(ws.pipeline.estimator).misalignment_m - remaining).norm(), 0.001);
   }

@@ -144,3 +144,53 @@ TEST(Rosbag2Cli, SessionTopicsAndFlagsOverride) {
   write_text(manifest, base + R"(, "topics": {"joints": ""}})");
   expect_error([&] { rcm::load_session(manifest); }, {"topics.joints", "empty topic name"});
 }
+
+// A CSV recording to a bag and back: the same samples, the force on its own
+// topic, the dVRK's joint names; an output it cannot write is refused whole.
+TEST(Rosbag2Cli, ConvertWritesABagOfARecording) {
+  TempDir dir;
+  rcm::Recording rec;
+  const int T = 50;
+  rec.source = "sines";
+  rec.time = Eigen::VectorXd::LinSpaced(T, 0.0, (T - 1) * 0.005);
+  rec.position.resize(T, 3);
+  rec.velocity.resize(T, 3);
+  rec.effort.resize(T, 3);
+  rec.force = Eigen::MatrixXd(T, 3);
+  for (int k = 0; k < T; ++k)
+    for (int j = 0; j < 3; ++j) {
+      rec.position(k, j) = 0.1 * std::sin(0.3 * k + j);
+      rec.velocity(k, j) = 0.03 * std::cos(0.3 * k + j);
+      rec.effort(k, j) = 0.5 * std::sin(0.2 * k - j);
+      (*rec.force)(k, j) = 2.0 * std::cos(0.1 * k + j);
+    }
+  const fs::path csv = dir.path() / "rec.csv";
+  rcm::save_recording(csv, rec);
+  for (const char* ext : {".mcap", ".db3"}) {
+    const fs::path bag = dir.path() / (std::string("rec") + ext);
+    const CliRun convert = run_cli("convert " + csv.string() + " " + bag.string());
+    ASSERT_EQ(convert.status, 0) << convert.out;
+    EXPECT_NE(convert.out.find("50 JointState messages, and the force"), std::string::npos) << convert.out;
+    rcm::TopicReadOptions read;
+    read.force_topic = "/PSM1/body/measured_cf";
+    rcm::Rosbag2ReadInfo info;
+    const rcm::Recording back = rcm::load_rosbag2_recording(bag, read, &info);
+    EXPECT_EQ(info.joint_names, (std::vector<std::string>{"outer_yaw", "outer_pitch", "outer_insertion"}));
+    ASSERT_EQ(back.num_samples(), rec.num_samples());
+    EXPECT_LT((back.time - rec.time).cwiseAbs().maxCoeff(), 1e-9);
+    EXPECT_EQ(back.position, rec.position);
+    EXPECT_EQ(back.effort, rec.effort);
+    ASSERT_TRUE(back.has_force());
+    EXPECT_LT((*back.force - *rec.force).cwiseAbs().maxCoeff(), 1e-12);
+  }
+  const CliRun text = run_cli("convert " + csv.string() + " " + (dir.path() / "rec.txt").string());
+  EXPECT_EQ(text.status, 2) << text.out;
+  EXPECT_NE(text.out.find("a CSV recording converts to a bag: name the output .mcap or .db3"), std::string::npos)
+      << text.out;
+  // A stamp that does not fit builtin_interfaces/Time: located, nothing written.
+  const CliRun late = run_cli("convert " + csv.string() + " " + (dir.path() / "late.mcap").string() +
+                              " --time-origin-ns 9000000000000000000");
+  EXPECT_EQ(late.status, 2) << late.out;
+  EXPECT_NE(late.out.find("does not fit builtin_interfaces/Time"), std::string::npos) << late.out;
+  EXPECT_FALSE(fs::exists(dir.path() / "late.mcap"));
+}

@@ -249,9 +249,23 @@ TEST(Rosbag2RoundTrip, WriterRejectsWhatItCannotWrite) {
   o = {};
   o.mcap_compression = "brotli";
   EXPECT_THROW(rcm::test::write_rosbag2(dir.path() / "x.mcap", r, o), std::invalid_argument);
+  // What the recording itself cannot carry is the user's input: located.
   rcm::Recording dense = r;
   dense.time[1] = dense.time[0] + 1e-10;  // two samples on the same nanosecond
-  EXPECT_THROW(rcm::test::write_rosbag2(dir.path() / "y.mcap", dense), std::invalid_argument);
+  try {
+    rcm::save_rosbag2_recording(dir.path() / "y.mcap", dense);
+    ADD_FAILURE() << "two samples on one nanosecond were written";
+  } catch (const rcm::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("sample 1: time closer than 1 ns"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "y.mcap"));
+  // A bag directory is written whole, never over files it did not write.
+  std::filesystem::create_directories(dir.path() / "full");
+  std::ofstream(dir.path() / "full" / "notes.txt") << "mine";
+  EXPECT_THROW(rcm::save_rosbag2_recording(dir.path() / "full", r), rcm::InputError);
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / "full" / "notes.txt"));
+  for (const auto& e : std::filesystem::directory_iterator(dir.path()))
+    EXPECT_NE(e.path().filename().string().front(), '.') << "a temporary was left: " << e.path();
 }
 
 namespace {

@@ -32,7 +32,7 @@ SCRIPT = os.path.join(ROOT, "bench", "learning_curve.py")
 # move yaw's and pitch's held-out error by up to about a fifth from one length
 # of teleoperation to the next on a seed, the insertion's (which sits on the
 # effort sensor's noise) by well under a per cent: the "Largest rise" line of
-# docs/dynamics.md, "Learning curves", measured over three seeds. 10 % is far
+# docs/validation-free-space.md, measured over three seeds. 10 % is far
 # above what the insertion shows; yaw and pitch need 25 % to stay above their
 # own noise. A rise beyond them is what a fit that loses data, or a truncation
 # that feeds it the wrong rows, produces.

@@ -303,7 +303,7 @@ TEST(ClosedLoopSafety, AnArmAtRestHolds) {
 // estimator's filters, the correction acts within seconds and the force on the
 // body wall falls below 2 N; without the test the settled filter follows by its
 // random walk and the force stays up for tens of seconds. What remains is
-// within the corrector's tolerance (2 mm), whose force stays under 2 N. The
+// within the corrector's tolerance (1.5 mm), whose force stays under 2 N. The
 // bench's 10 mm step, and the large step (D = 30 mm, 10 and 15 mm across:
 // 35 mm, beyond the default software limit, on an arm whose software RCM may
 // move 50 mm at 20 mm/s).

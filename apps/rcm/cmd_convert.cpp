@@ -1,7 +1,8 @@
 // rcm convert: a bag's joint-state topic (and optionally a force topic) to the
-// rcm CSV layout, validated as every recording is (docs/ros.md): a rosbag2
+// rcm CSV layout, validated as every recording is (docs/formats.md): a rosbag2
 // recording always, a ROS 1 bag when built with ROS. Every command also reads
-// bags directly; convert makes a file other tools read.
+// bags directly; convert makes a file other tools read. The other way, any
+// recording to a rosbag2 bag (.mcap, .db3), for ROS 2's own tools.
 
 #include <fmt/format.h>
 
@@ -13,6 +14,7 @@
 #include "message_cli.hpp"
 #include "rcm/io/recording.hpp"
 #include "rcm/io/rosbag2.hpp"
+#include "rcm/io/rosbag2_writer.hpp"
 #if RCM_HAVE_ROS
 #include "rcm/ros/bag_reader.hpp"
 #endif
@@ -23,7 +25,11 @@ namespace cmd_convert {
 struct Options {
   std::string in, out, joint_names;
   bool dedupe = false, json = false;
+  std::int64_t time_origin_ns = 0;  // to a bag; 0: the input bag's, else the writer's default
 };
+
+// A rosbag2 storage file named as the output: the recording is written as a bag.
+bool is_bag_output(const std::filesystem::path& out) { return out.extension() == ".mcap" || out.extension() == ".db3"; }
 
 // What the two readers report, in one shape.
 struct ReadInfo {
@@ -54,9 +60,35 @@ rcm::Recording read(const Options& o, const rcm::TopicReadOptions& options, Read
     return rcm::load_recording(in);  // the .bag reader of a build without ROS says why not
 #endif
   }
+  if (is_bag_output(o.out)) {
+    rcm::RecordingReadOptions read;
+    read.dedupe = o.dedupe;
+    rcm::Recording rec = rcm::load_recording(in, read);
+    info.format = "recording";
+    info.time_source = "time_column";
+    info.messages = rec.num_samples();
+    return rec;
+  }
   rcm::InputLocation where;
   where.file = o.in;
-  throw rcm::InputError(where, "not a bag: convert reads a rosbag2 directory, a .db3 or .mcap file, or a ROS 1 .bag");
+  throw rcm::InputError(where, "not a bag: convert reads a rosbag2 directory, a .db3 or .mcap file, or a ROS 1 .bag "
+                               "(a CSV recording converts to a bag: name the output .mcap or .db3)");
+}
+
+// The recording as a bag: the joint names it was read with (the dVRK's by
+// default), the --topic and --force-topic names, stamps from --time-origin-ns.
+void write_bag(const Options& o, const rcm::TopicReadOptions& topics, const ReadInfo& info, const rcm::Recording& rec) {
+  rcm::Rosbag2WriteOptions w;
+  w.storage = std::filesystem::path(o.out).extension() == ".db3" ? rcm::Rosbag2WriteOptions::Storage::sqlite3
+                                                                  : rcm::Rosbag2WriteOptions::Storage::mcap;
+  w.topic = topics.topic;
+  if (!topics.force_topic.empty()) w.force_topic = topics.force_topic;
+  if (info.joint_names.size() == static_cast<std::size_t>(rec.num_joints())) w.joint_names = info.joint_names;
+  if (o.time_origin_ns > 0)
+    w.time_origin_ns = o.time_origin_ns;
+  else if (info.time_origin_ns > 0)
+    w.time_origin_ns = info.time_origin_ns;  // a bag keeps its clock
+  rcm::save_rosbag2_recording(o.out, rec, w);
 }
 
 void run(Options o) {
@@ -76,7 +108,10 @@ void run(Options o) {
   }
   ReadInfo info;
   const rcm::Recording rec = read(o, bag, info);
-  rcm::save_recording(o.out, rec);
+  if (is_bag_output(o.out))
+    write_bag(o, bag, info, rec);
+  else
+    rcm::save_recording(o.out, rec);
   const Eigen::Index T = rec.time.size();
   const double duration = T > 1 ? rec.time(T - 1) - rec.time(0) : 0.0;
   if (o.json) {
@@ -106,6 +141,7 @@ void run(Options o) {
                            names.empty() ? std::string("no names, by position") : names, duration);
   const std::string time = info.time_source == "bag_time"       ? "bag receive time (header stamps are zero)"
                            : info.time_source == "receive_time" ? "receive time (--time receive)"
+                           : info.time_source == "time_column"  ? "the recording's time column"
                                                                 : "header.stamp";
   std::cout << fmt::format("  time: {} - origin {}.{:09d} s{}\n", time,
                            info.time_origin_ns / 1000000000, info.time_origin_ns % 1000000000,
@@ -118,15 +154,31 @@ void run(Options o) {
   if (!bag.force_topic.empty())
     std::cout << fmt::format("  force: {} ({} messages, frame_id '{}'), interpolated at the joint samples\n",
                              bag.force_topic, info.force_messages, info.force_frame_id);
-  std::cout << "  written " << o.out << "\n";
+  if (is_bag_output(o.out))
+    std::cout << fmt::format("  written {} (rosbag2, {}: {} JointState messages{})\n", o.out,
+                             std::filesystem::path(o.out).extension() == ".db3" ? "SQLite" : "MCAP", T,
+                             rec.has_force() ? ", and the force" : "");
+  else
+    std::cout << "  written " << o.out << "\n";
 }
 
 const bool registered = rcm::cli::register_command({"convert", 15, [](CLI::App& app) {
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
-      "convert", "Convert a bag's sensor_msgs/JointState topic (and a force topic) to an rcm CSV recording");
-  cmd->add_option("BAG", o->in, "input: rosbag2 directory, .db3 or .mcap file, or ROS 1 .bag")->required();
-  cmd->add_option("CSV", o->out, "output recording (rcm CSV layout)")->required();
+      "convert",
+      "Convert a bag's sensor_msgs/JointState topic (and a force topic) to an rcm CSV recording, or a recording to "
+      "a rosbag2 bag (OUT ending in .mcap or .db3)");
+  cmd->add_option("IN", o->in, "input: rosbag2 directory, .db3 or .mcap file, ROS 1 .bag, or (to a bag) a CSV recording")
+      ->required();
+  cmd->add_option("OUT", o->out,
+                  "output: an rcm CSV recording, or a rosbag2 storage file (.mcap: MCAP, zstd chunks; .db3: SQLite, "
+                  "Humble's layout) with the JointState topic --topic and, when the input has force, a WrenchStamped "
+                  "topic (--force-topic, default /PSM1/body/measured_cf)")
+      ->required();
+  cmd->add_option("--time-origin-ns", o->time_origin_ns,
+                  "to a bag: header.stamp of time 0, ns (a zero stamp is invalid on ROS 2; default: a bag input's own "
+                  "origin, else 1700000000 s)")
+      ->check(CLI::PositiveNumber);
   rcm::cli::add_topic_options(*cmd);
   cmd->add_option("--joint-names", o->joint_names,
                   "joint order of the output by name, comma separated (default: the first message's order)");

@@ -363,7 +363,7 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   pl->callback([args] { run_payload(*args); });
 
 #if defined(RCM_HAVE_TORCH)
-  auto* im = dyn->add_subcommand("import", "Convert a TorchScript LSTM trained in PyTorch (layout: docs/dynamics.md)");
+  auto* im = dyn->add_subcommand("import", "Convert a TorchScript LSTM trained in PyTorch (layout: docs/formats.md)");
   im->add_option("torchscript", args->torchscript_in, "TorchScript file")->required();
   im->add_option("--out", args->out, "model file to write")->required();
   im->callback([args] { run_import(*args); });

@@ -1,5 +1,5 @@
 // `rcm excite`: an excitation trajectory for free-space data collection
-// (docs/dynamics.md, "Excitation trajectories").
+// (docs/howto-record-free-space.md).
 
 #include <fmt/format.h>
 

@@ -82,7 +82,7 @@ void run_closed_loop(const SimulateOptions& o, const rcm::CorrectionOptions& cor
   study.verbose = true;
   // The loop moves the RCM on the estimate: a model whose torque trails by its
   // zero-phase half window would act on where the incision was that long
-  // before, which a breathing incision has left (docs/compensation.md).
+  // before, which a breathing incision has left (docs/howto-correction.md).
   study.fit.live_zero_phase = false;
   const rcm::MonitorSetup setup = rcm::prepare_monitor(session, study, rcm::cli::get_torque_model_fitter());
   rcm::OnlineEstimatorOptions online = make_closed_loop_online_options(setup.joint_options);

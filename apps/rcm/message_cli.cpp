@@ -1,4 +1,4 @@
-// Message recordings in the rcm CLI (docs/ros.md): rosbag2 directories, .db3
+// Message recordings in the rcm CLI (docs/formats.md): rosbag2 directories, .db3
 // and .mcap files always; ROS 1 .bag files when built with ROS (RCM_HAVE_ROS,
 // set by ros/CMakeLists.txt), a clear error otherwise.
 // - load_recording() hands such a path to its reader with the options below,

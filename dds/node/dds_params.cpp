@@ -51,6 +51,8 @@ void read_params_file(const std::string& file, const std::string& node_name, rcm
       else if (name == "tolerance_m") p.correction.tolerance_m = v.as<double>();
       else if (name == "compensate_limit_m") p.correction.compensate_limit_m = v.as<double>();
       else if (name == "max_shift_rate_m_per_s") p.correction.max_rate_m_per_s = v.as<double>();
+      else if (name == "jump_threshold") p.jump_threshold = v.as<double>();
+      else if (name == "software_rcm") p.software_rcm = v.as<bool>();
       else throw rcm::InputError(where, "unknown parameter");
     } catch (const YAML::Exception& e) {
       throw rcm::InputError(where, "wrong type: " + e.msg);

@@ -12,23 +12,6 @@
 
 namespace rcm::dds_node {
 
-dds_qos_t* make_qos(dds_reliability_kind_t reliability, int depth, dds_durability_kind_t durability) {
-  dds_qos_t* q = dds_create_qos();
-  dds_qset_reliability(q, reliability, DDS_MSECS(100));
-  dds_qset_history(q, DDS_HISTORY_KEEP_LAST, depth);
-  dds_qset_durability(q, durability);
-  return q;
-}
-
-[[noreturn]] void dds_fail(const char* what, dds_return_t rc) {
-  throw std::runtime_error(std::string("DDS: ") + what + ": " + dds_strretcode(rc));
-}
-
-dds_entity_t check(dds_entity_t e, const char* what) {
-  if (e < 0) dds_fail(what, e);
-  return e;
-}
-
 DdsSink::DdsSink(dds_entity_t participant, const rcm::MonitorNodeParameters& p)
     : incision_(p.get_incision_frame()), base_(p.get_base_frame()),
       queue_(static_cast<std::size_t>(std::max(p.queue_size, 64))) {
@@ -48,6 +31,7 @@ DdsSink::DdsSink(dds_entity_t participant, const rcm::MonitorNodeParameters& p)
   rejected_ = writer(&std_msgs_msg_dds__UInt64__desc, prefix + "rejected_samples", latched);
   correction_ = writer(&geometry_msgs_msg_dds__Vector3Stamped__desc, prefix + "correction", stream);
   advice_ = writer(&std_msgs_msg_dds__String__desc, prefix + "advice", latched);
+  if (p.software_rcm) shift_ = writer(&geometry_msgs_msg_dds__Vector3Stamped__desc, prefix + "shift", stream);
   dds_delete_qos(stream);
   dds_delete_qos(latched);
   std::memset(&vector_msg_, 0, sizeof vector_msg_);
@@ -64,9 +48,10 @@ void DdsSink::finish() {
 std::string DdsSink::get_summary() const {
   char buf[256];
   std::snprintf(buf, sizeof buf,
-                "rcm: publishing (own thread): %.2f us mean, %.1f us max per estimate (4 writes); queue depth max "
+                "rcm: publishing (own thread): %.2f us mean, %.1f us max per estimate (%d writes); queue depth max "
                 "%zu of %zu, %llu outputs dropped\n",
                 writes_.count ? 1e6 * writes_.sum_s / static_cast<double>(writes_.count) : 0.0, 1e6 * writes_.max_s,
+                shift_ ? 5 : 4,
                 queue_.get_max_depth(), queue_.capacity(), static_cast<unsigned long long>(queue_.get_dropped()));
   return buf;
 }
@@ -80,12 +65,17 @@ void DdsSink::publish_estimate(std::int64_t stamp_ns, const rcm::OnlineOutput& o
     o.sd[i] = out.sd_m[i];
     o.force[i] = out.f_inc_base[i];
     o.correction[i] = pending_correction_[i];
+    o.shift[i] = pending_shift_[i];
   }
   queue_.push(o);
 }
 
 void DdsSink::publish_correction(std::int64_t, const rcm::CorrectionOutput& c) {
   for (int i = 0; i < 3; ++i) pending_correction_[i] = c.move_base[i];
+}
+
+void DdsSink::publish_shift(std::int64_t, const Eigen::Vector3d& shift_base) {
+  for (int i = 0; i < 3; ++i) pending_shift_[i] = shift_base[i];
 }
 
 void DdsSink::publish_advice(const std::string& text) {
@@ -157,6 +147,10 @@ void DdsSink::publish_queued() {
         vector_msg_.header.frame_id = const_cast<char*>(base_.c_str());
         vector_msg_.vector = {o.correction[0], o.correction[1], o.correction[2]};
         write(correction_, &vector_msg_);
+        if (shift_) {
+          vector_msg_.vector = {o.shift[0], o.shift[1], o.shift[2]};
+          write(shift_, &vector_msg_);
+        }
         const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         ++writes_.count;
         writes_.sum_s += s;

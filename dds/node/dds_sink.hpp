@@ -14,22 +14,19 @@
 #include <thread>
 #include <vector>
 
+#include "support/dds_io.hpp"
 #include "rcm/live/monitor_node.hpp"
 #include "ros2_msgs.h"
 
 namespace rcm::dds_node {
-
-dds_qos_t* make_qos(dds_reliability_kind_t reliability, int depth, dds_durability_kind_t durability);
-// A DDS return code below zero as std::runtime_error naming `what`.
-[[noreturn]] void dds_fail(const char* what, dds_return_t rc);
-dds_entity_t check(dds_entity_t e, const char* what);
 
 // One output of the node: queued by the estimator's thread, written by the
 // publisher thread. Plain data, so that queueing it costs no allocation.
 struct Output {
   enum class Kind { estimate, flag, rejected, advice } kind = Kind::estimate;
   std::int64_t stamp_ns = 0;
-  double misalignment[3] = {0, 0, 0}, sd[3] = {0, 0, 0}, force[3] = {0, 0, 0}, correction[3] = {0, 0, 0};
+  double misalignment[3] = {0, 0, 0}, sd[3] = {0, 0, 0}, force[3] = {0, 0, 0}, correction[3] = {0, 0, 0},
+         shift[3] = {0, 0, 0};
   // The advice travels by value: the queue holds no pointer into the estimator's thread.
   char advice[320] = {};
   rcm::MonitorFlag flag = rcm::MonitorFlag::onset;
@@ -112,6 +109,8 @@ class DdsSink : public rcm::MonitorSink {
   // The node core calls publish_correction just before publish_estimate, with
   // the same stamp, on the estimator's thread: one queued output carries both.
   void publish_correction(std::int64_t, const rcm::CorrectionOutput& c) override;
+  // Likewise the software shift (software_rcm only).
+  void publish_shift(std::int64_t, const Eigen::Vector3d& shift_base) override;
   void publish_advice(const std::string& text) override;
   void publish_flag(rcm::MonitorFlag flag, bool value) override;
   void publish_rejected(std::uint64_t total) override;
@@ -129,8 +128,8 @@ class DdsSink : public rcm::MonitorSink {
 
   std::string incision_, base_;
   dds_entity_t misalignment_ = 0, sd_ = 0, force_ = 0, onset_ = 0, alarm_ = 0, out_of_regime_ = 0, rejected_ = 0,
-               correction_ = 0, advice_ = 0;
-  double pending_correction_[3] = {0, 0, 0};  // the estimator's thread only
+               correction_ = 0, advice_ = 0, shift_ = 0;
+  double pending_correction_[3] = {0, 0, 0}, pending_shift_[3] = {0, 0, 0};  // the estimator's thread only
   geometry_msgs_msg_dds__Vector3Stamped_ vector_msg_;
   geometry_msgs_msg_dds__WrenchStamped_ wrench_msg_;
   std::map<double, std::chrono::steady_clock::time_point> last_logged_;

@@ -33,20 +33,6 @@ using namespace rcm::dds_node;
 std::atomic<bool> g_stop{false};
 extern "C" void on_signal(int) { g_stop = true; }
 
-// A DDS JointState sample in the vectors JointStateView borrows; capacity is
-// kept from message to message, so after the first no allocation happens here.
-struct JointStateBuffer {
-  std::vector<std::string> name;
-  std::vector<double> position, velocity, effort;
-  void assign(const sensor_msgs_msg_dds__JointState_& m) {
-    name.resize(m.name._length);
-    for (std::uint32_t i = 0; i < m.name._length; ++i) name[i].assign(m.name._buffer[i] ? m.name._buffer[i] : "");
-    position.assign(m.position._buffer, m.position._buffer + m.position._length);
-    velocity.assign(m.velocity._buffer, m.velocity._buffer + m.velocity._length);
-    effort.assign(m.effort._buffer, m.effort._buffer + m.effort._length);
-  }
-};
-
 int run(int argc, char** argv) {
   rcm::MonitorNodeParameters p;
   std::string node_name = "rcm_monitor_dds";
@@ -82,6 +68,11 @@ int run(int argc, char** argv) {
   app.add_option("--max-shift-rate-m-per-s", p.correction.max_rate_m_per_s,
                  "correction: speed of the software RCM shift (m/s)")
       ->capture_default_str();
+  app.add_option("--jump-threshold", p.jump_threshold,
+                 "the estimator's change-point test for an incision that jumps (nats; 0: off)")
+      ->capture_default_str();
+  app.add_flag("--software-rcm", p.software_rcm,
+               "the arm shifts its RCM in software: command the shift on <arm>/rcm/shift and take it as in effect");
   app.add_option("--domain", domain, "DDS domain (default: ROS_DOMAIN_ID, else 0)");
   app.add_flag("--best-effort", best_effort,
                "subscribe best-effort (matches best-effort publishers; the dVRK's are reliable)");
@@ -93,12 +84,7 @@ int run(int argc, char** argv) {
   const std::string source = params_file.empty() ? "command line" : "command line / " + params_file;
   if (!joint_names.empty()) p.joint_names = rcm::parse_joint_names(joint_names, param_location(source, "--joint-names"));
   p.check([&](const std::string& name) { return param_location(source, name); });
-  if (domain < 0) {
-    const char* env = std::getenv("ROS_DOMAIN_ID");
-    domain = env && *env ? std::atoi(env) : 0;
-  }
-  if (domain < 0 || domain > 232)
-    throw rcm::InputError(param_location(source, "--domain"), "must be a DDS domain id, 0..232");
+  domain = get_domain(domain, source);
 
   std::string models;
   std::unique_ptr<rcm::OnlinePipeline> pipeline = rcm::make_monitor_pipeline(p, &models);
@@ -130,7 +116,7 @@ int run(int argc, char** argv) {
   void* samples[kBatch] = {};
   dds_sample_info_t infos[kBatch];
   JointStateBuffer buffer;
-  const rcm::JointStateView view{buffer.name, buffer.position, buffer.velocity, buffer.effort};
+  const rcm::JointStateView view = buffer.view();
   while (!g_stop) {
     const dds_return_t woke = dds_waitset_wait(waitset, nullptr, 0, DDS_MSECS(100));
     if (woke < 0) dds_fail("wait", woke);

@@ -110,7 +110,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
     Eigen::Matrix<double, 3, LinearTorqueModel::kGravityTerms> Y;
     LinearTorqueModel::compute_gravity_regressor(qv.data(), Y);
     return Eigen::MatrixXd(Y);
-  }, py::arg("q"), "3 x 17: the torque of joints 1-3 per coefficient of the free potential (docs/dynamics.md)");
+  }, py::arg("q"), "3 x 17: the torque of joints 1-3 per coefficient of the free potential (docs/methods.md)");
   d.def("compute_inertia_regressor", [](py::handle q, py::handle qd, py::handle qdd) {
     const std::string fn = "compute_inertia_regressor";
     const Eigen::Vector3d qv = to_vector3(q, argument_location(fn, "q")), qdv = to_vector3(qd, argument_location(fn, "qd")),
@@ -119,7 +119,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
     compute_inertia_regressor(qv.data(), qdv.data(), qddv.data(), Y);
     return Eigen::MatrixXd(Y);
   }, py::arg("q"), py::arg("qd"), py::arg("qdd"),
-        "3 x 19: the torque of joints 1-3 per rigid-body inertia coefficient (Lagrange, docs/dynamics.md)");
+        "3 x 19: the torque of joints 1-3 per rigid-body inertia coefficient (Lagrange, docs/methods.md)");
   d.def("compute_gravity_moment_map", [](py::handle g) {
     Eigen::Matrix<double, 17, kGravityMoments> P;
     compute_gravity_moment_map(to_vector3(g, argument_location("compute_gravity_moment_map", "g")), P);
@@ -195,7 +195,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
                " joints in, " + std::to_string(self.num_outputs()) + " out>";
       });
 
-  py::class_<LinearTorqueParameters>(d, "LinearTorqueParameters", "Coefficients of the linear model (docs/dynamics.md)")
+  py::class_<LinearTorqueParameters>(d, "LinearTorqueParameters", "Coefficients of the linear model (docs/methods.md)")
       .def_readonly("gravity", &LinearTorqueParameters::gravity, "17 shared potential coefficients")
       .def_readonly("armature", &LinearTorqueParameters::armature)
       .def_readonly("viscous", &LinearTorqueParameters::viscous)
@@ -316,7 +316,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
 
   def_options<ExcitationOptions>(d, "ExcitationOptions",
                                  "Options of design_excitation (`rcm excite`'s flags: one table, ExcitationOptions)");
-  py::class_<ExcitationSummary>(d, "ExcitationSummary", "The solver's outcome (docs/dynamics.md, \"Status\")")
+  py::class_<ExcitationSummary>(d, "ExcitationSummary", "The solver's outcome (docs/methods.md)")
       .def_readonly("converged", &ExcitationSummary::converged)
       .def_readonly("termination", &ExcitationSummary::termination)
       .def_readonly("message", &ExcitationSummary::message)
@@ -350,7 +350,7 @@ void bind_dynamics(py::module_& m, py::module_& d) {
     py::gil_scoped_release release;
     return design_excitation(model, options);
   }, py::arg("options") = ExcitationOptions{}, py::arg("robot") = "dvrk-psm-classic",
-        "Design a free-space excitation trajectory (`rcm excite`; docs/dynamics.md, \"Excitation trajectories\"):\n"
+        "Design a free-space excitation trajectory (`rcm excite`; docs/howto-record-free-space.md):\n"
         "the same samples as the CLI's CSV for the same options. Bad options: ValueError naming the field;\n"
         "q0 outside the limits: rcm.InputError.");
 

@@ -1,4 +1,4 @@
-// The Python module `rcm`: rcm::core (no LibTorch) for Python. See docs/python.md.
+// The Python module `rcm`: rcm::core (no LibTorch) for Python. See docs/howto-python.md.
 
 #include "common.hpp"
 

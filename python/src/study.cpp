@@ -111,7 +111,7 @@ void bind_study(py::module_& m) {
         "Free-space model, incision frame at q0 and the tissue model identified on the calibration, as\n"
         "`rcm monitor` prepares them. Then: OnlinePipeline(setup.free_space.model, OnlineEstimator(\n"
         "setup.incision, setup.tissue, make_online_options(setup.joint_options))).");
-  def_options<SetupOptions>(m, "SetupOptions", "Thresholds of run_setup (`rcm setup`; docs/setup.md)");
+  def_options<SetupOptions>(m, "SetupOptions", "Thresholds of run_setup (`rcm setup`; docs/howto-setup.md)");
   m.def("run_setup", [](const Session& session, const StudyOptions& o, const SetupOptions& setup_options) {
     SetupReport report;
     {

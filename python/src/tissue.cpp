@@ -142,7 +142,7 @@ void bind_tissue(py::module_& m) {
         "Same pairs with y = |force| of the recording's force columns (a sensor, for reference)");
 
   def_options<TissueFitOptions, std::vector<TissueTermKind>>(m, "TissueFitOptions",
-                                                             "Symbolic regression options (docs/tissue.md)")
+                                                             "Symbolic regression options (docs/methods.md)")
       .def("check", &TissueFitOptions::check);
   py::class_<TissueFrontEntry>(m, "TissueFrontEntry")
       .def_readonly("expression", &TissueFrontEntry::expression)

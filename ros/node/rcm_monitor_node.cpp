@@ -3,7 +3,7 @@
 // free-space model and the bank of EKFs once per message, and publishes the
 // running estimate of the RCM-to-incision offset, the force at the incision,
 // the onset of a misalignment and the force alarm. Topics, parameters, frames
-// and units: docs/ros.md.
+// and units: docs/howto-ros1.md.
 //
 //   rcm_monitor_node _session:=/data/bench/session.json _model_file:=/data/bench/free_space_model.json
 //
@@ -22,10 +22,14 @@
 #include <std_msgs/UInt64.h>
 
 #include <cstdio>
+#include <cstring>
+#include <functional>
 #include <map>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "rcm/common/error.hpp"
@@ -54,26 +58,92 @@ std::vector<std::string> read_joint_names(const ros::NodeHandle& pnh) {
   return names;
 }
 
+// The node's private parameters, each once: its name, what it is (with its
+// unit), and how it is read into the parameters; `--help` prints this table
+// with each default from a default MonitorNodeParameters.
+struct Parameter {
+  const char* name;
+  const char* help;
+  std::function<std::string(const rcm::MonitorNodeParameters&)> get_default;
+  std::function<void(const ros::NodeHandle&, rcm::MonitorNodeParameters&)> read;
+};
+
+template <class T>
+Parameter make_parameter(const char* name, const char* help, T& (*field)(rcm::MonitorNodeParameters&)) {
+  return {name, help,
+          [field](const rcm::MonitorNodeParameters& defaults) {
+            rcm::MonitorNodeParameters p = defaults;
+            const T value = field(p);
+            if constexpr (std::is_same_v<T, std::string>) return value.empty() ? std::string("(none)") : value;
+            else if constexpr (std::is_same_v<T, bool>) return std::string(value ? "true" : "false");
+            else {
+              std::ostringstream out;
+              out << value;
+              return out.str();
+            }
+          },
+          [name, field](const ros::NodeHandle& pnh, rcm::MonitorNodeParameters& p) {
+            T& value = field(p);
+            pnh.param(name, value, value);
+          }};
+}
+
+const std::vector<Parameter>& get_parameters() {
+  using P = rcm::MonitorNodeParameters;
+  static const std::vector<Parameter> table = {
+      make_parameter<std::string>("session", "rcm-session/1 manifest: q0, the calibration, the free-space recordings (required)",
+                                  [](P& p) -> std::string& { return p.session; }),
+      make_parameter<std::string>("model_file", "saved free-space model: free_space_model.json of `rcm setup` or `rcm run` (required)",
+                                  [](P& p) -> std::string& { return p.model_file; }),
+      make_parameter<std::string>("arm", "topic prefix: subscribes <arm>/measured_js, publishes <arm>/rcm/...",
+                                  [](P& p) -> std::string& { return p.arm; }),
+      {"joint_names", "the model's joint order by name: a list, or a comma-separated string (default: the first message's order)",
+       [](const P&) { return std::string("(none)"); },
+       [](const ros::NodeHandle& pnh, P& p) { p.joint_names = read_joint_names(pnh); }},
+      make_parameter<double>("alarm_force_n", "force alarm threshold at the incision, N",
+                             [](P& p) -> double& { return p.alarm_force_n; }),
+      make_parameter<double>("onset_threshold", "threshold of the onset test (CUSUM)",
+                             [](P& p) -> double& { return p.onset_threshold; }),
+      make_parameter<int>("publish_every", "publish the estimate topics every n-th accepted sample",
+                          [](P& p) -> int& { return p.publish_every; }),
+      make_parameter<int>("queue_size", "queue of the subscription and of the estimate publishers, messages",
+                          [](P& p) -> int& { return p.queue_size; }),
+      make_parameter<std::string>("base_frame", "frame_id of incision_force and correction (default: <arm>_base)",
+                                  [](P& p) -> std::string& { return p.base_frame; }),
+      make_parameter<std::string>("incision_frame", "frame_id of misalignment (default: <arm>_incision)",
+                                  [](P& p) -> std::string& { return p.incision_frame; }),
+      make_parameter<bool>("dedupe", "drop repeated rows of the session's recordings",
+                           [](P& p) -> bool& { return p.dedupe; }),
+      make_parameter<int>("seed", "seed of the tissue identification", [](P& p) -> int& { return p.seed; }),
+      make_parameter<double>("status_period_s", "period of the status line in sample time, s (0: none)",
+                             [](P& p) -> double& { return p.status_period_s; }),
+      make_parameter<double>("tolerance_m", "correction: the RCM is aligned within this distance of the incision, m",
+                             [](P& p) -> double& { return p.correction.tolerance_m; }),
+      make_parameter<double>("compensate_limit_m", "correction: software RCM shifts up to this, beyond it re-docking advice, m",
+                             [](P& p) -> double& { return p.correction.compensate_limit_m; }),
+      make_parameter<double>("max_shift_rate_m_per_s", "correction: speed of a software RCM shift, m/s",
+                             [](P& p) -> double& { return p.correction.max_rate_m_per_s; }),
+  };
+  return table;
+}
+
 rcm::MonitorNodeParameters read_parameters(const ros::NodeHandle& pnh) {
   rcm::MonitorNodeParameters p;
-  pnh.getParam("session", p.session);
-  pnh.getParam("model_file", p.model_file);
-  pnh.param("arm", p.arm, p.arm);
-  p.joint_names = read_joint_names(pnh);
-  pnh.param("alarm_force_n", p.alarm_force_n, p.alarm_force_n);
-  pnh.param("onset_threshold", p.onset_threshold, p.onset_threshold);
-  pnh.param("publish_every", p.publish_every, p.publish_every);
-  pnh.param("queue_size", p.queue_size, p.queue_size);
-  pnh.param("base_frame", p.base_frame, p.base_frame);
-  pnh.param("incision_frame", p.incision_frame, p.incision_frame);
-  pnh.param("dedupe", p.dedupe, p.dedupe);
-  pnh.param("seed", p.seed, p.seed);
-  pnh.param("status_period_s", p.status_period_s, p.status_period_s);
-  pnh.param("tolerance_m", p.correction.tolerance_m, p.correction.tolerance_m);
-  pnh.param("compensate_limit_m", p.correction.compensate_limit_m, p.correction.compensate_limit_m);
-  pnh.param("max_shift_rate_m_per_s", p.correction.max_rate_m_per_s, p.correction.max_rate_m_per_s);
+  for (const Parameter& parameter : get_parameters()) parameter.read(pnh, p);
   p.check(param_location);
   return p;
+}
+
+void print_help() {
+  std::printf(
+      "rcm_monitor_node: the online RCM misalignment estimator on a live dVRK over ROS 1\n"
+      "Usage: rcm_monitor_node _session:=FILE _model_file:=FILE [_NAME:=VALUE ...]\n\n"
+      "Subscribes <arm>/measured_js (sensor_msgs/JointState) and publishes <arm>/rcm/misalignment,\n"
+      "misalignment_sd, incision_force, correction, onset, alarm, out_of_regime, rejected_samples, advice.\n\n"
+      "Private parameters (~NAME; _NAME:=VALUE on the command line, or a launch file), with their defaults:\n");
+  const rcm::MonitorNodeParameters defaults;
+  for (const Parameter& parameter : get_parameters())
+    std::printf("  ~%-24s %-10s %s\n", parameter.name, parameter.get_default(defaults).c_str(), parameter.help);
 }
 
 // roscpp's publishers and rosconsole behind the node core's sink.
@@ -167,6 +237,12 @@ class RosSink : public rcm::MonitorSink {
 
 int main(int argc, char** argv) {
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // log lines appear as they come when redirected to a file
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
+      print_help();
+      return 0;
+    }
+  }
   ros::init(argc, argv, "rcm_monitor");
   ros::NodeHandle nh, pnh("~");
   try {

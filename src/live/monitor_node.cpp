@@ -39,6 +39,7 @@ void MonitorNodeParameters::check(const std::function<InputLocation(const std::s
   if (!(correction.compensate_limit_m >= correction.tolerance_m))
     throw InputError(where("compensate_limit_m"), "must be >= tolerance_m");
   if (!(correction.max_rate_m_per_s > 0)) throw InputError(where("max_shift_rate_m_per_s"), "must be > 0");
+  if (!(jump_threshold >= 0)) throw InputError(where("jump_threshold"), "must be >= 0 (0: off)");
   for (std::size_t i = 0; i < joint_names.size(); ++i) {
     if (joint_names[i].empty()) throw InputError(where("joint_names[" + std::to_string(i) + "]"), "empty joint name");
     for (std::size_t k = 0; k < i; ++k)
@@ -83,6 +84,7 @@ std::unique_ptr<OnlinePipeline> make_monitor_pipeline(const MonitorNodeParameter
   OnlineEstimatorOptions online = make_online_options(setup.joint_options);
   online.alarm_force_n = p.alarm_force_n;
   online.onset_threshold = p.onset_threshold;
+  online.jump_threshold = p.jump_threshold;
   if (description)
     *description = format("free-space model %s (%d joints), tissue model %s: k1 %.1f N/m, k3 %.3g N/m^3, c %.2f N s/m, "
                           "F %.2f N",
@@ -124,10 +126,16 @@ void MonitorNode::start(const std::string& input_topic_name) {
                               "(refit it)");
   sink_.log(LogLevel::info, format("rcm: listening on %s; publishing %s{misalignment,misalignment_sd,incision_force,"
                                    "onset,alarm,rejected_samples,out_of_regime,correction,advice}; alarm above %.1f N; "
-                                   "aligned within %.1f mm, software shifts up to %.1f mm",
+                                   "aligned within %.1f mm, software shifts up to %.1f mm%s",
                                    input_topic_name.c_str(), params_.get_output_prefix().c_str(),
                                    params_.alarm_force_n, 1e3 * params_.correction.tolerance_m,
-                                   1e3 * params_.correction.compensate_limit_m));
+                                   1e3 * params_.correction.compensate_limit_m,
+                                   params_.software_rcm
+                                       ? format("; software RCM: commands the shift on %sshift at up to %.1f mm/s",
+                                                params_.get_output_prefix().c_str(),
+                                                1e3 * params_.correction.max_rate_m_per_s)
+                                             .c_str()
+                                       : ""));
 }
 
 void MonitorNode::compute_message(const JointStateView& message, std::int64_t stamp_ns, std::int64_t receive_time_ns) {
@@ -156,10 +164,18 @@ void MonitorNode::compute_message(const JointStateView& message, std::int64_t st
     return;
   }
   updates_ = out.updates;
-  const CorrectionOutput& correction = corrector_.compute_correction(correction_ws_, out);
+  const CorrectionOutput& correction = corrector_.compute_correction(correction_ws_, out, shift_base_);
+  if (params_.software_rcm && !correction.step_base.isZero()) {
+    // The arm holds the shift commanded: from the next sample on the estimate
+    // is relative to the RCM as it then is.
+    shift_base_ = correction.applied_base;
+    monitor_.apply_rcm_shift(correction.step_base);
+    ++shift_moves_;
+  }
   if (++since_publish_ >= params_.publish_every) {
     since_publish_ = 0;
     sink_.publish_correction(monitor_.get_output_time_ns(), correction);
+    if (params_.software_rcm) sink_.publish_shift(monitor_.get_output_time_ns(), shift_base_);
     sink_.publish_estimate(monitor_.get_output_time_ns(), out);
   }
   if (correction.changed) {
@@ -248,6 +264,9 @@ std::string MonitorNode::get_summary() const {
                 1e3 * o.misalignment_m[0], 1e3 * o.sd_m[0], 1e3 * o.misalignment_m[1], 1e3 * o.sd_m[1],
                 1e3 * o.misalignment_m[2], 1e3 * o.sd_m[2], o.onset ? "detected" : "not detected");
     s += "rcm: advice: " + describe_correction(correction_ws_.output, corrector_) + "\n";
+    if (params_.software_rcm)
+      s += format("rcm: software RCM: %llu moves commanded; shift in effect %.2f, %.2f, %.2f mm (base frame)\n",
+                  ull(shift_moves_), 1e3 * shift_base_[0], 1e3 * shift_base_[1], 1e3 * shift_base_[2]);
   }
   return s;
 }

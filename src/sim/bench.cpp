@@ -24,6 +24,7 @@
 
 #include "rcm/common/interrupt.hpp"
 #include "rcm/sim/arm_dynamics.hpp"
+#include "rcm/sim/bench_arm.hpp"
 #include "rcm/sim/plant.hpp"
 
 namespace rcm::sim {
@@ -36,10 +37,6 @@ std::uint64_t splitmix64(std::uint64_t x) {
   x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
   x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
   return x ^ (x >> 31);
-}
-
-double quantize(double x, double quantum) {
-  return quantum > 0.0 ? quantum * std::round(x / quantum) : x;
 }
 
 struct SegmentBuffer {
@@ -84,10 +81,9 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
                                              std::uint64_t noise_seed, const RunHooks* hooks) {
   const ControllerParams& C = config.controller;
   const SensorParams& S = config.sensors;
-  const double dt = 1.0 / C.physics_rate_hz;
+  const BenchArm bench_arm(config);
+  const double dt = bench_arm.dt;
   const int decimation = static_cast<int>(std::lround(C.physics_rate_hz / S.log_rate_hz));
-  const Plant plant(config.arm, config.friction);
-  const ArmDynamics& arm = plant.arm;
 
   std::vector<SegmentBuffer> buffers(segments.size());
   std::size_t k_last = 0;
@@ -112,27 +108,17 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
 
   const long step_begin = -std::lround(C.settle_s * C.physics_rate_hz);
   const long step_end = static_cast<long>(k_last) * decimation;  // exclusive
-  const double alpha = 1.0 - std::exp(-2.0 * M_PI * C.velocity_filter_hz * dt);
   const Eigen::Vector3d q0 = config.protocol.q0;
   const ShaftFrame f0 = compute_shaft_frame(q0);
 
-  PlantState state = make_plant_state_at_rest(plant, reference.evaluate(step_begin * dt).q);
-  const Eigen::Vector3d& q = state.q;
-  const Eigen::Vector3d& qd = state.qd;
-  double axial_z = 0.0;
-  auto measure_position = [&](const Eigen::Vector3d& x) {
-    if (!S.noise) return x;
-    Eigen::Vector3d m;
-    for (int j = 0; j < 3; ++j) m[j] = quantize(x[j], S.position_quantum[j]);
-    return m;
-  };
-  // The encoders sit on the motors.
-  Eigen::Vector3d q_meas_prev = measure_position(state.qm);
+  BenchArmState state = make_bench_arm_state(bench_arm, reference.evaluate(step_begin * dt).q);
+  const Eigen::Vector3d& q = state.plant.q;
+  const Eigen::Vector3d& qd = state.plant.qd;
+  BenchArmStep s;
   // With a moving incision, the tissue's anchor is moved in a copy at every step.
   std::optional<TissueModel> moving;
   if (tissue && hooks && hooks->get_misalignment) moving.emplace(*tissue);
   const TissueModel* active_tissue = moving ? &*moving : tissue;
-  Eigen::Vector3d velocity_filtered = Eigen::Vector3d::Zero();
   std::size_t buffer_index = 0;
   bool have_previous_row = false;
 
@@ -140,55 +126,32 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
     if (step % 4096 == 0 && is_interrupt_requested())
       throw Interrupted("interrupted while simulating " + segments.front().name);
     const double t = static_cast<double>(step) / C.physics_rate_hz;
-    // Sensors as the controller sees them.
-    const Eigen::Vector3d q_meas = measure_position(state.qm);
-    Eigen::Vector3d v_meas;
-    if (S.noise) {
-      velocity_filtered += alpha * ((q_meas - q_meas_prev) / dt - velocity_filtered);
-      v_meas = velocity_filtered;
-    } else {
-      v_meas = state.qmd;
-    }
-    q_meas_prev = q_meas;
-
-    // Controller.
     const ReferenceSample ref = reference.evaluate(std::max(t, step_begin * dt));
-    Eigen::Vector3d tau = C.kp.cwiseProduct(ref.q - q_meas) + C.kd.cwiseProduct(ref.qd - v_meas);
-    if (C.feedforward)
-      tau += compute_inverse_dynamics(arm, ref.q, ref.qd, ref.qdd, true) + plant.rotor_inertia.cwiseProduct(ref.qdd);
-
-    // Plant.
-    TissueOutput tis;
-    if (moving) {
-      moving->misalignment_m = hooks->get_misalignment(t);
-      moving->p_anchor_base = moving->R_base_inc * moving->misalignment_m;
-      if (hooks->get_misalignment_rate) moving->misalignment_rate_m_per_s = hooks->get_misalignment_rate(t);
+    if (moving)
+      set_tissue_misalignment(*moving, hooks->get_misalignment(t),
+                              hooks->get_misalignment_rate ? hooks->get_misalignment_rate(t)
+                                                           : moving->misalignment_rate_m_per_s);
+    try {
+      compute_bench_arm_step(bench_arm, state, ref, active_tissue, s);
+    } catch (const std::domain_error& e) {
+      throw std::runtime_error(fmt::format("simulation of '{}' at t = {:.3f} s: {}",
+                                           segments.front().name, t, e.what()));
     }
-    if (active_tissue) {
-      try {
-        tis = compute_tissue_force(*active_tissue, q, qd, axial_z);
-      } catch (const std::domain_error& e) {
-        throw std::runtime_error(fmt::format("simulation of '{}' at t = {:.3f} s: {}",
-                                             segments.front().name, t, e.what()));
-      }
-    }
-    const PlantAcceleration acc = compute_plant_acceleration(plant, state, tau, tis.tau);
+    const Eigen::Vector3d& q_meas = s.q_meas;
+    const Eigen::Vector3d& tau = s.tau;
+    const TissueOutput& tis = s.tissue;
+    const PlantAcceleration& acc = s.acceleration;
 
     if (step >= 0 && step % decimation == 0) {
       const auto k = static_cast<std::size_t>(step / decimation);
       // The published velocity: the dVRK's estimate from encoder timing is
       // noisier than the controller's filtered difference (docs/simulator.md).
-      Eigen::Vector3d v_published = v_meas;
-      if (S.noise && S.velocity_noise.maxCoeff() > 0.0)
-        for (int j = 0; j < 3; ++j) {
-          const double fade = std::min(1.0, std::abs(state.qmd[j]) / S.velocity_noise_fade[j]);
-          v_published[j] += fade * S.velocity_noise[j] * normal(velocity_rng);
-        }
+      const Eigen::Vector3d v_published =
+          compute_published_velocity(S, s.v_meas, state.plant.qmd, velocity_rng, normal);
       // The loop reads the same noisy effort that the recording logs.
       std::optional<Eigen::Vector3d> sensed_effort;
       if (hooks && hooks->on_sample) {
-        sensed_effort.emplace();
-        for (int j = 0; j < 3; ++j) (*sensed_effort)[j] = tau[j] + (S.noise ? S.effort_noise[j] * normal(rng) : 0.0);
+        sensed_effort = compute_sensed_effort(S, tau, rng, normal);
         hooks->on_sample(static_cast<double>(k) / S.log_rate_hz, q_meas, v_published, *sensed_effort,
                          tis.f_inc_base);
       }
@@ -215,6 +178,8 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
         } else {
           rec.position.row(r) = q_meas.transpose();
           rec.velocity.row(r) = v_published.transpose();
+          // Without hooks the effort's and the force's noise alternate per
+          // joint: the draws of every session written so far.
           for (int j = 0; j < 3; ++j) {
             rec.effort(r, j) = sensed_effort ? (*sensed_effort)[j]
                                              : tau[j] + (S.noise ? S.effort_noise[j] * normal(rng) : 0.0);
@@ -236,8 +201,7 @@ std::vector<SimulatedRecording> simulate_run(const SimConfig& config,
       }
     }
 
-    advance_plant_state(plant, state, acc, dt);
-    if (active_tissue) axial_z = advance_tissue_state(*active_tissue, axial_z, tis.axial_velocity, dt);
+    advance_bench_arm_state(bench_arm, state, s, active_tissue);
   }
 
   std::vector<SimulatedRecording> out;

@@ -91,9 +91,7 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   bool have_sample = false;
   const double series_dt = 1.0 / o.series_rate_hz;
   double next_series = 0.0;
-  std::vector<double> force_after_settle;
-  double last_above = -1.0, residual_sum = 0.0;
-  int residual_count = 0;
+  ClosedLoopMeter meter(motion.onset_s, o.duration_s, o);
   Eigen::Vector3d z_sq_sum = Eigen::Vector3d::Zero(), covered = Eigen::Vector3d::Zero();
   int z_count = 0;
   CorrectionAction last_action = CorrectionAction::hold;
@@ -116,8 +114,7 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
     last_sample_t = t;
     shift_rate_base.setZero();
     if (!c.step_base.isZero()) {
-      ++run.moves;
-      if (c.step_base.dot(R * remaining_inc) < 0) ++run.wrong_direction_moves;
+      meter.add_move(c.step_base, R * remaining_inc);
       if (closed) {  // the setpoint moves
         shift_base = c.applied_base;
         if (sample_dt > 0) shift_rate_base = c.step_base / sample_dt;
@@ -129,12 +126,9 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
       last_reason = c.reason;
     }
     const double f = f_true.norm();
-    if (t >= motion.onset_s) {
-      run.peak_force_n = std::max(run.peak_force_n, f);
-      run.max_fit_cost = std::max(run.max_fit_cost, c.fit_cost);
-    }
+    meter.add_sample(t, f, remaining_inc.norm());
+    if (t >= motion.onset_s) run.max_fit_cost = std::max(run.max_fit_cost, c.fit_cost);
     if (t >= motion.onset_s + o.settled_after_s) {
-      force_after_settle.push_back(f);
       const OnlineOutput& e = get_online_output(ws.pipeline.estimator);
       if (e.misalignment_m.allFinite() && (e.sd_m.array() > 0).all()) {
         const Eigen::Vector3d z = (e.misalignment_m - remaining_inc).cwiseQuotient(e.sd_m);
@@ -142,11 +136,6 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
         covered += (z.array().abs() <= loop.corrector().options().confidence_z).cast<double>().matrix();
         ++z_count;
       }
-    }
-    if (f > o.force_threshold_n) last_above = t;
-    if (t >= o.duration_s - 10.0) {
-      residual_sum += remaining_inc.norm();
-      ++residual_count;
     }
     if (t >= next_series) {
       next_series += series_dt;
@@ -159,11 +148,7 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   simulate_run(config, reference, &tissue, {{"closed-loop " + motion.name, 0.0, o.duration_s}},
                derive_seed(config.seed, "noise:closed-loop:" + motion.name), &hooks);
 
-  double sum_sq = 0.0;
-  for (double f : force_after_settle) sum_sq += f * f;
-  run.rms_force_after_settle_n = force_after_settle.empty() ? 0.0 : std::sqrt(sum_sq / force_after_settle.size());
-  if (last_above < o.duration_s - 5.0) run.time_to_below_s = std::max(0.0, last_above - motion.onset_s);
-  run.residual_misalignment_m = residual_count ? residual_sum / residual_count : 0.0;
+  meter.get_figures(run);
   if (z_count > 0) {
     run.interval_rms_z = (z_sq_sum / z_count).cwiseSqrt();
     run.interval_coverage = covered / z_count;
@@ -177,6 +162,37 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
 }
 
 }  // namespace
+
+ClosedLoopMeter::ClosedLoopMeter(double onset_s, double duration_s, const ClosedLoopOptions& o)
+    : onset_s_(onset_s), duration_s_(duration_s), settled_after_s_(o.settled_after_s), threshold_n_(o.force_threshold_n) {}
+
+void ClosedLoopMeter::add_sample(double t, double f, double remaining_m) {
+  if (t >= onset_s_) peak_n_ = std::max(peak_n_, f);
+  if (t >= onset_s_ + settled_after_s_) {
+    sum_sq_after_settle_ += f * f;
+    ++after_settle_;
+  }
+  if (f > threshold_n_) last_above_s_ = t;
+  if (t >= duration_s_ - 10.0) {
+    residual_sum_ += remaining_m;
+    ++residual_count_;
+  }
+}
+
+void ClosedLoopMeter::add_move(const Eigen::Vector3d& step_base, const Eigen::Vector3d& remaining_base) {
+  ++moves_;
+  if (step_base.dot(remaining_base) < 0) ++wrong_;
+}
+
+void ClosedLoopMeter::get_figures(ClosedLoopRun& run) const {
+  run.peak_force_n = peak_n_;
+  run.rms_force_after_settle_n = after_settle_ ? std::sqrt(sum_sq_after_settle_ / after_settle_) : 0.0;
+  run.time_to_below_s.reset();
+  if (last_above_s_ < duration_s_ - 5.0) run.time_to_below_s = std::max(0.0, last_above_s_ - onset_s_);
+  run.residual_misalignment_m = residual_count_ ? residual_sum_ / residual_count_ : 0.0;
+  run.moves = moves_;
+  run.wrong_direction_moves = wrong_;
+}
 
 OnlineEstimatorOptions make_closed_loop_online_options(const JointEstimatorOptions& joint) {
   OnlineEstimatorOptions o = make_online_options(joint);

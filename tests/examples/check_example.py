@@ -17,7 +17,7 @@ The command must exit with status 0; then, by KIND:
                     --max-error-mm of its truth, the estimate was printed as the
                     stream went, onset was reported, and the last advice is the
                     one the truth calls for: reposition beyond the corrector's
-                    10 mm software limit, hold within its 2 mm tolerance;
+                    10 mm software limit, hold within its 1.5 mm tolerance;
   free-space-model  --out holds one prediction row per sample of --recording,
                     and the per-joint NRMSE against its effort over the last
                     10 % of the samples (the part a model fitted with rcm's
@@ -47,8 +47,8 @@ RUNNING_LINE = re.compile(r"^\s*\d+\.\d+ s\s+estimate \[")
 ADVICE_LINE = re.compile(r"^\s*\d+\.\d+ s\s+advice: (\w+)")
 ONSET_LINE = re.compile(r"^\s*\d+\.\d+ s\s+onset:")
 # The corrector's defaults (CorrectionOptions): software shifts up to 10 mm,
-# hold within 2 mm.
-COMPENSATE_LIMIT_MM, TOLERANCE_MM = 10.0, 2.0
+# hold within 1.5 mm.
+COMPENSATE_LIMIT_MM, TOLERANCE_MM = 10.0, 1.5
 
 
 class CheckFailed(Exception):

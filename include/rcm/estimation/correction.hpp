@@ -47,7 +47,7 @@
 namespace rcm {
 
 struct CorrectionOptions {
-  double tolerance_m = 0.002;          // within this, hold
+  double tolerance_m = 0.0015;         // within this, hold
   double compensate_limit_m = 0.010;   // software shifts up to this (in all, since reset), beyond: re-dock
   double max_rate_m_per_s = 0.005;     // speed of the software shift
   double confidence_z = 1.96;          // the 95 % interval

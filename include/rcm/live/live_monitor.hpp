@@ -85,6 +85,9 @@ class LiveMonitor {
   Verdict compute_message(const JointStateView& message, std::int64_t stamp_ns, std::int64_t receive_time_ns);
 
   const OnlineOutput& get_output() const { return get_online_output(workspace_.estimator); }
+  // The RCM moved by `shift_base` (base frame, m) before the next message (a
+  // software shift): OnlinePipeline::apply_rcm_shift.
+  void apply_rcm_shift(const Eigen::Vector3d& shift_base) { pipeline_.apply_rcm_shift(workspace_, shift_base); }
   const Counters& get_counters() const { return counters_; }
   bool started() const { return started_; }
   bool uses_receive_time() const { return receive_time_; }

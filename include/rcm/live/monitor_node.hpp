@@ -12,7 +12,11 @@
 // rejected_samples (UInt64, latched), correction (Vector3Stamped, base frame,
 // m: the RCM move onto the incision) and advice (String, latched: hold,
 // compensate or reposition in words, estimation/correction.hpp). The node
-// advises: it never moves the arm, so no software shift is in effect.
+// advises: it never moves the arm, so no software shift is in effect; unless
+// the arm shifts its RCM in software (software_rcm): then the node commands
+// that shift (shift, Vector3Stamped, base frame, m: the shift to hold, in all
+// since the node started), gated and rate-limited by the correction, and takes
+// it as in effect, as CorrectionLoop does in one process.
 
 #include <chrono>
 #include <cstdint>
@@ -44,6 +48,12 @@ struct MonitorNodeParameters {
   double status_period_s = 5.0;
   // The correction's gates (parameters tolerance_m, compensate_limit_m, max_shift_rate_m_per_s).
   CorrectionOptions correction;
+  // The estimator's change-point test (OnlineEstimatorOptions::jump_threshold,
+  // nats; 0: off), for an incision that may jump.
+  double jump_threshold = OnlineEstimatorOptions{}.jump_threshold;
+  // The arm moves its RCM setpoint to the shift this node commands (a
+  // software-RCM arm, or the simulated PSM with --software-rcm).
+  bool software_rcm = false;
 
   // Throws InputError at `where(name)` for a missing or out-of-range value.
   void check(const std::function<InputLocation(const std::string&)>& where) const;
@@ -80,6 +90,11 @@ class MonitorSink {
   virtual void publish_correction(std::int64_t stamp_ns, const CorrectionOutput& correction) = 0;
   // advice (latched): the action in words, each time it changes.
   virtual void publish_advice(const std::string& text) = 0;
+  // shift, with `stamp_ns`, only with software_rcm: the software shift of the
+  // RCM setpoint to hold (base frame, m), after the correction at that stamp.
+  // Called just before publish_estimate. A sink for an arm that cannot shift
+  // its RCM leaves it out.
+  virtual void publish_shift(std::int64_t /*stamp_ns*/, const Eigen::Vector3d& /*shift_base*/) {}
   // `throttle_s` > 0: the sink may drop lines of the same call site closer than that.
   virtual void log(LogLevel level, const std::string& text, double throttle_s = 0.0) = 0;
 };
@@ -117,6 +132,8 @@ class MonitorNode {
   RcmCorrector::Workspace correction_ws_;
   MonitorSink& sink_;
   bool onset_ = false, alarm_ = false, out_of_regime_ = false;
+  Eigen::Vector3d shift_base_ = Eigen::Vector3d::Zero();  // the software shift commanded (software_rcm)
+  std::uint64_t shift_moves_ = 0;
   std::uint64_t retimed_ = 0;
   std::uint64_t updates_ = 0;  // OnlineOutput::updates of the last estimate handled
   dynamics::RegimeSummary regime_;

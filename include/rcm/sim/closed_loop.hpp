@@ -98,6 +98,31 @@ struct ClosedLoopRun {
   std::vector<std::pair<double, std::string>> advice;
 };
 
+// The figures of ClosedLoopRun that come from the truth, sample by sample:
+// the one home of their definitions, for the bench (run_closed_loop_experiment)
+// and for a loop closed across processes (the simulated PSM, the monitor and
+// the procedure over DDS). Times are from the run's start.
+class ClosedLoopMeter {
+ public:
+  // `onset_s`: when the incision starts to leave the RCM; `duration_s`: the
+  // run's end (time to below counts only a force that stays below over its last 5 s).
+  ClosedLoopMeter(double onset_s, double duration_s, const ClosedLoopOptions& options);
+  // One sample: the true |f| (N) and the true misalignment left, |incision - RCM| (m).
+  void add_sample(double t, double force_n, double remaining_m);
+  // A software shift of the RCM (base frame), against the true misalignment
+  // left just before it (base frame): a move, and a wrong one if it points away.
+  void add_move(const Eigen::Vector3d& step_base, const Eigen::Vector3d& remaining_base);
+  // peak_force_n, rms_force_after_settle_n, time_to_below_s,
+  // residual_misalignment_m, moves, wrong_direction_moves.
+  void get_figures(ClosedLoopRun& run) const;
+
+ private:
+  double onset_s_, duration_s_, settled_after_s_, threshold_n_;
+  double peak_n_ = 0.0, sum_sq_after_settle_ = 0.0, last_above_s_ = -1.0, residual_sum_ = 0.0;
+  std::size_t after_settle_ = 0;
+  int residual_count_ = 0, moves_ = 0, wrong_ = 0;
+};
+
 struct ClosedLoopScenario {
   IncisionMotion motion;
   ClosedLoopRun open, closed;

@@ -120,7 +120,7 @@ void add_network_warnings(FitSummary& s, std::size_t few) {
   const std::string blas = get_libtorch_blas_library();
   if (s.device == "cpu" && (blas.find("atlas") != std::string::npos || blas.find("/blas/") != std::string::npos))
     s.warnings.push_back(fmt::format("LibTorch calls the BLAS of {}, which is single-threaded and slow; install "
-                                     "libopenblas0-openmp (docs/benchmarks.md, \"BLAS\")",
+                                     "libopenblas0-openmp (README.md, \"Dependencies\")",
                                      blas));
 }
 

@@ -1,6 +1,6 @@
 // TorchScript interop: an LSTM model exported as a TorchScript module with its
 // normalization inside, and a TorchScript LSTM trained in PyTorch imported and
-// checked against the module's own forward (layout: docs/dynamics.md).
+// checked against the module's own forward (layout: docs/formats.md).
 
 #include <fmt/format.h>
 #include <torch/script.h>
@@ -176,7 +176,7 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   for (const auto& nb : m.named_buffers(true)) p[nb.name] = nb.value;
   auto get = [&](const std::string& name) -> torch::Tensor {
     auto it = p.find(name);
-    if (it == p.end()) import_error(path, name, "missing parameter or buffer (see docs/dynamics.md for the layout)");
+    if (it == p.end()) import_error(path, name, "missing parameter or buffer (see docs/formats.md for the layout)");
     return it->second;
   };
   LstmNetwork net;
@@ -293,7 +293,7 @@ std::unique_ptr<LstmTorqueModel> import_torchscript(const std::filesystem::path&
   if ((mine - theirs).cwiseAbs().maxCoeff() > 1e-4 * scale)
     import_error(path, "forward",
                  fmt::format("the module's forward disagrees with its parameters read as the documented layout "
-                             "(max difference {:.3g}); is the layout as in docs/dynamics.md?",
+                             "(max difference {:.3g}); is the layout as in docs/formats.md?",
                              (mine - theirs).cwiseAbs().maxCoeff()));
   return model;
 }

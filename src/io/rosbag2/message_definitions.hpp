@@ -1,13 +1,13 @@
 #pragma once
-// Internal to the test writer (rosbag2_writer.cpp): what its two storage files
-// share, the message types and their definitions as rosbag2 stores them.
+// Internal to io: what the bag writer's two storage files share, the message
+// types and their definitions as rosbag2 stores them.
 
 #include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
 
-namespace rcm::test::detail {
+namespace rcm::rosbag2::detail {
 
 namespace fs = std::filesystem;
 using Bytes = std::vector<std::uint8_t>;
@@ -15,6 +15,11 @@ using Bytes = std::vector<std::uint8_t>;
 constexpr const char* kJointStateType = "sensor_msgs/msg/JointState";
 constexpr const char* kWrenchType = "geometry_msgs/msg/WrenchStamped";
 constexpr const char* kForceFrame = "PSM1_base";
+
+// A topic as a storage file declares it.
+struct BagTopic {
+  std::string name, type, format = "cdr";
+};
 
 // The definitions rosbag2 stores with a topic (MCAP Schema data, SQLite
 // message_definitions): the type's .msg text followed by its dependencies.
@@ -67,4 +72,4 @@ inline std::string message_definition(const std::string& type) {
   return "";
 }
 
-}  // namespace rcm::test::detail
+}  // namespace rcm::rosbag2::detail

@@ -1,17 +1,19 @@
 #pragma once
-// Internal to the test writer: a rosbag2 SQLite storage file (.db3) in each
-// schema rosbag2 has written (0: before Humble, 3: Humble, 4: Jazzy), filled
-// topic by topic and message by message in one transaction.
+// Internal to io (the bag writer; the tests write defects with it): a rosbag2
+// SQLite storage file (.db3) in each schema rosbag2 has written (0: before
+// Humble, 3: Humble, 4: Jazzy), filled topic by topic and message by message
+// in one transaction.
 
 #include <sqlite3.h>
 
+#include <cstdint>
 #include <memory>
 #include <stdexcept>
+#include <string>
 
-#include "rosbag2_writer_types.hpp"
-#include "support/rosbag2_writer.hpp"
+#include "io/rosbag2/message_definitions.hpp"
 
-namespace rcm::test::detail {
+namespace rcm::rosbag2::detail {
 
 class Db3File {
  public:
@@ -123,4 +125,4 @@ class Db3File {
   Statement insert_;
 };
 
-}  // namespace rcm::test::detail
+}  // namespace rcm::rosbag2::detail

@@ -1,59 +1,40 @@
 #pragma once
-// Internal to the test writer: an MCAP storage file (mcap.dev/spec, version 0)
-// as rosbag2 writes it, chunked or not, compressed with zstd or lz4, with or
-// without its summary and message indexes.
+// Internal to io (the bag writer): an MCAP storage file (mcap.dev/spec,
+// version 0) as rosbag2 writes it, chunked or not, compressed with zstd or lz4,
+// with or without its summary and message indexes. The record layout (magic,
+// opcodes) and the CRC-32 are the reader's (mcap_records.hpp).
 
 #include <lz4frame.h>
 #include <zstd.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <fstream>
 #include <map>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
-#include "rosbag2_writer_types.hpp"
-#include "support/rosbag2_writer.hpp"
+#include "io/rosbag2/mcap_records.hpp"
+#include "io/rosbag2/message_definitions.hpp"
+#include "rcm/io/rosbag2_writer.hpp"
 
-namespace rcm::test::detail {
+namespace rcm::rosbag2::detail {
 
-constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
+using mcap::detail::kMagic;
+using namespace mcap::detail;  // the opcodes
 
-// clang-format off
-enum Op : std::uint8_t {
-  kHeader = 0x01, kFooter = 0x02, kSchema = 0x03, kChannel = 0x04, kMessage = 0x05, kChunk = 0x06,
-  kMessageIndex = 0x07, kChunkIndex = 0x08, kStatistics = 0x0B, kSummaryOffset = 0x0E, kDataEnd = 0x0F
-};
-// clang-format on
-
-// CRC-32 of zlib (reflected 0xEDB88320), written here rather than shared with
-// the reader so that a mistake in one cannot hide in the other.
+// The CRC-32 of a byte stream fed in pieces.
 class Crc32 {
  public:
-  void update(const std::uint8_t* p, std::size_t n) {
-    static const auto table = [] {
-      std::array<std::uint32_t, 256> t{};
-      for (std::uint32_t i = 0; i < 256; ++i) {
-        std::uint32_t v = i;
-        for (int k = 0; k < 8; ++k) v = (v & 1u) ? (v >> 1) ^ 0xEDB88320u : v >> 1;
-        t[i] = v;
-      }
-      return t;
-    }();
-    std::uint32_t c = c_;
-    for (std::size_t i = 0; i < n; ++i) c = table[(c ^ p[i]) & 0xffu] ^ (c >> 8);
-    c_ = c;
-  }
-  std::uint32_t value() const { return ~c_; }
+  void update(const std::uint8_t* p, std::size_t n) { c_ = mcap::detail::crc32_update(c_, p, n); }
+  std::uint32_t value() const { return c_; }
 
  private:
-  std::uint32_t c_ = 0xffffffffu;
+  std::uint32_t c_ = 0;
 };
 
-inline std::uint32_t crc32_of(const Bytes& b) {
-  Crc32 c;
-  c.update(b.data(), b.size());
-  return c.value();
-}
+inline std::uint32_t crc32_of(const Bytes& b) { return mcap::detail::crc32_update(0, b.data(), b.size()); }
 
 inline void put(Bytes& b, std::uint64_t v, int bytes) {
   for (int i = 0; i < bytes; ++i) b.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
@@ -103,7 +84,7 @@ class McapFile {
     emit(kMagic, sizeof kMagic);
     Bytes header, body;
     put_string(body, "ros2");
-    put_string(body, "rcm test support (rosbag2_writer)");
+    put_string(body, "rcm");
     put_record(header, kHeader, body);
     emit(header);
   }
@@ -356,4 +337,4 @@ class McapFile {
   std::vector<Bytes> chunk_indexes_;  // ChunkIndex bodies for the summary
 };
 
-}  // namespace rcm::test::detail
+}  // namespace rcm::rosbag2::detail
