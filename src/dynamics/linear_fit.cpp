@@ -48,8 +48,7 @@ constexpr int kPitchJoint = 1, kInsertionJoint = 2;
 // row by row, 0.48), and the terms fitted at one speed lower the error at the
 // other; on yaw and the insertion the residual does not carry across speed
 // (0.09 and 0.16-0.19), and the same terms, though they fit a later slice of
-// the same run better, raise the error from full to half speed
-// (docs/dynamics.md).
+// the same run better, raise the error from full to half speed (docs/methods.md).
 constexpr unsigned kTravelJoints = 1u << kPitchJoint;
 
 // Gram matrix of one joint's regressor [gravity (17, joints 1-3), qdd, v, z, 1]

@@ -6,7 +6,7 @@
 // with a level that varies along the travel. On the real PSM the pitch torque
 // the rigid-body model leaves has the same shape along the travel at both
 // speeds and all four payloads, and builds up over every scale of the distance
-// moved since the last reversal (docs/dynamics.md). Every term is a function
+// moved since the last reversal (docs/methods.md). Every term is a function
 // of the path in joint space, not of the speed along it, so it carries to any
 // speed the path is run at.
 //
