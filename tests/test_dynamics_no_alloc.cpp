@@ -12,6 +12,7 @@
 
 #include "rcm/dynamics/excitation.hpp"
 #include "rcm/dynamics/linear_model.hpp"
+#include "rcm/dynamics/travel_terms.hpp"
 #include "rcm/dynamics/networks.hpp"
 
 using rcm::test::g_allocations;
@@ -48,6 +49,12 @@ TEST(NoAllocation, ComputeStepOfEveryKind) {
   lp_rigid.coulomb_profile_range.col(0).setConstant(-1.0);
   lp_rigid.coulomb_profile_range.col(1).setConstant(1.0);
   lp_rigid.stiffness = Eigen::VectorXd::Constant(6, 0.2);
+  // The travel terms on every joint (a fit gives them to pitch).
+  lp_rigid.travel_range = lp_rigid.coulomb_profile_range;
+  lp_rigid.travel_torque = Eigen::MatrixXd::Constant(6, rcm::dynamics::kTravelTorqueKnots, 0.01);
+  lp_rigid.travel_hysteresis_displacement = Eigen::MatrixXd::Constant(6, rcm::dynamics::kTravelHysteresisElements, 0.01);
+  lp_rigid.travel_hysteresis = Eigen::MatrixXd::Constant(
+      6, rcm::dynamics::kTravelHysteresisElements * rcm::dynamics::kTravelHysteresisKnots, 0.02);
   models.push_back(std::make_unique<LinearTorqueModel>(info, lp_rigid));
   models.push_back(std::make_unique<HybridTorqueModel>(info, base, make_random_lstm_network(12, 32, 1, 16, 6, 2), norm));
   Normalization with_direction = norm;  // the fitted default: three direction features per joint

@@ -94,8 +94,11 @@ class TestDynamics(unittest.TestCase):
         armature = self.model().parameters.armature
         for j in range(2):
             self.assertLess(abs(out["payload"]["inertia_kg_m2"][j]), 0.05 * armature[j])
-        for before, after in zip(out["rms_before"], out["rms_after"]):
-            self.assertLessEqual(after, before + 1e-12)
+        # The refit minimizes the residual pooled over the joints (one joint's
+        # may grow a little while the sum shrinks).
+        before = sum(r * r for r in out["rms_before"])
+        after = sum(r * r for r in out["rms_after"])
+        self.assertLessEqual(after, before + 1e-12)
         self.assertEqual(rcm.dynamics.predict_torque(out["model"], free).shape, (free.num_samples, 3))
         options = rcm.dynamics.FitOptions()
         options.verbose = False

@@ -255,6 +255,9 @@ const OptionTable<FitOptions>& get_option_table(OptionTag<FitOptions>) {
           .add("insertion_stiffness", &FitOptions::insertion_stiffness,
                "linear, hybrid, with the rigid-body structure: a stiffness along the insertion, an elastic element "
                "that no rigid link's weight gives (false: none)")
+          .add("travel_terms", &FitOptions::travel_terms,
+               "linear, hybrid, with the rigid-body structure: a torque and a multi-scale hysteretic friction "
+               "along each joint's travel, fitted on what the rest leaves, where they predict better (false: none)")
           .add("live_zero_phase", &FitOptions::live_zero_phase,
                "linear: live torque from the fit's zero-phase qddot, trailing by about half its window (false: "
                "causal qddot, no delay)")

@@ -17,6 +17,7 @@
 
 #include "acceleration.hpp"
 #include "rcm/dynamics/rigid_body.hpp"
+#include "rcm/dynamics/travel_terms.hpp"
 #include "model_io.hpp"
 #include "gravity_terms.hpp"
 
@@ -33,6 +34,9 @@ using detail::G;
 
 struct LinearWorkspace final : TorqueModelWorkspace {
   Eigen::VectorXd prev_q, z, z_slow, acceleration;
+  // M x H, a joint's elements contiguous: the travel terms' Dahl states.
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> z_travel;
+  Eigen::VectorXd travel_row;     // one joint's travel regressor
   std::vector<AccelerationEstimator> qdd;
   bool has_previous = false;
   Eigen::Matrix<double, 3, G> Y;
@@ -115,6 +119,25 @@ LinearTorqueModel::LinearTorqueModel(TorqueModelInfo info, LinearTorqueParameter
         !(q.coulomb_profile_range.col(1).array() > q.coulomb_profile_range.col(0).array()).all())
       throw std::invalid_argument("linear model: coulomb_profile must be finite over ranges with lo < hi");
   }
+  const bool travel = q.travel_range.size() || q.travel_torque.size() || q.travel_hysteresis_displacement.size() ||
+                      q.travel_hysteresis.size();
+  if (travel) {
+    const Eigen::Index H = q.travel_hysteresis_displacement.cols();
+    if (q.travel_range.rows() != M || q.travel_range.cols() != 2 || q.travel_torque.rows() != M ||
+        q.travel_torque.cols() < 2 || q.travel_hysteresis_displacement.rows() != M || H < 1 ||
+        q.travel_hysteresis.rows() != M || q.travel_hysteresis.cols() % H != 0 || q.travel_hysteresis.cols() / H < 2)
+      throw std::invalid_argument(
+          "linear model: the travel terms need travel_range M x 2, travel_torque M x Kt (Kt >= 2), "
+          "travel_hysteresis_displacement M x H (H >= 1) and travel_hysteresis M x H Kh (Kh >= 2), or none");
+    if (!(q.travel_range.col(1).array() > q.travel_range.col(0).array()).all() || !q.travel_torque.allFinite() ||
+        !q.travel_hysteresis.allFinite() || !(q.travel_hysteresis_displacement.array() > 0).all() ||
+        !q.travel_hysteresis_displacement.allFinite())
+      throw std::invalid_argument(
+          "linear model: the travel terms must be finite, over ranges with lo < hi, with positive displacements");
+    travel_coefficients_.resize(M, q.travel_torque.cols() + q.travel_hysteresis.cols());
+    travel_coefficients_ << q.travel_torque, q.travel_hysteresis;
+    for (int j = 0; j < M; ++j) has_travel_.push_back((travel_coefficients_.row(j).array() != 0).any());
+  }
   if (!(q.acceleration_window_s.array() >= 0).all() || !(q.acceleration_filter_s.array() >= 0).all() ||
       !(q.batch_acceleration_window_s.array() >= 0).all())
     throw std::invalid_argument("linear model: the acceleration windows and filters must be >= 0");
@@ -136,6 +159,8 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
   ws->z = Eigen::VectorXd::Zero(M);
   ws->acceleration = Eigen::VectorXd::Zero(M);
   ws->z_slow = Eigen::VectorXd::Zero(M);
+  ws->z_travel = Eigen::MatrixXd::Zero(M, parameters_.travel_hysteresis_displacement.cols());
+  ws->travel_row = Eigen::VectorXd::Zero(travel_coefficients_.cols());
   ws->qdd.reserve(M);
   for (int j = 0; j < M; ++j)
     ws->qdd.emplace_back(parameters_.acceleration_window_s[j], parameters_.acceleration_filter_s[j],
@@ -159,6 +184,7 @@ void LinearTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   auto& ws = static_cast<LinearWorkspace&>(workspace);
   ws.z.setZero();
   ws.z_slow.setZero();
+  ws.z_travel.setZero();
   for (auto& e : ws.qdd) e.reset();
   ws.has_previous = false;
   ws.pushed = ws.done = 0;
@@ -276,6 +302,17 @@ void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, const do
     if (j < 3) value += ws.Y.row(j).dot(p.gravity);
     if (has_extra_friction_) value += p.coulomb_slow[j] * ws.z_slow[j] + p.sqrt_viscous[j] * compute_sqrt_velocity(v);
     if (p.stiffness.size()) value += p.stiffness[j] * q[j];
+    if (!has_travel_.empty() && has_travel_[static_cast<std::size_t>(j)]) {
+      const Eigen::Index H = p.travel_hysteresis_displacement.cols();
+      for (Eigen::Index h = 0; h < H && ws.has_previous; ++h)
+        ws.z_travel(j, h) =
+            compute_dahl_state(ws.z_travel(j, h), q[j] - ws.prev_q[j], p.travel_hysteresis_displacement(j, h));
+      compute_travel_regressor(q[j], p.travel_range(j, 0), p.travel_range(j, 1), ws.z_travel.row(j).data(),
+                               static_cast<int>(H),
+                               static_cast<int>(p.travel_torque.cols()),
+                               static_cast<int>(p.travel_hysteresis.cols() / H), ws.travel_row.data());
+      value += travel_coefficients_.row(j).dot(ws.travel_row.transpose());
+    }
     tau[j] = value;
     ws.prev_q[j] = q[j];
   }
@@ -430,6 +467,12 @@ nlohmann::json LinearTorqueModel::save_parameters() const {
     j["coulomb_profile_range"] = detail::encode_array(p.coulomb_profile_range);
   }
   if (p.stiffness.size()) j["stiffness"] = detail::encode_vector(p.stiffness);
+  if (p.travel_range.size()) {
+    j["travel_range"] = detail::encode_array(p.travel_range);
+    j["travel_torque"] = detail::encode_array(p.travel_torque);
+    j["travel_hysteresis_displacement"] = detail::encode_array(p.travel_hysteresis_displacement);
+    j["travel_hysteresis"] = detail::encode_array(p.travel_hysteresis);
+  }
   if (p.live_zero_phase) j["live_zero_phase"] = true;
   return j;
 }
@@ -513,6 +556,38 @@ std::unique_ptr<TorqueModel> detail::load_linear_parameters(TorqueModelInfo info
       fail(source, f + ".coulomb_profile_range", "expected lo < hi on every row");
   }
   if (j.contains("stiffness")) p.stiffness = decode_vector_d(j["stiffness"], source, f + ".stiffness", M);
+  {
+    // The travel terms: the four fields together or none.
+    const char* fields[] = {"travel_range", "travel_torque", "travel_hysteresis_displacement", "travel_hysteresis"};
+    int present = 0;
+    for (const char* name : fields) present += j.contains(name) ? 1 : 0;
+    if (present != 0 && present != 4)
+      for (const char* name : fields)
+        if (!j.contains(name)) fail(source, f + "." + name, "missing (the four travel fields come together)");
+    if (present == 4) {
+      p.travel_range = decode_array_d(j["travel_range"], source, f + ".travel_range");
+      p.travel_torque = decode_array_d(j["travel_torque"], source, f + ".travel_torque");
+      p.travel_hysteresis_displacement =
+          decode_array_d(j["travel_hysteresis_displacement"], source, f + ".travel_hysteresis_displacement");
+      p.travel_hysteresis = decode_array_d(j["travel_hysteresis"], source, f + ".travel_hysteresis");
+      const Eigen::Index H = p.travel_hysteresis_displacement.cols();
+      if (p.travel_range.rows() != M || p.travel_range.cols() != 2)
+        fail(source, f + ".travel_range", fmt::format("expected {} rows of 2 values", M));
+      if (!(p.travel_range.col(1).array() > p.travel_range.col(0).array()).all())
+        fail(source, f + ".travel_range", "expected lo < hi on every row");
+      if (p.travel_torque.rows() != M || p.travel_torque.cols() < 2)
+        fail(source, f + ".travel_torque", fmt::format("expected {} rows of at least 2 values", M));
+      if (p.travel_hysteresis_displacement.rows() != M || H < 1)
+        fail(source, f + ".travel_hysteresis_displacement", fmt::format("expected {} rows of at least 1 value", M));
+      if (!(p.travel_hysteresis_displacement.array() > 0).all() || !p.travel_hysteresis_displacement.allFinite())
+        fail(source, f + ".travel_hysteresis_displacement", "expected finite positive values");
+      if (p.travel_hysteresis.rows() != M || p.travel_hysteresis.cols() % H != 0 || p.travel_hysteresis.cols() / H < 2)
+        fail(source, f + ".travel_hysteresis",
+             fmt::format("expected {} rows of H x Kh values, H = {} (travel_hysteresis_displacement), Kh >= 2", M, H));
+      if (!p.travel_torque.allFinite()) fail(source, f + ".travel_torque", "expected finite values");
+      if (!p.travel_hysteresis.allFinite()) fail(source, f + ".travel_hysteresis", "expected finite values");
+    }
+  }
   if (j.contains("live_zero_phase")) {
     if (!j["live_zero_phase"].is_boolean()) fail(source, f + ".live_zero_phase", "expected true or false");
     p.live_zero_phase = j["live_zero_phase"].get<bool>();

@@ -13,6 +13,9 @@ namespace rcm::dynamics::detail {
 
 namespace {
 using detail::G;
+// Ridge of the travel terms' fit, relative to the mean of their normal
+// matrix's diagonal.
+constexpr double kTravelRidge = 1e-4;
 }  // namespace
 
 ModelStats& ModelStats::operator+=(const ModelStats& o) {
@@ -20,7 +23,36 @@ ModelStats& ModelStats::operator+=(const ModelStats& o) {
   b += o.b;
   yy += o.yy;
   rows += o.rows;
+  if (travel.size() < o.travel.size()) travel.resize(o.travel.size());
+  for (std::size_t j = 0; j < o.travel.size(); ++j) {
+    auto& t = travel[j];
+    const auto& u = o.travel[j];
+    if (!u.ee.size()) continue;
+    if (!t.ee.size()) {
+      t = u;
+    } else {
+      t.ee += u.ee;
+      t.ex += u.ex;
+      t.ey += u.ey;
+    }
+  }
   return *this;
+}
+
+Eigen::VectorXd solve_travel_terms(const ModelStats& stats, int j, const Eigen::VectorXd& theta) {
+  const auto& t = stats.travel.at(static_cast<std::size_t>(j));
+  // The elements' states are nearly collinear (neighbouring displacements):
+  // without a ridge the fit cancels large levels against each other, which
+  // another slice of the path then does not cancel.
+  Eigen::MatrixXd A = t.ee;
+  A.diagonal().array() += kTravelRidge * t.ee.diagonal().mean();
+  return solve_bounded_normal_equations(A, t.ey - t.ex * theta, {});
+}
+
+double compute_loss_with_travel(const ModelStats& stats, int j, const Eigen::VectorXd& theta,
+                                const Eigen::VectorXd& c) {
+  const auto& t = stats.travel.at(static_cast<std::size_t>(j));
+  return stats.compute_loss(theta) - 2.0 * c.dot(t.ey - t.ex * theta) + c.dot(t.ee * c);
 }
 
 double ModelStats::compute_loss(const Eigen::VectorXd& theta) const {
@@ -34,7 +66,15 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
   const int M = static_cast<int>(choices.size());
   const int P = kRigidBodyShared + kRigidBodyBlock * M;
   const std::size_t num_groups = groups.size();
-  std::vector<ModelStats> stats(num_groups, ModelStats{Eigen::MatrixXd::Zero(P, P), Eigen::VectorXd::Zero(P), 0.0, 0});
+  std::vector<ModelStats> stats(num_groups, ModelStats{Eigen::MatrixXd::Zero(P, P), Eigen::VectorXd::Zero(P), 0.0, 0, {}});
+  constexpr int E = kTravelColumns;
+  for (auto& s : stats) {
+    s.travel.resize(static_cast<std::size_t>(M));
+    for (int j = 0; j < M; ++j)
+      if (choices[j].travel)
+        s.travel[static_cast<std::size_t>(j)] = {Eigen::MatrixXd::Zero(E, E), Eigen::MatrixXd::Zero(E, P),
+                                                 Eigen::VectorXd::Zero(E)};
+  }
   // Which groups each sample of each recording belongs to (bit g), and how far
   // each recording is needed.
   std::vector<std::vector<std::uint32_t>> member(recordings.size());
@@ -50,6 +90,28 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
   std::vector<Eigen::MatrixXd> F(num_groups, Eigen::MatrixXd(kChunk, P));
   std::vector<Eigen::VectorXd> y(num_groups, Eigen::VectorXd(kChunk));
   std::vector<Eigen::Index> n(num_groups, 0);
+  // The travel rows of each group and joint, and the model rows and torques
+  // they go with.
+  constexpr Eigen::Index kTravelChunk = 512;
+  std::vector<std::vector<Eigen::MatrixXd>> Fe(num_groups), Fx(num_groups);
+  std::vector<std::vector<Eigen::VectorXd>> ye(num_groups);
+  std::vector<std::vector<Eigen::Index>> ne(num_groups, std::vector<Eigen::Index>(static_cast<std::size_t>(M), 0));
+  for (std::size_t g = 0; g < num_groups; ++g)
+    for (int j = 0; j < M; ++j) {
+      const bool on = choices[j].travel;
+      Fe[g].push_back(on ? Eigen::MatrixXd(kTravelChunk, E) : Eigen::MatrixXd());
+      Fx[g].push_back(on ? Eigen::MatrixXd(kTravelChunk, P) : Eigen::MatrixXd());
+      ye[g].push_back(on ? Eigen::VectorXd(kTravelChunk) : Eigen::VectorXd());
+    }
+  auto flush_travel = [&](std::size_t g, int j) {
+    const auto u = static_cast<std::size_t>(j);
+    const Eigen::Index k = ne[g][u];
+    auto& t = stats[g].travel[u];
+    t.ee.noalias() += Fe[g][u].topRows(k).transpose() * Fe[g][u].topRows(k);
+    t.ex.noalias() += Fe[g][u].topRows(k).transpose() * Fx[g][u].topRows(k);
+    t.ey.noalias() += Fe[g][u].topRows(k).transpose() * ye[g][u].head(k);
+    ne[g][u] = 0;
+  };
   auto flush = [&](std::size_t g) {
     const Eigen::Index k = n[g];
     stats[g].A.noalias() += F[g].topRows(k).transpose() * F[g].topRows(k);
@@ -64,6 +126,9 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
   for (const auto& c : choices) estimators.emplace_back(c.causal_window_s, c.causal_filter_s, sample_period_s);
   std::vector<Eigen::VectorXd> batch(M);
   Eigen::VectorXd z(M), z_slow(M), qdd(M);
+  Eigen::Matrix<double, Eigen::Dynamic, kTravelHysteresisElements, Eigen::RowMajor> z_travel(M,
+                                                                                          kTravelHysteresisElements);
+  Eigen::RowVectorXd travel_row(E);
   for (std::size_t r = 0; r < recordings.size(); ++r) {
     if (needed[r] == 0) continue;
     const auto& rec = recordings[r];
@@ -76,12 +141,16 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
     for (auto& e : estimators) e.reset();
     z.setZero();
     z_slow.setZero();
+    z_travel.setZero();
     for (Eigen::Index t = 0; t < needed[r]; ++t) {
       for (int j = 0; j < M; ++j) {
         if (t > 0) {
           const double dq = rec.position(t, j) - rec.position(t - 1, j);
           z[j] = compute_dahl_state(z[j], dq, choices[j].dahl_displacement);
           z_slow[j] = compute_dahl_state(z_slow[j], dq, choices[j].slow_dahl_displacement);
+          if (choices[j].travel)
+            for (int h = 0; h < kTravelHysteresisElements; ++h)
+              z_travel(j, h) = compute_dahl_state(z_travel(j, h), dq, choices[j].get_travel_displacement(h));
         }
         estimators[j].update(rec.time(t), rec.velocity(t, j));
       }
@@ -113,18 +182,32 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
         // Knot 0's column is the constant Coulomb column's.
         if (k > 0) row(rigid_body_block_index(j, kCoulombProfileFirst + k - 1)) = (1.0 - u) * z[j] * w;
         row(rigid_body_block_index(j, kCoulombProfileFirst + k)) = u * z[j] * w;
+        if (choices[j].travel)
+          compute_travel_regressor(rec.position(t, j), choices[j].profile_lo, choices[j].profile_hi,
+                                   z_travel.row(j).data(), kTravelHysteresisElements, kTravelTorqueKnots,
+                                   kTravelHysteresisKnots, travel_row.data());
+        const auto ju = static_cast<std::size_t>(j);
         for (std::size_t g = 0; g < num_groups; ++g)
           if (in & (1u << g)) {
             F[g].row(n[g]) = row;
             y[g](n[g]) = rec.effort(t, j) * w;
             ++stats[g].rows;
             if (++n[g] == kChunk) flush(g);
+            if (choices[j].travel) {
+              Fe[g][ju].row(ne[g][ju]) = travel_row * w;
+              Fx[g][ju].row(ne[g][ju]) = row;
+              ye[g][ju](ne[g][ju]) = rec.effort(t, j) * w;
+              if (++ne[g][ju] == kTravelChunk) flush_travel(g, j);
+            }
           }
       }
     }
   }
-  for (std::size_t g = 0; g < num_groups; ++g)
+  for (std::size_t g = 0; g < num_groups; ++g) {
     if (n[g]) flush(g);
+    for (int j = 0; j < M; ++j)
+      if (ne[g][static_cast<std::size_t>(j)]) flush_travel(g, j);
+  }
   return stats;
 }
 

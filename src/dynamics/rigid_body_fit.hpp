@@ -12,6 +12,7 @@
 #include "rcm/dynamics/fit.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/rigid_body.hpp"
+#include "rcm/dynamics/travel_terms.hpp"
 
 namespace rcm::dynamics::detail {
 
@@ -26,17 +27,32 @@ struct JointEstimatorChoice {
   // Where the stiffness column is zero: the middle of that range, for the
   // conditioning (the offset takes the difference back).
   double get_stiffness_origin() const { return 0.5 * (profile_lo + profile_hi); }
+  // Whether the statistics of the travel terms (travel_terms.hpp, over the
+  // same range) are gathered for this joint.
+  bool travel = false;
+  double get_travel_displacement(int h) const {
+    return kTravelHysteresisFractions[static_cast<std::size_t>(h)] * (profile_hi - profile_lo);
+  }
 };
 
 // Normal equations of the weighted rows of every joint, parameters in the order
 // [gravity 17 | inertia 19 | per joint: armature, viscous, coulomb, offset,
 // slow coulomb, sqrt-viscous, stiffness, Coulomb profile at knots 1..K-1]
 // (LinearTorqueParameters, K = kCoulombProfileKnots).
+// One joint's travel terms against the model's columns: e the travel
+// regressor, x the model's row and y the torque (weighted as the rows).
+struct TravelStats {
+  Eigen::MatrixXd ee;  // sum e e^T
+  Eigen::MatrixXd ex;  // sum e x^T
+  Eigen::VectorXd ey;  // sum e y
+};
 struct ModelStats {
   Eigen::MatrixXd A;
   Eigen::VectorXd b;
   double yy = 0.0;
   std::size_t rows = 0;
+  // Per joint: empty unless its JointEstimatorChoice::travel was set.
+  std::vector<TravelStats> travel;
   ModelStats& operator+=(const ModelStats& o);
   // Weighted sum of squared residuals of theta (full layout).
   double compute_loss(const Eigen::VectorXd& theta) const;
@@ -69,6 +85,14 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
 std::vector<std::vector<SampleSegment>> split_by_speed(const std::vector<Recording>& recordings,
                                                        const std::vector<SampleSegment>& segments, int num_outputs,
                                                        double chunk_s = 0.5);
+
+// The travel terms of joint j fitted on what the model theta (full layout)
+// leaves of the samples of `stats` (least squares, the ridge of
+// solve_bounded_normal_equations for knots the samples do not reach).
+Eigen::VectorXd solve_travel_terms(const ModelStats& stats, int j, const Eigen::VectorXd& theta);
+// compute_loss of theta with joint j's travel terms c added.
+double compute_loss_with_travel(const ModelStats& stats, int j, const Eigen::VectorXd& theta,
+                                const Eigen::VectorXd& c);
 
 // How the 19 inertia coefficients are fitted: free, or tied by the bodies of
 // a remote-centre arm (rigid_body.hpp, compute_remote_center_map).

@@ -88,6 +88,11 @@ struct FitOptions {
   // linear and hybrid, with the rigid-body structure: a stiffness along the
   // insertion (linear_model.hpp); false: none.
   bool insertion_stiffness = true;
+  // linear and hybrid, with the rigid-body structure: the travel terms of
+  // travel_terms.hpp, fitted on what the rest of the model leaves, kept per
+  // joint when they predict the validation split and the other speed more
+  // than 1 % better; false: none.
+  bool travel_terms = true;
   // linear: the live path (compute_step) takes qddot from the zero-phase
   // estimate the fit regressed on, its torque trailing by about half that
   // window (linear_model.hpp), so that live and offline torques agree; false:

@@ -67,6 +67,12 @@
 // fit at one speed takes the wrong inertia for the other. On yaw and pitch a
 // spring is nearly in the span of the gravity terms, and fitted there it
 // trades places with them.
+// And, per joint where they predict better, the travel terms of
+// travel_terms.hpp (a torque and a multi-scale hysteretic friction along the
+// travel), fitted after everything else on what it leaves, so that they cannot
+// take over the gravity or the inertia: on the real PSM, fitted with them,
+// they trade places with the gravity direction and the error at the other
+// speed grows.
 
 #include <Eigen/Core>
 #include <cmath>
@@ -159,6 +165,16 @@ struct LinearTorqueParameters {
   // Per output joint (empty: none): torque per unit of the joint's position
   // (N m/rad or N/m); `offset` is the torque at q = 0.
   Eigen::VectorXd stiffness;
+  // Per output joint (all four empty: none for any): the travel terms of
+  // travel_terms.hpp over [travel_range(j, 0), travel_range(j, 1)] (M x 2, lo
+  // < hi): the torque at Kt >= 2 knots (travel_torque, M x Kt), and H >= 1
+  // Dahl elements of displacement travel_hysteresis_displacement (M x H, joint
+  // units, > 0) whose levels at Kh >= 2 knots are travel_hysteresis (M x H Kh,
+  // element h at columns h Kh ..). A joint whose row of both is zero has none.
+  Eigen::MatrixXd travel_range;
+  Eigen::MatrixXd travel_torque;
+  Eigen::MatrixXd travel_hysteresis_displacement;
+  Eigen::MatrixXd travel_hysteresis;
   // compute_step() takes the zero-phase qddot of the joints whose
   // batch_acceleration_window_s > 0, its torque trailing by output_delay()
   // (above); false: the causal estimate, no delay (model files without the
@@ -212,6 +228,10 @@ class LinearTorqueModel final : public TorqueModel {
   friend class LinearSequencePredictor;
   LinearTorqueParameters parameters_;
   bool has_extra_friction_ = false;  // coulomb_slow and sqrt_viscous present
+  // [travel_torque | travel_hysteresis] per joint, and which joints have a
+  // nonzero row (the others skip the travel terms).
+  Eigen::MatrixXd travel_coefficients_;
+  std::vector<bool> has_travel_;
   int live_delay_samples_ = 0;       // output_delay()
 };
 
