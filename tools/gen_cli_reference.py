@@ -148,7 +148,8 @@ def compact(text, heading, seen):
             continue
         named = next((v for k, v in NAMED_SECTIONS.items() if head.startswith(k)), None)
         if head.startswith(STUDY_OPTIONS):
-            seen.setdefault(STUDY_OPTIONS, "\n".join(dedent(re.sub(r"(?<=\S) {3,}", "  ", l)) for l in lines[1:]))
+            seen.setdefault(STUDY_OPTIONS, "\n".join(implied_type(dedent(re.sub(r"(?<=\S) {3,}", "  ", l)))
+                                                     for l in lines[1:]))
         if named is not None:
             out.append(named)
             continue
@@ -276,6 +277,21 @@ def old_sections(text):
     return kept
 
 
+IMPLIED_TYPES = {  # a default written so shows its type
+    "number": r"-?\d+(\.\d+)?(e[-+]?\d+)?", "integer": r"-?\d+", "true|false": r"true|false", "text": r'".*"'}
+
+
+def implied_type(line):
+    """A study option's `[type, default V]` as `[default V]` when the default's form says the type: a number
+    with a point or an exponent, an integer without, true or false, a quoted text."""
+    m = re.search(r"\[(number|integer|true\|false|text), default (.*)\]$", line)
+    if not m or not re.fullmatch(IMPLIED_TYPES[m.group(1)], m.group(2)):
+        return line
+    if m.group(1) == "number" and re.fullmatch(r"-?\d+", m.group(2)):
+        return line  # an integer-looking default of a number field keeps its type
+    return line[:m.start()] + f"[default {m.group(2)}]"
+
+
 def dedent(line):
     """An entry of a help section (a flag, a parameter) starts the line, its wrapped help four spaces in:
     the section's heading, ending in a colon, says what the entries are."""
@@ -324,11 +340,12 @@ def generate(build, study_dir, current):
     if STUDY_OPTIONS in seen:
         files.append("## Study options (`--options FILE`)\n\nAny of these fields, nested as the dots say, for "
                      "`rcm run`, `rcm setup`, `rcm monitor` and Python's `rcm.StudyOptions`. Each line: the field, "
-                     "what it is (unit; limits) [type, default].\n\n```text\n" + seen[STUDY_OPTIONS] + "\n```\n")
+                     "what it is (unit; limits) [type, default]; the type goes unsaid where the default shows it "
+                     "(`2.0` a number, `2` an integer).\n\n```text\n" + seen[STUDY_OPTIONS] + "\n```\n")
     legend = ("One line per object: its path, then its fields, numbers unless marked: `x[]` an array, `x{}` "
               "an object (its own line), `x[{}]` an array of objects, `(text)`, `(true|false)`, `or null`.")
-    files.append("## Model file (rcm-torque-model/1)\n\nThe fields of `free_space_model.json` (the default "
-                 "`linear` kind); arrays of numbers are `{shape, dtype, data}` ([formats.md](formats.md)). " + legend + "\n\n"
+    files.append("## Model file (rcm-torque-model/1)\n\n`free_space_model.json` of the default `linear` kind; arrays "
+                 "of numbers are `{shape, dtype, data}` ([formats.md](formats.md)). " + legend + "\n\n"
                  + field_block(os.path.join(study_dir, "free_space_model.json")) + "\n")
     files.append("## Results file (rcm-results/1)\n\nThe fields of `results.json` from `rcm run` with its "
                  "defaults. Units are SI (m, N, N m, s). The contract's fields: "
