@@ -90,15 +90,16 @@ bench: build
 # Each method's error on the worst seed and its spread, interval coverage, the
 # calibration's bias correction before and after, and the self-check's hits,
 # over 10 seeds x 3 tissue laws x 3 free-space rows on the default bench, as
-# independent tasks, COVERAGE_JOBS at a time, in COVERAGE_WORK (kept: a rerun
+# independent tasks through rcm.batch (COVERAGE_JOBS local workers, or the
+# workers of SCHEDULER, below), in COVERAGE_WORK (kept: a rerun
 # resumes; summary.json holds every task's figures); writes its tables into
 # docs/validation.md. Its wall time is in the table's heading.
 COVERAGE_SEEDS ?= 1,2,3,4,5,6,7,8,9,10
 COVERAGE_JOBS ?= 2
 COVERAGE_WORK ?= coverage-work
 coverage: build
-	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS) --jobs $(COVERAGE_JOBS) \
-	  --work $(COVERAGE_WORK)
+	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS) --work $(COVERAGE_WORK) \
+	  $(if $(SCHEDULER),--scheduler $(SCHEDULER),--workers $(COVERAGE_JOBS))
 
 # The free-space model's held-out torque error and estimate error against the
 # length of teleoperation and excitation data (about 10 minutes on 2 cores);

@@ -79,14 +79,26 @@ def import_rcm_batch(build):
 
 @contextlib.contextmanager
 def open_runner(build, scheduler=None, workers=None):
-    """run(func, tasks) -> [func(*task) for task in tasks], in the tasks' order:
-    through rcm.batch on a Dask cluster (scheduler, or a local one of `workers`
-    processes), or with workers == 0 in this process one after another (no Dask
-    and no rcm package needed: the instrumented test build has none). A failed
-    task raises, naming it, once the others have finished."""
+    """run(func, tasks, progress=None) -> [func(*task) for task in tasks], in the
+    tasks' order: through rcm.batch on a Dask cluster (scheduler, or a local one
+    of `workers` processes), or with workers == 0 in this process one after
+    another (no Dask and no rcm package needed: the instrumented test build has
+    none). progress(value) is called as each task returns. A failed task
+    raises, naming it, once the others have finished."""
     if workers == 0:
-        yield lambda func, tasks: [func(*task) for task in tasks]
+        def run_here(func, tasks, progress=None):
+            values = []
+            for task in tasks:
+                values.append(func(*task))
+                if progress:
+                    progress(values[-1])
+            return values
+        yield run_here
         return
     batch = import_rcm_batch(build)
     with batch.open_client(scheduler, workers) as client:
-        yield lambda func, tasks: batch.get_values(batch.map_tasks(func, [tuple(t) for t in tasks], client=client))
+        def run_on_cluster(func, tasks, progress=None):
+            on_result = (lambda r: r.ok and progress(r.value)) if progress else None
+            return batch.get_values(batch.map_tasks(func, [tuple(t) for t in tasks], client=client,
+                                                    on_result=on_result))
+        yield run_on_cluster

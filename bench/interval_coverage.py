@@ -24,15 +24,15 @@ returns a JSON-able dict (a kept folder resumes):
   correction (`fit_torque_offset` false, no bootstrap: point estimates for
   the before/after table).
 
-`main` runs them on a local process pool (--jobs); a Dask cluster can map the
-same functions. The tables go between the worst-case markers of
+`main` runs them through rcm.batch: a local cluster (--workers, default one
+per core) or a Dask scheduler's workers (--scheduler), which must see --work
+at the same path. The tables go between the worst-case markers of
 docs/validation.md, with the date, machine and wall time, and every task's
 figures into --work/summary.json.
 
 Run with Debian's Python: /usr/bin/python3 bench/interval_coverage.py --build build
 """
 import argparse
-import concurrent.futures
 import datetime
 import json
 import math
@@ -43,7 +43,7 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from doc_tables import cpu_model, publish_block  # noqa: E402
+from doc_tables import add_cluster_flags, cpu_model, open_runner, publish_block  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "validation.md")
@@ -131,6 +131,11 @@ def trial_summary(results, side_of):
     return out
 
 
+def prepare_task(rcm, work, kind, seed, name):
+    """free_space_task or session_task, so that both go to the cluster together."""
+    return (free_space_task if kind == "free_space" else session_task)(rcm, work, seed, name)
+
+
 def study_task(rcm, work, seed, law, row, free_space, session):
     """`rcm run` on the session with the row's free space and model: with and without the bias correction."""
     folder = os.path.join(work, f"study_{row}_{law}_seed{seed}")
@@ -192,11 +197,11 @@ def spread(values):
     return f"{1e3 * v[len(v) // 2]:.2f} [{1e3 * v[0]:.2f} .. {1e3 * v[-1]:.2f}]"
 
 
-def tables(results, wall_s, jobs):
+def tables(results, wall_s, where):
     when = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     seeds = sorted({r["seed"] for r in results})
     lines = [f"Measured by `make coverage` (bench/interval_coverage.py, seeds {', '.join(map(str, seeds))}) on {when}, "
-             f"{os.cpu_count()} cores of {cpu_model()}, {jobs} tasks at a time: {wall_s / 60:.0f} min of wall time in "
+             f"{os.cpu_count()} cores of {cpu_model()}, {where}: {wall_s / 60:.0f} min of wall time in "
              "all. Default bench (`real` friction, counterweighted arm, each trial its own teleoperation). Per seed "
              "and tissue law one session of 15 trials (D = 10..50 mm x radial [0, 0], [10, 15], [-12, 8] mm, two "
              "holds per static file), estimated by `rcm run` with its defaults on the row's linear free-space model. "
@@ -252,17 +257,24 @@ def tables(results, wall_s, jobs):
     return "\n".join(lines)
 
 
+def runs_where(args):
+    if args.scheduler:
+        return "on a Dask cluster's workers"
+    workers = os.cpu_count() if args.workers is None else args.workers
+    return f"{workers} rcm.batch workers" if workers else "one task at a time"
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--build", default="build")
     ap.add_argument("--seeds", default="1,2,3,4,5,6,7,8,9,10")
     ap.add_argument("--rows", default=",".join(ROWS), help="free-space rows: " + ", ".join(ROWS))
     ap.add_argument("--laws", default=",".join(LAWS))
-    ap.add_argument("--jobs", type=int, default=2, help="tasks at a time (each rcm command uses one core)")
     ap.add_argument("--work", help="keep the tasks' folders here (default: a temporary folder); a kept folder resumes")
     ap.add_argument("--no-doc", action="store_true", help="print the tables only")
     ap.add_argument("--report-only", action="store_true",
                     help="run nothing: the tables of the study tasks finished in --work (e.g. by a cluster)")
+    add_cluster_flags(ap)
     args = ap.parse_args()
     rcm = os.path.join(os.path.abspath(args.build), "bin", "rcm")
     work = os.path.abspath(args.work or tempfile.mkdtemp(prefix="rcm_coverage_"))
@@ -288,33 +300,31 @@ def main():
                        if n.startswith("study_") and os.path.exists(os.path.join(work, n, "task.json"))) - first
         if not results:
             sys.exit(f"no finished study task in {work}")
-        publish_block(DOC, BEGIN, END, tables(results, wall, args.jobs), write=not args.no_doc)
+        publish_block(DOC, BEGIN, END, tables(results, wall, runs_where(args)), write=not args.no_doc)
         return
+    def report(r):
+        print(f"seed {r['seed']} {r['law']} {r['row']}: joint "
+              f"{[round(1e3 * x, 2) for x in per_seed(r['corrected']['trials'], 'joint_m')]} mm "
+              f"(before {[round(1e3 * x, 2) for x in per_seed(r['uncorrected']['trials'], 'joint_m')]}), "
+              f"{r['seconds']:.0f} s", file=sys.stderr, flush=True)
+
     start = time.monotonic()
-    with concurrent.futures.ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        fs = {(s, r): pool.submit(free_space_task, rcm, work, s, r) for s in seeds for r in rows}
-        ss = {(s, l): pool.submit(session_task, rcm, work, s, l) for s in seeds for l in laws}
-        studies = []  # row by row, so that the first rows are whole first
-        for r in rows:
-            for s in seeds:
-                for l in laws:
-                    studies.append(pool.submit(study_task, rcm, work, s, l, r, fs[(s, r)].result(),
-                                               ss[(s, l)].result()))
-        results = []
-        for f in concurrent.futures.as_completed(studies):
-            results.append(f.result())
-            r = results[-1]
-            print(f"seed {r['seed']} {r['law']} {r['row']}: joint "
-                  f"{[round(1e3 * x, 2) for x in per_seed(r['corrected']['trials'], 'joint_m')]} mm "
-                  f"(before {[round(1e3 * x, 2) for x in per_seed(r['uncorrected']['trials'], 'joint_m')]}), "
-                  f"{r['seconds']:.0f} s", file=sys.stderr, flush=True)
+    # Through rcm.batch: the free-space recordings and sessions first, then
+    # every study on them; a cluster's workers must see --work at the same path.
+    with open_runner(args.build, args.scheduler, args.workers) as run_all:
+        inputs = run_all(prepare_task, [(rcm, work, "free_space", s, r) for s in seeds for r in rows] +
+                         [(rcm, work, "session", s, l) for s in seeds for l in laws])
+        fs = dict(zip([(s, r) for s in seeds for r in rows], inputs))
+        ss = dict(zip([(s, l) for s in seeds for l in laws], inputs[len(fs):]))
+        results = run_all(study_task, [(rcm, work, s, l, r, fs[(s, r)], ss[(s, l)])
+                                       for r in rows for s in seeds for l in laws], report)
     wall = time.monotonic() - start
     # A resumed run adds the wall time of the runs before it on the same folder.
     if os.path.exists(summary_path):
         with open(summary_path) as f:
             wall += json.load(f).get("wall_s", 0.0)
     write_json(summary_path, {"seeds": seeds, "wall_s": wall, "results": results})
-    publish_block(DOC, BEGIN, END, tables(results, wall, args.jobs), write=not args.no_doc)
+    publish_block(DOC, BEGIN, END, tables(results, wall, runs_where(args)), write=not args.no_doc)
 
 
 if __name__ == "__main__":
