@@ -32,8 +32,9 @@ using detail::kDefaultAccelerationWindow;
 using detail::G;
 
 struct LinearWorkspace final : TorqueModelWorkspace {
-  Eigen::VectorXd prev_q, z, z_slow, acceleration;
+  Eigen::VectorXd prev_q, z, z_slow, acceleration;  // prev_q: at the Dahl states' last step
   std::vector<AccelerationEstimator> qdd;
+  DahlClock dahl_clock;
   bool has_previous = false;
   Eigen::Matrix<double, 3, G> Y;
   Eigen::Matrix<double, 3, kInertiaTerms> Y_inertia;
@@ -136,6 +137,7 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
   ws->z = Eigen::VectorXd::Zero(M);
   ws->acceleration = Eigen::VectorXd::Zero(M);
   ws->z_slow = Eigen::VectorXd::Zero(M);
+  ws->dahl_clock = DahlClock(info().sample_period_s);
   ws->qdd.reserve(M);
   for (int j = 0; j < M; ++j)
     ws->qdd.emplace_back(parameters_.acceleration_window_s[j], parameters_.acceleration_filter_s[j],
@@ -160,6 +162,7 @@ void LinearTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   ws.z.setZero();
   ws.z_slow.setZero();
   for (auto& e : ws.qdd) e.reset();
+  ws.dahl_clock.reset();
   ws.has_previous = false;
   ws.pushed = ws.done = 0;
   ws.back = 1;
@@ -190,7 +193,7 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
     ws.acceleration[j] = ws.qdd[j].update(t, qd[j]);
     if (qdd_batch && parameters_.batch_acceleration_window_s[j] > 0) ws.acceleration[j] = qdd_batch[j];
   }
-  compute_torque(workspace, q, qd, tau);
+  compute_torque(workspace, t, q, qd, tau);
 }
 
 void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, double t, const double* q,
@@ -218,7 +221,7 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
             c, oldest, ws.pushed, [&](std::int64_t k) { return row(k)[0]; },
             [&](std::int64_t k) { return row(k)[1 + N + j]; });
       }
-      compute_torque(workspace, r + 1, r + 1 + N, ws.delayed_tau.data());
+      compute_torque(workspace, t_c, r + 1, r + 1 + N, ws.delayed_tau.data());
       ws.done = c + 1;
       if (ws.run_count < static_cast<int>(ws.run_time.size())) {
         ws.run_time[static_cast<std::size_t>(ws.run_count)] = t_c;
@@ -256,13 +259,14 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
   std::copy(ws.delayed_tau.data(), ws.delayed_tau.data() + M, tau);
 }
 
-void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, const double* q, const double* qd,
+void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                                        double* tau) const {
   auto& ws = static_cast<LinearWorkspace&>(workspace);
   const auto& p = parameters_;
   compute_gravity_regressor(q, ws.Y);
+  const bool dahl_step = ws.dahl_clock.tick(t);
   for (int j = 0; j < num_outputs(); ++j) {
-    if (ws.has_previous) {
+    if (ws.has_previous && dahl_step) {
       ws.z[j] = compute_dahl_state(ws.z[j], q[j] - ws.prev_q[j], p.dahl_displacement[j]);
       if (has_extra_friction_)
         ws.z_slow[j] = compute_dahl_state(ws.z_slow[j], q[j] - ws.prev_q[j], p.dahl_displacement_slow[j]);
@@ -277,7 +281,7 @@ void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, const do
     if (has_extra_friction_) value += p.coulomb_slow[j] * ws.z_slow[j] + p.sqrt_viscous[j] * compute_sqrt_velocity(v);
     if (p.stiffness.size()) value += p.stiffness[j] * q[j];
     tau[j] = value;
-    ws.prev_q[j] = q[j];
+    if (dahl_step) ws.prev_q[j] = q[j];
   }
   if (p.inertia.size() == kInertiaTerms) {
     compute_inertia_regressor(q, qd, ws.acceleration.data(), ws.Y_inertia);
