@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <iostream>
 #include <memory>
@@ -44,11 +45,14 @@ struct SimulateOptions {
   rcm::cli::OptionFlags<rcm::StudyOptions> free_space;  // closed-loop: the estimator's free-space model
   rcm::cli::OptionFlags<rcm::CorrectionOptions> correction;  // closed-loop: the corrector's gates, every scenario
   rcm::cli::OptionFlags<rcm::OnlineEstimatorOptions> online;  // closed-loop: over the bench's estimator options
+  rcm::cli::OptionFlags<rcm::sim::ClosedLoopOptions> loop;    // closed-loop: the loop across processes, modelled
+  std::string motions;                                         // closed-loop: these motions only
 };
 
 // The flags that only the closed-loop bench reads.
 const char* const kClosedLoopFlags[] = {"--model",          "--model-file",     "--tolerance",
-                                        "--compensate-limit", "--max-shift-rate", "--correlation-time"};
+                                        "--compensate-limit", "--max-shift-rate", "--correlation-time",
+                                        "--stream-rate",      "--loop-delay",     "--teleop-stream"};
 
 std::string config_help() {
   const rcm::sim::SimConfig defaults = rcm::sim::make_default_config();
@@ -91,8 +95,28 @@ void run_closed_loop(const SimulateOptions& o, const rcm::CorrectionOptions& cor
                                      rcm::OnlineEstimator(setup.incision, setup.tissue, online));
 
   ClosedLoopOptions options;
+  o.loop.apply(options);
   options.correction = correction;
   std::vector<IncisionMotion> motions = make_default_incision_motions();
+  if (!o.motions.empty()) {
+    std::vector<IncisionMotion> chosen;
+    std::vector<std::string> names;
+    for (std::size_t start = 0; start <= o.motions.size();) {
+      const std::size_t end = std::min(o.motions.find(',', start), o.motions.size());
+      names.push_back(o.motions.substr(start, end - start));
+      start = end + 1;
+    }
+    for (const std::string& name : names) {
+      const auto it = std::find_if(motions.begin(), motions.end(), [&](const auto& m) { return m.name == name; });
+      if (it == motions.end()) {
+        rcm::InputLocation loc;
+        loc.file = "--motions";
+        throw rcm::InputError(loc, "unknown motion '" + name + "'; known: step, drift, breathing, large_step");
+      }
+      chosen.push_back(*it);
+    }
+    motions = chosen;
+  }
   // A limit or a rate given on the command line is the arm's in every
   // scenario, the large step's own included.
   for (IncisionMotion& m : motions) {
@@ -426,6 +450,16 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   opts->correction.add(cmd, "--max-shift-rate", {"max_rate_m_per_s"},
                        "closed-loop: how fast the arm shifts its RCM, in every scenario (unset: the large step "
                        "shifts at 20 mm/s)");
+  opts->loop.add(cmd, "--stream-rate", {"stream_rate_hz"},
+                 "closed-loop: the rate the estimator reads the arm (the simulated PSM's measured_js; 0: "
+                 "sensors.log_rate_hz)");
+  opts->loop.add(cmd, "--loop-delay", {"loop_delay_s"},
+                 "closed-loop: the arm's time from a sample to the RCM shift it leads to being in effect on the arm, "
+                 "as across processes");
+  opts->loop.add(cmd, "--teleop-stream", {"teleoperation_stream"},
+                 "closed-loop: the draw of the surgeon's motion (the simulated PSM's n-th spell: teleop:n)");
+  cmd->add_option("--motions", opts->motions,
+                  "closed-loop: these motions only, comma separated (step, drift, breathing, large_step; default all)");
   opts->online.add(cmd, "--correlation-time", {"correlation_time_s"},
                    "closed-loop: the free-space model error's correlation time the estimator assumes (the "
                    "measurement variance is sigma^2 times it per second; unset: the study's)");
