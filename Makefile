@@ -10,12 +10,12 @@ DEB_PACKAGES := build-essential cmake pkg-config \
   libeigen3-dev libceres-dev libcli11-dev nlohmann-json3-dev libfmt-dev \
   libgtest-dev libgmock-dev libbenchmark-dev \
   libtorch-dev libopenblas0-openmp \
-  pybind11-dev python3-dev python3-numpy python3-torch python3-scipy \
+  pybind11-dev python3-dev python3-numpy python3-torch python3-scipy python3-dask python3-distributed \
   gnuplot-nox \
   libroscpp-dev librosbag-dev libsensor-msgs-dev python3-rosmaster \
   libsqlite3-dev libzstd-dev liblz4-dev libyaml-cpp-dev cyclonedds-dev cyclonedds-tools libfastrtps-dev
 
-.PHONY: deps build test build-sanitize test-sanitize demo live-demo bench coverage learning-curve docs-figures docs-cli soak fuzz fuzz-deps clean
+.PHONY: deps build test build-sanitize test-sanitize demo live-demo bench coverage learning-curve batch-speed docs-figures docs-cli soak fuzz fuzz-deps clean
 
 # Idempotent: asks dpkg first and calls apt only for what is missing.
 deps:
@@ -87,27 +87,44 @@ live-demo: build
 bench: build
 	$(PYTHON) bench/run_benchmarks.py --build $(BUILD)
 
-# Interval coverage and method errors per friction model, free-space path and
-# length (about 15 minutes on 2 cores); writes its table into docs/validation.md.
-COVERAGE_SEEDS ?= 1,2
+# Each method's error on the worst seed and its spread, interval coverage, the
+# calibration's bias correction before and after, and the self-check's hits,
+# over 10 seeds x 3 tissue laws x 3 free-space rows on the default bench, as
+# independent tasks, COVERAGE_JOBS at a time, in COVERAGE_WORK (kept: a rerun
+# resumes; summary.json holds every task's figures); writes its tables into
+# docs/validation.md. Its wall time is in the table's heading.
+COVERAGE_SEEDS ?= 1,2,3,4,5,6,7,8,9,10
+COVERAGE_JOBS ?= 2
+COVERAGE_WORK ?= coverage-work
 coverage: build
-	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
+	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS) --jobs $(COVERAGE_JOBS) \
+	  --work $(COVERAGE_WORK)
 
 # The free-space model's held-out torque error and estimate error against the
 # length of teleoperation and excitation data (about 10 minutes on 2 cores);
 # prints its table (bench/learning_curve.py --doc writes it and its figure into
 # docs/validation-free-space.md). REAL=DIR adds the curve of
 # real recordings (NAME_full.csv / NAME_half.csv pairs).
+# SCHEDULER=tcp://HOST:8786 runs the independent runs of the learning curve and
+# of the closed-loop bench on that Dask scheduler's workers instead of a local
+# cluster (docs/howto-batch.md); the tables are the same.
+SCHEDULER ?=
 learning-curve: build
-	$(PYTHON) bench/learning_curve.py --build $(BUILD) $(if $(REAL),--real $(REAL))
+	$(PYTHON) bench/learning_curve.py --build $(BUILD) $(if $(REAL),--real $(REAL)) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
+
+# `rcm batch` on 8 simulated sessions with 1 and 2 workers against `rcm run` one
+# after another, results compared (about 30 minutes on 2 cores); writes its
+# table into docs/validation-speed.md.
+batch-speed: build
+	$(PYTHON) bench/batch_speed.py --build $(BUILD)
 
 # The accuracy figures of docs/validation.md, from runs on this machine, with the
-# date and machine: the demo's table (and its wall times, docs/validation-speed.md),
-# the coverage table and the closed-loop bench. About 30 minutes on 2 cores.
-docs-figures: build
-	$(PYTHON) bench/demo_table.py --build $(BUILD)
-	$(PYTHON) bench/closed_loop_report.py --build $(BUILD)
-	$(PYTHON) bench/interval_coverage.py --build $(BUILD) --seeds $(COVERAGE_SEEDS)
+# date and machine: the worst-case tables (make coverage), the demo's table with
+# their worst seed (and its wall times, docs/validation-speed.md) and the
+# closed-loop bench.
+docs-figures: coverage
+	$(PYTHON) bench/demo_table.py --build $(BUILD) --coverage-summary $(COVERAGE_WORK)/summary.json
+	$(PYTHON) bench/closed_loop_report.py --build $(BUILD) $(if $(SCHEDULER),--scheduler $(SCHEDULER))
 
 # docs/cli.md, the command reference, from every program's --help and the files of
 # a quick study (tools/gen_cli_reference.py; the ctest docs_cli_reference checks it).

@@ -7,20 +7,23 @@ own session, teleoperation and noise), so that one seed does not speak for all.
 
     /usr/bin/python3 bench/closed_loop_report.py --build build [--seed 1] [--other-seeds 2,3,4,5,6,7,8]
                                                  [--model KIND] [--quick] [--no-correlation-pass]
-                                                 [--tolerance-pass M]
+                                                 [--tolerance-pass M] [--scheduler ADDR | --workers N]
 
 Also printed: how the online estimate's intervals describe its error per scenario, the free-space model
 error's measured correlation time, and the seeds rerun with the estimator assuming it, then with a tolerance of
 2 mm (the default is 1.5 mm).
+
+Every run is independent of the others (its own seed and folder): they go through rcm.batch, side by side on a
+local cluster (--workers, default one per core) or on a Dask scheduler's workers (--scheduler; docs/howto-batch.md).
+Each run is the same whichever worker does it, so the tables do not depend on where they ran.
 """
 import argparse
 import datetime
 import json
 import os
-import shutil
 import tempfile
 
-from doc_tables import cpu_model, run, write_block
+from doc_tables import add_cluster_flags, cpu_model, open_runner, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "validation.md")
@@ -205,6 +208,26 @@ def tolerance_lines(tolerance_runs):
     return lines
 
 
+def simulate_closed_loop(rcm, seed, extra, model, quick, first):
+    """One `rcm simulate --experiment closed-loop` in a folder of its own (a task of rcm.batch, on any worker):
+    its command and closed_loop.json; for the `first` seed also its figures (bytes) and the free-space model
+    error's correlation times, measured on its files."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [rcm, "simulate", "--experiment", "closed-loop", "--seed", seed, "--out", tmp, "--json", *extra]
+        if model:
+            cmd += ["--model", model]
+        if quick:
+            cmd += ["--quick"]
+        out = {"cmd": cmd, "out_dir": tmp, "json": json.loads(run(cmd, capture_output=True, text=True).stdout)}
+        if first:
+            out["taus"] = measure_correlation_time(rcm, tmp)
+            out["figures"] = {}
+            for name in FIGURES:
+                with open(os.path.join(tmp, name + ".png"), "rb") as f:
+                    out["figures"][name] = f.read()
+        return out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--build", default="build")
@@ -216,48 +239,40 @@ def main():
                     help="rerun the seeds with this corrector tolerance (m; 0: skip)")
     ap.add_argument("--no-correlation-pass", action="store_true",
                     help="skip the seeds' rerun at the free-space error's measured correlation time")
+    add_cluster_flags(ap)
     a = ap.parse_args()
-    rcm = os.path.join(a.build, "bin", "rcm")
+    rcm = os.path.abspath(os.path.join(a.build, "bin", "rcm"))
+    other_seeds = [x for x in a.other_seeds.split(",") if x]
+    with open_runner(a.build, a.scheduler, a.workers) as run_all:
+        def simulate(tasks):
+            """(seed, extra flags, first) per run -> each run's result, in order; stops on any failure."""
+            return run_all(simulate_closed_loop,
+                           [(rcm, seed, extra, a.model, a.quick, first) for seed, extra, first in tasks])
 
-    def simulate(seed, out, extra=()):
-        cmd = [rcm, "simulate", "--experiment", "closed-loop", "--seed", seed, "--out", out, "--json", *extra]
-        if a.model:
-            cmd += ["--model", a.model]
-        if a.quick:
-            cmd += ["--quick"]
-        return cmd, json.loads(run(cmd, capture_output=True, text=True).stdout)
-
-    with tempfile.TemporaryDirectory() as tmp:
-        cmd, j = simulate(a.seed, tmp)
-        out_dir = tmp
-        taus = measure_correlation_time(rcm, tmp)
-        for name in FIGURES:
-            shutil.copyfile(os.path.join(tmp, name + ".png"), os.path.join(ROOT, "docs", "figures", name + ".png"))
-    others = []
-    for seed in [x for x in a.other_seeds.split(",") if x]:
-        with tempfile.TemporaryDirectory() as tmp:
-            others.append((seed, simulate(seed, tmp)[1]))
-    # The large step again at the default shift rate: what the faster arm buys and costs.
-    default_rate = []
-    bench_rate = j["correction"]["max_rate_m_per_s"]  # the bench's, CorrectionOptions' default
-    if "large_step" in j["scenarios"]:
-        for seed in [a.seed] + [x for x in a.other_seeds.split(",") if x]:
-            with tempfile.TemporaryDirectory() as tmp:
-                o = simulate(seed, tmp, ["--max-shift-rate", f"{bench_rate:g}", "--no-plot"])[1]
-                default_rate.append((seed, o["scenarios"]["large_step"]))
-    # The seeds again with the estimator assuming the correlation time measured above (the slowest joint's).
-    alt_runs = []
-    if not a.no_correlation_pass:
-        for seed in [a.seed] + [x for x in a.other_seeds.split(",") if x]:
-            with tempfile.TemporaryDirectory() as tmp:
-                alt_runs.append((seed, simulate(seed, tmp, ["--correlation-time", f"{max(taus):.2f}", "--no-plot"])[1]))
-    # The seeds again with another tolerance: what the default leaves against it.
-    tolerance_runs = []
-    if a.tolerance_pass > 0:
-        for seed in [a.seed] + [x for x in a.other_seeds.split(",") if x]:
-            with tempfile.TemporaryDirectory() as tmp:
-                tolerance_runs.append((seed, simulate(seed, tmp, ["--tolerance", f"{a.tolerance_pass:g}",
-                                                                  "--no-plot"])[1]))
+        first, *rest = simulate([(a.seed, [], True)] + [(seed, [], False) for seed in other_seeds])
+        cmd, j, out_dir, taus = first["cmd"], first["json"], first["out_dir"], first["taus"]
+        for name, data in first["figures"].items():
+            with open(os.path.join(ROOT, "docs", "figures", name + ".png"), "wb") as f:
+                f.write(data)
+        others = [(seed, r["json"]) for seed, r in zip(other_seeds, rest)]
+        # The passes below need the first run (its shift rate, its correlation times); they run together.
+        seeds = [a.seed] + other_seeds
+        bench_rate = j["correction"]["max_rate_m_per_s"]  # the bench's, CorrectionOptions' default
+        passes = []
+        # The large step again at the default shift rate: what the faster arm buys and costs.
+        if "large_step" in j["scenarios"]:
+            passes += [("default_rate", seed, ["--max-shift-rate", f"{bench_rate:g}", "--no-plot"]) for seed in seeds]
+        # The seeds again with the estimator assuming the correlation time measured above (the slowest joint's).
+        if not a.no_correlation_pass:
+            passes += [("alt", seed, ["--correlation-time", f"{max(taus):.2f}", "--no-plot"]) for seed in seeds]
+        # The seeds again with another tolerance: what the default leaves against it.
+        if a.tolerance_pass > 0:
+            passes += [("tolerance", seed, ["--tolerance", f"{a.tolerance_pass:g}", "--no-plot"]) for seed in seeds]
+        done = simulate([(seed, extra, False) for _, seed, extra in passes])
+    default_rate = [(seed, r["json"]["scenarios"]["large_step"]) for (kind, seed, _), r in zip(passes, done)
+                    if kind == "default_rate"]
+    alt_runs = [(seed, r["json"]) for (kind, seed, _), r in zip(passes, done) if kind == "alt"]
+    tolerance_runs = [(seed, r["json"]) for (kind, seed, _), r in zip(passes, done) if kind == "tolerance"]
     shown = " ".join(os.path.relpath(c, ROOT) if c == rcm else c for c in cmd if c != out_dir).replace(" --out", " --out DIR")
     lines = [f"Measured {datetime.date.today().isoformat()} on {cpu_model()} ({os.cpu_count()} cores): `{shown}` "
              f"(`/usr/bin/python3 bench/closed_loop_report.py`), {j['free_space_model']} free-space model, "

@@ -67,7 +67,33 @@ def trial(results, name):
     sys.exit(f"the demo has no trial {name}")
 
 
-def readme_table(results, seconds, when, machine):
+def worst_case_rows(summary_path):
+    """The demo table's worst-seed rows, from the summary.json of `make coverage`: the
+    default method's and the three-step's mean e per seed on 15 min of teleoperation,
+    worst seed and median over every seed and tissue law, and the intervals' coverage."""
+    with open(summary_path) as f:
+        summary = json.load(f)
+    sel = [r for r in summary["results"] if r["row"] == "teleop15"]
+    if not sel:
+        return []
+    mean_of = lambda v: sum(v) / len(v)
+
+    def seeds(key):
+        far = sorted(mean_of([t[key] for t in r["corrected"]["trials"] if t["far"]]) for r in sel)
+        near = sorted(mean_of([t[key] for t in r["corrected"]["trials"] if not t["far"]]) for r in sel)
+        return (f"{mm(far[-1])} / {mm(near[-1])} mm (median {mm(far[len(far) // 2])} / "
+                f"{mm(near[len(near) // 2])})")
+
+    trials = [t for r in sel for t in r["corrected"]["trials"]]
+    cov = " / ".join(f"{100 * mean_of([t['covered'][a] for t in trials]):.0f}" for a in range(3))
+    laws = sorted({r["law"] for r in sel})
+    n_seeds = len({r["seed"] for r in sel})
+    return [f"| worst seed of {n_seeds} x {len(laws)} tissue laws ({', '.join(laws)}), mean e D > 20 / <= 20 mm "
+            f"(`make coverage`) | | {seeds('three_step_m')} | {seeds('joint_m')} | |",
+            f"| 95 % intervals covering x / y / D over those {len(trials)} trials | | | {cov} % | |"]
+
+
+def readme_table(results, seconds, when, machine, summary_path=None):
     s = results["summary"]
     fit = results["free_space_model"]["fit"]
     nrmse = " / ".join(f"{j['nrmse_percent']:.2f}" for j in fit["test"])
@@ -82,7 +108,7 @@ def readme_table(results, seconds, when, machine):
         return " / ".join(f"{f:.2f}" for f in trial(results, name)["force_rmse_n"]) + " N"
 
     lines = [
-        f"`make demo` on {when} ({machine}; seed 1, the default bench: hysteretic friction, two holds per "
+        f"`make demo` on {when} ({machine}; seed 1, the default bench: real friction, two holds per "
         f"static file, the paper's 10 trials; {fit['kind']} free-space model, fitted in {fit['seconds']:.0f} s; "
         f"{seconds:.0f} s for `rcm demo` in all; written by `bench/demo_table.py`):",
         "",
@@ -99,6 +125,8 @@ def readme_table(results, seconds, when, machine):
         f"| settled within 5 mm of the final estimate | | | | < {s['online_settled_after_s_max']:.1f} s after the "
         "first motion |",
     ]
+    if summary_path:
+        lines += worst_case_rows(summary_path)
     return "\n".join(lines)
 
 
@@ -119,6 +147,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--build", default="build")
     ap.add_argument("--no-doc", action="store_true", help="print the tables only")
+    ap.add_argument("--coverage-summary", help="summary.json of `make coverage`: adds its worst-seed rows")
     args = ap.parse_args()
     rcm = os.path.join(os.path.abspath(args.build), "bin", "rcm")
     with tempfile.TemporaryDirectory(prefix="rcm_demo_table_") as work:
@@ -126,7 +155,7 @@ def main():
         quick = demo(rcm, os.path.join(work, "quick"), True)
     when = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     machine = f"{os.cpu_count()} cores of {cpu_model()}, load average {os.getloadavg()[0]:.1f} at the end"
-    table = readme_table(*full, when, machine)
+    table = readme_table(*full, when, machine, args.coverage_summary)
     times = times_table(full, quick, when, machine)
     print(table + "\n\n" + times)
     if not args.no_doc:

@@ -1,141 +1,320 @@
 #!/usr/bin/python3
-"""`make coverage`: how often the 95 % intervals cover the truth, and what each
-method's error is, per friction model, free-space path and free-space length.
+"""`make coverage`: each method's error on the worst seed, its spread over the
+seeds, and how often the 95 % intervals cover the truth, per free-space row,
+over the seeds and the three tissue laws (linear, stiffening, sliding), on the
+default bench (`real` friction).
 
-A condition is FRICTION:PATH:MINUTES (friction preset hysteretic or smooth;
-free-space path teleoperation or excitation, the periodic Fourier path of an
-identification run). For each condition and seed it simulates a session on
-the 5 x 3 grid of offsets (D = 10..50 mm, radial [0, 0], [10, 15] and [-12, 8]
-mm), runs `rcm run` with its defaults (joint method, three-step beside it, the
-default free-space model) and once more with the paper's last-hold static step
-on the same fitted model, and writes the table between the coverage markers of
-docs/validation.md, with the date and machine.
+A row is a free-space recording: `teleop15` (15 min of the simulator's
+teleoperation), `teleop2` (2 min of it) and `excite2` (the 2-minute path of
+`rcm excite --duration 120`, played on the arm). For a seed S and a law L every
+row shares the same calibration and trials (they do not depend on the free
+space), so the work splits into independent tasks, each a plain function of
+its arguments that runs rcm commands in its own folder under --work and
+returns a JSON-able dict (a kept folder resumes):
+
+- free_space_task(rcm, work, seed, row): the row's free-space recording and the
+  linear model `rcm dynamics fit` fits on it;
+- session_task(rcm, work, seed, law): the calibration, baseline and the 15
+  trials (D = 10..50 mm x radial [0, 0], [10, 15], [-12, 8] mm, two holds per
+  static file) of `rcm simulate --tissue L`;
+- study_task(rcm, work, seed, law, row, free_space, session): the session with
+  the row's free space, `rcm run` with its defaults on the row's model
+  (`--model-file`: joint method with the calibration's bias correction,
+  three-step with balanced holds beside it) and once more without the
+  correction (`fit_torque_offset` false, no bootstrap: point estimates for
+  the before/after table).
+
+`main` runs them on a local process pool (--jobs); a Dask cluster can map the
+same functions. The tables go between the worst-case markers of
+docs/validation.md, with the date, machine and wall time, and every task's
+figures into --work/summary.json.
 
 Run with Debian's Python: /usr/bin/python3 bench/interval_coverage.py --build build
 """
 import argparse
+import concurrent.futures
 import datetime
 import json
+import math
 import os
 import subprocess
 import sys
 import tempfile
+import time
 
-from doc_tables import cpu_model, run, write_block
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from doc_tables import cpu_model, publish_block  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "validation.md")
-BEGIN, END = "<!-- coverage:begin -->", "<!-- coverage:end -->"
-GRID = {"protocol": {"radial_offsets_m": [[0.0, 0.0], [0.010, 0.015], [-0.012, 0.008]]}}
+BEGIN, END = "<!-- worst-case:begin -->", "<!-- worst-case:end -->"
+LAWS = ("linear", "stiffening", "sliding")
+ROWS = {"teleop15": ("teleoperation", 15.0), "teleop2": ("teleoperation", 2.0), "excite2": ("rcm excite", 2.0)}
+GRID = {"coaxial_offsets_m": [0.010, 0.020, 0.030, 0.040, 0.050],
+        "radial_offsets_m": [[0.0, 0.0], [0.010, 0.015], [-0.012, 0.008]], "static_approaches": 2}
+# Targets on the worst seed (mean e, D > 20 / <= 20 mm), and the self-check's threshold.
+TARGETS = {"teleop15": {"joint": (0.5, 1.0), "three_step": (2.0, 4.0)}, "excite2": {"joint": (1.0, 1.5)}}
+SELF_CHECK_M = 0.001
 
+
+def call(cmd, log):
+    """Runs an rcm command, its output appended to `log`; raises on failure."""
+    with open(log, "a") as f:
+        f.write("+ " + " ".join(cmd) + "\n")
+        f.flush()
+        subprocess.run(cmd, check=True, stdout=f, stderr=subprocess.STDOUT)
+
+
+def write_json(path, value):
+    with open(path + ".tmp", "w") as f:
+        json.dump(value, f)
+    os.replace(path + ".tmp", path)
+
+
+def free_space_task(rcm, work, seed, row):
+    """The row's free-space recording for this seed, and its fitted linear model."""
+    folder = os.path.join(work, f"free_space_{row}_seed{seed}")
+    done = os.path.join(folder, "task.json")
+    if os.path.exists(done):
+        with open(done) as f:
+            return json.load(f)
+    os.makedirs(folder, exist_ok=True)
+    log = os.path.join(folder, "log.txt")
+    path, minutes = ROWS[row]
+    # Only the free space is wanted: the rest of the protocol as short as it may be.
+    config = os.path.join(folder, "config.json")
+    write_json(config, {"protocol": {"coaxial_offsets_m": [0.03], "radial_offsets_m": [[0.0, 0.0]],
+                                     "calibration_s": 1.0, "trial_s": 1.0, "static_hold_s": 1.0,
+                                     "baseline_hold_s": 1.0, "write_truth": False}})
+    sim = [rcm, "simulate", "--out", os.path.join(folder, "sim"), "--seed", str(seed), "--config", config, "--no-truth"]
+    if path == "rcm excite":
+        trajectory = os.path.join(folder, "excitation.csv")
+        call([rcm, "excite", "--duration", str(60 * minutes), "--seed", str(seed), "--out", trajectory], log)
+        sim += ["--free-space-trajectory", trajectory, "--free-space-s", str(60 * minutes)]
+    else:
+        sim += ["--free-space-s", str(60 * minutes)]
+    call(sim, log)
+    with open(os.path.join(folder, "sim", "session.json")) as f:
+        recordings = [os.path.join(folder, "sim", p) for p in json.load(f)["free_space"]]
+    model = os.path.join(folder, "free_space_model.json")
+    call([rcm, "dynamics", "fit", "--model", "linear", "--seed", str(seed), "--out", model] + recordings, log)
+    out = {"free_space": recordings, "model": model}
+    write_json(done, out)
+    return out
+
+
+def session_task(rcm, work, seed, law):
+    """Calibration, baseline and trials of one seed and tissue law (a token free space)."""
+    folder = os.path.join(work, f"session_{law}_seed{seed}")
+    done = os.path.join(folder, "task.json")
+    if os.path.exists(done):
+        with open(done) as f:
+            return json.load(f)
+    os.makedirs(folder, exist_ok=True)
+    config = os.path.join(folder, "config.json")
+    write_json(config, {"protocol": GRID})
+    call([rcm, "simulate", "--out", os.path.join(folder, "sim"), "--seed", str(seed), "--tissue", law,
+          "--config", config, "--free-space-s", "5", "--no-truth"], os.path.join(folder, "log.txt"))
+    out = {"manifest": os.path.join(folder, "sim", "session.json")}
+    write_json(done, out)
+    return out
+
+
+def trial_summary(results, side_of):
+    """Per trial of a results.json: truth, joint and three-step errors, whether the interval covers each axis."""
+    out = []
+    for t in results["trials"]:
+        j = t["joint"]
+        out.append({"name": t["name"], "D_m": t["truth_m"][2], "far": side_of(t["truth_m"][2]),
+                    "joint_m": j["error_m"], "three_step_m": t["three_step"]["error_m"],
+                    "covered": [j["ci95_low_m"][a] <= t["truth_m"][a] <= j["ci95_high_m"][a] for a in range(3)]})
+    return out
+
+
+def study_task(rcm, work, seed, law, row, free_space, session):
+    """`rcm run` on the session with the row's free space and model: with and without the bias correction."""
+    folder = os.path.join(work, f"study_{row}_{law}_seed{seed}")
+    done = os.path.join(folder, "task.json")
+    if os.path.exists(done):
+        with open(done) as f:
+            return json.load(f)
+    os.makedirs(folder, exist_ok=True)
+    log = os.path.join(folder, "log.txt")
+    with open(session["manifest"]) as f:
+        manifest = json.load(f)
+    base = os.path.dirname(session["manifest"])
+    absolute = lambda p: p if os.path.isabs(p) else os.path.join(base, p)
+    manifest["free_space"] = free_space["free_space"]
+    manifest["baseline"] = absolute(manifest["baseline"])
+    manifest["calibration"]["recording"] = absolute(manifest["calibration"]["recording"])
+    for t in manifest["trials"]:
+        t["recording"] = absolute(t["recording"])
+        if "static" in t:
+            t["static"] = absolute(t["static"])
+    path = os.path.join(folder, "session.json")
+    write_json(path, manifest)
+    runs = {}
+    no_correction = os.path.join(folder, "no_correction.json")
+    write_json(no_correction, {"joint": {"fit_torque_offset": False, "bootstrap_replicates": 0,
+                                         "calibration_bootstrap_replicates": 0}, "tissue_sensitivity_delta_m": 0.0})
+    start = time.monotonic()
+    for name, extra in (("corrected", []), ("uncorrected", ["--options", no_correction])):
+        out_dir = os.path.join(folder, name)
+        call([rcm, "run", path, "--out", out_dir, "--seed", str(seed), "--model-file", free_space["model"]] + extra,
+             log)
+        with open(os.path.join(out_dir, "results.json")) as f:
+            runs[name] = json.load(f)
+    far = lambda D: D > 0.020 + 1e-9
+    out = {"seed": seed, "law": law, "row": row, "seconds": time.monotonic() - start}
+    for name, r in runs.items():
+        tissue = r["joint_tissue_model"]
+        out[name] = {"trials": trial_summary(r, far), "self_check_m": math.sqrt(sum(x * x for x in
+                                                                                    tissue["calibration_bias_m"])),
+                     "torque_offset": tissue.get("torque_offset"), "family": tissue["family"]}
+    write_json(done, out)
+    return out
+
+
+# ----------------------------------------------------------------------------- tables
 
 def mean(v):
     return sum(v) / len(v) if v else float("nan")
 
 
-def simulate(rcm, work, condition, seed, approaches):
-    """The session of a condition and seed, with `approaches` holds per static file.
-
-    The trial recordings do not depend on the static protocol (same seed, same
-    path and noise up to the trial's end), so the sessions with one and with two
-    holds differ only in their static files."""
-    friction, path, minutes = condition
-    session_dir = os.path.join(work, f"{friction}_{path}_{minutes:g}min_seed{seed}" +
-                               ("" if approaches == 2 else f"_{approaches}hold"))
-    manifest = os.path.join(session_dir, "session.json")
-    if not os.path.exists(manifest):
-        config = os.path.join(work, f"config_{path}_{approaches}.json")
-        with open(config, "w") as f:
-            json.dump({"protocol": {**GRID["protocol"], "static_approaches": approaches},
-                       "trajectory": {"free_space_path": path}}, f)
-        run([rcm, "simulate", "--out", session_dir, "--friction", friction, "--seed", str(seed),
-             "--free-space-s", str(60 * minutes), "--config", config, "--no-truth"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return session_dir
+def per_seed(trials, key):
+    """Mean error (m) over the trials of D > 20 mm and of D <= 20 mm."""
+    return (mean([t[key] for t in trials if t["far"]]), mean([t[key] for t in trials if not t["far"]]))
 
 
-def study(rcm, session_dir, name, seed, extra):
-    """`rcm run` on the session into session_dir/run_<name>; a kept --work folder resumes."""
-    run_dir = os.path.join(session_dir, f"run_{name}")
-    if not (os.path.exists(os.path.join(run_dir, "results.json")) and
-            os.path.exists(os.path.join(run_dir, "free_space_model.json"))):
-        run([rcm, "run", os.path.join(session_dir, "session.json"), "--out", run_dir, "--seed", str(seed)] + extra,
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    with open(os.path.join(run_dir, "results.json")) as f:
-        return json.load(f)
+def spread(values):
+    """'median [min .. max]' in mm."""
+    v = sorted(values)
+    return f"{1e3 * v[len(v) // 2]:.2f} [{1e3 * v[0]:.2f} .. {1e3 * v[-1]:.2f}]"
 
 
-def study_condition(rcm, work, condition, seed):
-    """The defaults on the two-hold session, then the three-step method alone on
-    the same fitted model: the last of the two holds, and the paper's protocol
-    (one hold per static file)."""
-    two = simulate(rcm, work, condition, seed, 2)
-    one = simulate(rcm, work, condition, seed, 1)
-    default = study(rcm, two, "balanced", seed, ["--static-step", "balanced"])
-    model = os.path.join(two, "run_balanced", "free_space_model.json")
-    paper = ["--model-file", model, "--method", "three-step", "--static-step", "last-hold"]
-    return default, study(rcm, two, "last-hold", seed, paper), study(rcm, one, "paper", seed, paper)
+def tables(results, wall_s, jobs):
+    when = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    seeds = sorted({r["seed"] for r in results})
+    lines = [f"Measured by `make coverage` (bench/interval_coverage.py, seeds {', '.join(map(str, seeds))}) on {when}, "
+             f"{os.cpu_count()} cores of {cpu_model()}, {jobs} tasks at a time: {wall_s / 60:.0f} min of wall time in "
+             "all. Default bench (`real` friction, counterweighted arm, each trial its own teleoperation). Per seed "
+             "and tissue law one session of 15 trials (D = 10..50 mm x radial [0, 0], [10, 15], [-12, 8] mm, two "
+             "holds per static file), estimated by `rcm run` with its defaults on the row's linear free-space model. "
+             "A seed's error is its mean e over the trials of D > 20 mm / D <= 20 mm; the worst seed is the "
+             "largest such mean over the seeds and laws, then the median and range over them, in mm.", "",
+             "| free space | law | seeds | joint (default): worst seed | joint: median [range] over seeds, D > 20 / "
+             "<= 20 | joint 95 % intervals covering x / y / D | three-step, balanced holds: worst seed | three-step: "
+             "median [range], D > 20 / <= 20 |", "|---|---|---|---|---|---|---|---|"]
+    for row in ROWS:
+        for law in LAWS + ("all",):
+            sel = [r for r in results if r["row"] == row and (law == "all" or r["law"] == law)]
+            if not sel:
+                continue
+            joint = [per_seed(r["corrected"]["trials"], "joint_m") for r in sel]
+            three = [per_seed(r["corrected"]["trials"], "three_step_m") for r in sel]
+            trials = [t for r in sel for t in r["corrected"]["trials"]]
+            cov = [100.0 * mean([t["covered"][a] for t in trials]) for a in range(3)]
+            worst = lambda v: f"{1e3 * max(x[0] for x in v):.2f} / {1e3 * max(x[1] for x in v):.2f}"
+            lines.append(f"| {ROWS[row][1]:g} min {ROWS[row][0]} | {law} | {len(sel)} | {worst(joint)} | "
+                         f"{spread([x[0] for x in joint])} / {spread([x[1] for x in joint])} | "
+                         f"{cov[0]:.0f} / {cov[1]:.0f} / {cov[2]:.0f} % of {len(trials)} | {worst(three)} | "
+                         f"{spread([x[0] for x in three])} / {spread([x[1] for x in three])} |")
+    lines += ["", "Before and after the calibration's bias correction, per seed (joint method, mean e D > 20 / "
+              "<= 20 mm, 15 min of teleoperation; before: `fit_torque_offset` false, the same fitted model), with "
+              "the calibration self-check (held-out halves, mm) of each:", "",
+              "| seed | law | before | after | self-check before | self-check after | torque offset found "
+              "(N m, N m, N) |", "|---|---|---|---|---|---|---|"]
+    for r in sorted((r for r in results if r["row"] == "teleop15"), key=lambda r: (r["seed"], r["law"])):
+        b, a = per_seed(r["uncorrected"]["trials"], "joint_m"), per_seed(r["corrected"]["trials"], "joint_m")
+        off = r["corrected"]["torque_offset"] or [0, 0, 0]
+        lines.append(f"| {r['seed']} | {r['law']} | {1e3 * b[0]:.2f} / {1e3 * b[1]:.2f} | {1e3 * a[0]:.2f} / "
+                     f"{1e3 * a[1]:.2f} | {1e3 * r['uncorrected']['self_check_m']:.2f} | "
+                     f"{1e3 * r['corrected']['self_check_m']:.2f} | {off[0]:+.3f} / {off[1]:+.3f} / {off[2]:+.2f} |")
+    # The self-check against what the estimate turned out to be.
+    lines += ["", f"The calibration self-check as `rcm setup` applies it (not ready above "
+              f"{1e3 * SELF_CHECK_M:g} mm) against the seed's worst trial error of the default method above "
+              f"{1e3 * SELF_CHECK_M:g} mm, over every seed and law of each row:", "",
+              "| free space | not ready, estimate off (hit) | not ready, estimate fine (false alarm) | ready, "
+              "estimate off (miss) | ready, estimate fine |", "|---|---|---|---|---|"]
+    for row in ROWS:
+        sel = [r for r in results if r["row"] == row]
+        if not sel:
+            continue
+        n = [0, 0, 0, 0]
+        for r in sel:
+            flagged = r["corrected"]["self_check_m"] > SELF_CHECK_M
+            off = max(t["joint_m"] for t in r["corrected"]["trials"]) > SELF_CHECK_M
+            n[(0 if off else 1) if flagged else (2 if off else 3)] += 1
+        lines.append(f"| {ROWS[row][1]:g} min {ROWS[row][0]} | " + " | ".join(str(x) for x in n) + " |")
+    lines += ["", "Targets on the worst seed: " + "; ".join(
+        f"{ROWS[row][1]:g} min {ROWS[row][0]}, {method}: {a:g} / {b:g} mm" for row, t in TARGETS.items()
+        for method, (a, b) in t.items()) + "; intervals covering each axis in at least 90 % of trials."]
+    return "\n".join(lines)
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--build", default="build")
-    ap.add_argument("--seeds", default="1,2")
-    ap.add_argument("--condition", action="append", default=[], metavar="FRICTION:PATH:MINUTES",
-                    help="repeatable; default: hysteretic and smooth, each with 2 and 15 min of teleoperation "
-                         "and 2 min of excitation")
-    ap.add_argument("--work", help="keep the sessions here (default: a temporary folder); a kept folder resumes")
-    ap.add_argument("--no-doc", action="store_true", help="print the table only")
+    ap.add_argument("--seeds", default="1,2,3,4,5,6,7,8,9,10")
+    ap.add_argument("--rows", default=",".join(ROWS), help="free-space rows: " + ", ".join(ROWS))
+    ap.add_argument("--laws", default=",".join(LAWS))
+    ap.add_argument("--jobs", type=int, default=2, help="tasks at a time (each rcm command uses one core)")
+    ap.add_argument("--work", help="keep the tasks' folders here (default: a temporary folder); a kept folder resumes")
+    ap.add_argument("--no-doc", action="store_true", help="print the tables only")
+    ap.add_argument("--report-only", action="store_true",
+                    help="run nothing: the tables of the study tasks finished in --work (e.g. by a cluster)")
     args = ap.parse_args()
     rcm = os.path.join(os.path.abspath(args.build), "bin", "rcm")
-    work = args.work or tempfile.mkdtemp(prefix="rcm_coverage_")
+    work = os.path.abspath(args.work or tempfile.mkdtemp(prefix="rcm_coverage_"))
     os.makedirs(work, exist_ok=True)
-    conditions = []
-    for c in args.condition or [f"{f}:{p}:{m}" for f in ("hysteretic", "smooth")
-                                for p, m in (("teleoperation", 2), ("teleoperation", 15), ("excitation", 2))]:
-        friction, path, minutes = c.split(":")
-        conditions.append((friction, path, float(minutes)))
     seeds = [int(x) for x in args.seeds.split(",")]
-    rows = []
-    for condition in conditions:
-        errors = {k: ([], []) for k in ("joint", "balanced", "last", "paper")}
-        inside, trials = [0, 0, 0], 0
-        for seed in seeds:
-            default, last, paper = study_condition(rcm, work, condition, seed)
-            for t, tl, tp in zip(default["trials"], last["trials"], paper["trials"]):
-                j = t["joint"]
-                side = 0 if t["truth_m"][2] > 0.020 + 1e-9 else 1
-                errors["joint"][side].append(j["error_m"])
-                errors["balanced"][side].append(t["three_step"]["error_m"])
-                errors["last"][side].append(tl["three_step"]["error_m"])
-                errors["paper"][side].append(tp["three_step"]["error_m"])
-                trials += 1
-                for a in range(3):
-                    inside[a] += j["ci95_low_m"][a] <= t["truth_m"][a] <= j["ci95_high_m"][a]
-        rows.append((*condition, trials, {k: (mean(v[0]), mean(v[1])) for k, v in errors.items()},
-                     [i / trials for i in inside]))
-        print(rows[-1], file=sys.stderr, flush=True)
-    load = os.getloadavg()
-    lines = [f"Run {datetime.date.today().isoformat()} by `make coverage` (bench/interval_coverage.py, seeds "
-             f"{args.seeds}) on {os.cpu_count()} cores of {cpu_model()}, load average {load[0]:.1f} at the end. "
-             "Each seed is one simulated session of 15 trials (D = 10..50 mm x radial [0, 0], [10, 15], "
-             "[-12, 8] mm) with two holds per static file, estimated by `rcm run` with its defaults; the "
-             "three-step method is also run alone on the same fitted model with the last hold only "
-             "(`--static-step last-hold`) and on the same trials with the paper's protocol of one hold per "
-             "static file. Mean e in mm, D > 20 / <= 20 mm.", "",
-             "| friction | free space | trials | joint | joint 95 % coverage x / y / D | three-step, balanced "
-             "holds | three-step, last hold | three-step, paper protocol (one hold) |",
-             "|---|---|---|---|---|---|---|---|"]
-    for fr, path, mins, n, e, cov in rows:
-        pair = lambda k: f"{1e3 * e[k][0]:.2f} / {1e3 * e[k][1]:.2f}"
-        lines.append(f"| {fr} | {mins:g} min {path} | {n} | {pair('joint')} | "
-                     f"{100 * cov[0]:.0f} / {100 * cov[1]:.0f} / {100 * cov[2]:.0f} % | {pair('balanced')} | "
-                     f"{pair('last')} | {pair('paper')} |")
-    block = "\n".join(lines)
-    print(block)
-    if not args.no_doc:
-        write_block(DOC, BEGIN, END, block)
-        print(f"wrote {DOC}", file=sys.stderr)
+    rows, laws = args.rows.split(","), args.laws.split(",")
+    summary_path = os.path.join(work, "summary.json")
+    if args.report_only:
+        results = []
+        for name in sorted(os.listdir(work)):
+            done = os.path.join(work, name, "task.json")
+            if name.startswith("study_") and os.path.exists(done):
+                with open(done) as f:
+                    results.append(json.load(f))
+        if os.path.exists(summary_path):
+            with open(summary_path) as f:
+                wall = json.load(f).get("wall_s", 0.0)
+        else:  # tasks run elsewhere: from the first task's config to the last study's end
+            folders = [os.path.join(work, n) for n in os.listdir(work) if os.path.isdir(os.path.join(work, n))]
+            first = min(os.path.getmtime(os.path.join(d, "config.json")) for d in folders
+                        if os.path.exists(os.path.join(d, "config.json")))
+            wall = max(os.path.getmtime(os.path.join(work, n, "task.json")) for n in os.listdir(work)
+                       if n.startswith("study_") and os.path.exists(os.path.join(work, n, "task.json"))) - first
+        if not results:
+            sys.exit(f"no finished study task in {work}")
+        publish_block(DOC, BEGIN, END, tables(results, wall, args.jobs), write=not args.no_doc)
+        return
+    start = time.monotonic()
+    with concurrent.futures.ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        fs = {(s, r): pool.submit(free_space_task, rcm, work, s, r) for s in seeds for r in rows}
+        ss = {(s, l): pool.submit(session_task, rcm, work, s, l) for s in seeds for l in laws}
+        studies = []  # row by row, so that the first rows are whole first
+        for r in rows:
+            for s in seeds:
+                for l in laws:
+                    studies.append(pool.submit(study_task, rcm, work, s, l, r, fs[(s, r)].result(),
+                                               ss[(s, l)].result()))
+        results = []
+        for f in concurrent.futures.as_completed(studies):
+            results.append(f.result())
+            r = results[-1]
+            print(f"seed {r['seed']} {r['law']} {r['row']}: joint "
+                  f"{[round(1e3 * x, 2) for x in per_seed(r['corrected']['trials'], 'joint_m')]} mm "
+                  f"(before {[round(1e3 * x, 2) for x in per_seed(r['uncorrected']['trials'], 'joint_m')]}), "
+                  f"{r['seconds']:.0f} s", file=sys.stderr, flush=True)
+    wall = time.monotonic() - start
+    # A resumed run adds the wall time of the runs before it on the same folder.
+    if os.path.exists(summary_path):
+        with open(summary_path) as f:
+            wall += json.load(f).get("wall_s", 0.0)
+    write_json(summary_path, {"seeds": seeds, "wall_s": wall, "results": results})
+    publish_block(DOC, BEGIN, END, tables(results, wall, args.jobs), write=not args.no_doc)
 
 
 if __name__ == "__main__":

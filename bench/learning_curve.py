@@ -30,9 +30,16 @@ lengths the file holds. Nothing of those files is copied.
 
   /usr/bin/python3 bench/learning_curve.py --build build [--seeds 1,2,3] [--models linear]
       [--data teleoperation,excitation] [--real DIR] [--json FILE] [--no-doc] [--quick]
+      [--scheduler ADDR --keep SHARED_DIR | --workers N]
 
 --quick: the first seed, lengths 0.5, 1 and 2 min, torque only, nothing written
 to docs/; tests/test_learning_curve.py runs it with --data teleoperation.
+
+Each seed's session, then each (seed, length, kind of data), is a task of
+rcm.batch: side by side on a local cluster (--workers, default one per core; 0:
+one after another in this process, without Dask) or on a Dask scheduler's
+workers (--scheduler, with --keep a folder they all see; docs/howto-batch.md).
+A task's figures do not depend on where it ran.
 """
 import argparse
 import datetime
@@ -46,7 +53,7 @@ import sys
 import tempfile
 import time
 
-from doc_tables import cpu_model, run, write_block
+from doc_tables import add_cluster_flags, cpu_model, open_runner, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOC = os.path.join(ROOT, "docs", "validation-free-space.md")
@@ -130,7 +137,8 @@ def training_data(rcm, seed, minutes, kinds, session, work):
     return data
 
 
-def bench_seed(args, rcm, seed, work):
+def prepare_seed(args, rcm, seed, work):
+    """A seed's session and hold-out teleoperation (a task); returns the hold-out's effort noise."""
     session, holdout = os.path.join(work, "session"), os.path.join(work, "holdout")
     # The first minutes of a simulated teleoperation depend on its whole length,
     # so every run takes them from the same 900 s: --quick's points are the
@@ -139,26 +147,44 @@ def bench_seed(args, rcm, seed, work):
          "--no-truth", "--out", session], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     run([rcm, "simulate", "--seed", str(seed + 100), "--quick", "--free-space-s", str(HOLDOUT_S), "--no-truth",
          "--out", holdout], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    with open(os.path.join(holdout, "sim_config.json")) as f:
-        noise = json.load(f)["sensors"]["effort_noise"]
-    options = os.path.join(work, "run_options.json")
-    with open(options, "w") as f:
+    with open(os.path.join(work, "run_options.json"), "w") as f:
         json.dump(NO_BOOTSTRAP, f)
-    data = training_data(rcm, seed, args.minutes, args.data, session, work)
+    with open(os.path.join(holdout, "sim_config.json")) as f:
+        return json.load(f)["sensors"]["effort_noise"]
+
+
+def bench_length(args, rcm, seed, data_kind, L, work, noise):
+    """One kind and length of a seed's free-space data (a task, after prepare_seed): every model kind fitted on
+    it, scored on the hold-out and, unless --quick, run on the session's trials; one point per model kind."""
+    session, holdout = os.path.join(work, "session"), os.path.join(work, "holdout")
+    train = training_data(rcm, seed, [L], [data_kind], session, work)[(data_kind, L)]
     points = []
     for model_kind in args.models:
-        for (data_kind, L), train in data.items():
-            model = os.path.join(work, f"{model_kind}_{data_kind}_{L:g}min.json")
-            p = {"seed": seed, "model": model_kind, "data": data_kind, "minutes": L, "train_s": duration(train),
-                 "effort_noise": noise, **fit_and_score(args, rcm, model_kind, train,
-                                                        os.path.join(holdout, "free_space.csv"), model)}
-            if not args.quick:
-                s = rcm_json([rcm, "run", os.path.join(session, "session.json"), "--model-file", model, "--options",
-                              options, "--out", model[:-5] + "_run", "--json"])["summary"]
-                p["e_above_20mm_mm"] = 1e3 * s["error_D_above_20mm"]["mean_m"]
-                p["e_up_to_20mm_mm"] = 1e3 * s["error_D_up_to_20mm"]["mean_m"]
-            points.append(p)
+        model = os.path.join(work, f"{model_kind}_{data_kind}_{L:g}min.json")
+        p = {"seed": seed, "model": model_kind, "data": data_kind, "minutes": L, "train_s": duration(train),
+             "effort_noise": noise, **fit_and_score(args, rcm, model_kind, train,
+                                                    os.path.join(holdout, "free_space.csv"), model)}
+        if not args.quick:
+            s = rcm_json([rcm, "run", os.path.join(session, "session.json"), "--model-file", model, "--options",
+                          os.path.join(work, "run_options.json"), "--out", model[:-5] + "_run", "--json"])["summary"]
+            p["e_above_20mm_mm"] = 1e3 * s["error_D_above_20mm"]["mean_m"]
+            p["e_up_to_20mm_mm"] = 1e3 * s["error_D_up_to_20mm"]["mean_m"]
+        points.append(p)
     return points
+
+
+def bench_seeds(args, rcm, seeds, work):
+    """Every seed's points, in the order seed, model kind, length, data kind: each seed's session first, then
+    every (seed, length, data kind) at once, through rcm.batch (--scheduler, --workers)."""
+    folders = {seed: os.path.join(work, f"seed{seed}") for seed in seeds}
+    for folder in folders.values():
+        os.makedirs(folder, exist_ok=True)
+    jobs = [(seed, data, L) for seed in seeds for L in args.minutes for data in DATA_KINDS if data in args.data]
+    with open_runner(args.build, args.scheduler, args.workers) as run_all:
+        noise = dict(zip(seeds, run_all(prepare_seed, [(args, rcm, seed, folders[seed]) for seed in seeds])))
+        done = dict(zip(jobs, run_all(bench_length, [(args, rcm, seed, data, L, folders[seed], noise[seed])
+                                                      for seed, data, L in jobs])))
+    return [done[job][m] for seed in seeds for m in range(len(args.models)) for job in jobs if job[0] == seed]
 
 
 def real_curve(args, rcm, work):
@@ -336,12 +362,15 @@ def main():
     ap.add_argument("--real", help="a folder of real recordings, NAME_full.csv and NAME_half.csv pairs")
     ap.add_argument("--quick", action="store_true", help="the first seed, 0.5-2 min, torque only, no docs")
     ap.add_argument("--json", help="write every point to this file")
-    ap.add_argument("--keep", help="keep the recordings and models in this directory")
+    ap.add_argument("--keep", help="keep the recordings and models in this directory (on a cluster: one every worker "
+                                   "sees at the same path; the default, a temporary directory here, serves a local "
+                                   "cluster only)")
+    add_cluster_flags(ap)
     ap.add_argument("--no-doc", action="store_true", help="print the table only (the default; kept for scripts)")
     ap.add_argument("--doc", action="store_true",
                     help="also write the table and figure into docs/validation-free-space.md")
     args = ap.parse_args()
-    rcm = args.rcm or os.path.join(args.build, "bin", "rcm")
+    rcm = os.path.abspath(args.rcm or os.path.join(args.build, "bin", "rcm"))
     seeds = [int(s) for s in args.seeds.split(",")][:1 if args.quick else None]
     args.minutes = [float(x) for x in (args.minutes or ("0.5,1,2" if args.quick else "0.5,1,2,5,10,15")).split(",")]
     args.models = args.models.split(",")
@@ -352,10 +381,7 @@ def main():
     start = time.monotonic()
     work = args.keep or tempfile.mkdtemp(prefix="rcm_learning_curve_")
     try:
-        points = []
-        for seed in seeds:
-            os.makedirs(os.path.join(work, f"seed{seed}"), exist_ok=True)
-            points += bench_seed(args, rcm, seed, os.path.join(work, f"seed{seed}"))
+        points = bench_seeds(args, rcm, seeds, work)
         real = real_curve(args, rcm, work) if args.real else []
         summary = summarize(points, args.quick)
         ratio = ratios(summary)

@@ -3,7 +3,8 @@
 
 Runs `bench/learning_curve.py --quick --data teleoperation` (seed 1; 0.5, 1
 and 2 min of random teleoperation; the linear model; held-out torque only, no
-`rcm run`) and fails unless every point is finite and, per joint, each length's
+`rcm run`; through rcm.batch on two local workers when the build has the
+Python package) and fails unless every point is finite and, per joint, each length's
 held-out NRMSE is at most TOLERANCE (relative, per joint) above the previous
 length's.
 The excitation curve is left to the script's full run: designing its three
@@ -94,10 +95,23 @@ def main():
         return self_test()
     if not args.rcm:
         ap.error("--rcm is required")
+    # Through rcm.batch on a local cluster when the program's build has the
+    # Python package (and Dask is installed); else, as in the instrumented
+    # build, which has none, in the script's own process (--workers 0).
+    build = os.path.dirname(os.path.dirname(os.path.abspath(args.rcm)))
+    try:
+        import distributed  # noqa: F401
+        has_dask = True
+    except ImportError:
+        has_dask = False
+    if has_dask and os.path.isfile(os.path.join(build, "python", "rcm", "batch.py")):
+        where = ["--build", build, "--workers", "2"]
+    else:
+        where = ["--workers", "0"]
     with tempfile.TemporaryDirectory(prefix="rcm_test_learning_curve_") as work:
         out = os.path.join(work, "curve.json")
-        subprocess.run([sys.executable, SCRIPT, "--quick", "--data", "teleoperation", "--rcm", args.rcm, "--json", out], check=True,
-                       stderr=subprocess.DEVNULL)
+        subprocess.run([sys.executable, SCRIPT, "--quick", "--data", "teleoperation", "--rcm", args.rcm, "--json", out,
+                        *where], check=True, stderr=subprocess.DEVNULL)
         with open(out) as f:
             points = json.load(f)["points"]
     kinds = {p["data"] for p in points}

@@ -699,3 +699,59 @@ TEST(OnlineEstimator, AJumpOfTheIncisionRestartsTheFiltersAndTheyReconverge) {
   }
   EXPECT_EQ(rcm::get_online_output(ws).jumps, 0);
 }
+
+// A recording replayed in chunks (OnlineReplayer, what `rcm monitor` streams)
+// gives the whole replay: the same outputs in the same order, the same
+// summary, the settling time read back from the trace's temporary file.
+TEST(OnlineReplay, ChunksGiveTheWholeReplay) {
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const rcm::OnlineEstimator estimator(incision, linear_tissue(), default_options());
+  const int T = 6000;
+  rcm::Recording rec;
+  rec.source = "path";
+  rec.time.resize(T);
+  rec.position.resize(T, 3);
+  rec.velocity.resize(T, 3);
+  rec.effort.resize(T, 3);
+  std::mt19937 rng(8);
+  for (int k = 0; k < T; ++k) {
+    const PathSample s = path(k / 200.0);
+    // The incision moves at 10 s: an onset, and a settling time well inside the run.
+    const Eigen::Vector3d truth = k < 2000 ? Eigen::Vector3d::Zero() : Eigen::Vector3d(0.004, -0.003, 0.02);
+    rec.time(k) = s.t;
+    rec.position.row(k) = s.q.transpose();
+    rec.velocity.row(k) = s.qd.transpose();
+    rec.effort.row(k) = (make_dtau(incision, linear_tissue(), s, truth, Eigen::Vector3d(0.02, 0.02, 0.1), rng) +
+                         trailing_torque(s.q.data(), s.qd.data()))
+                            .transpose();
+  }
+  for (int delay : {0, 6}) {
+    const rcm::OnlinePipeline pipeline(std::make_shared<const TrailingModel>(delay), estimator);
+    std::vector<rcm::OnlineOutput> whole_outputs, chunk_outputs;
+    const rcm::OnlineReplay whole =
+        rcm::replay_online(pipeline, rec, {}, [&](const rcm::OnlineOutput& o) { whole_outputs.push_back(o); });
+    ASSERT_TRUE(whole.settled_after_s.has_value());
+    ASSERT_TRUE(whole.onset_s.has_value());
+    for (Eigen::Index rows : {1, 999}) {
+      chunk_outputs.clear();
+      rcm::OnlineReplayer replayer(pipeline, {}, [&](const rcm::OnlineOutput& o) { chunk_outputs.push_back(o); });
+      for (Eigen::Index at = 0; at < T; at += rows)
+        replayer.add(rcm::get_recording_rows(rec, at, std::min<Eigen::Index>(at + rows, T)));
+      const rcm::OnlineReplay chunked = replayer.finish();
+      ASSERT_EQ(chunk_outputs.size(), whole_outputs.size());
+      for (std::size_t i = 0; i < whole_outputs.size(); ++i) {
+        ASSERT_EQ(chunk_outputs[i].time, whole_outputs[i].time);
+        ASSERT_EQ(chunk_outputs[i].misalignment_m, whole_outputs[i].misalignment_m);
+      }
+      EXPECT_EQ(chunked.samples, whole.samples);
+      EXPECT_EQ(chunked.estimates, whole.estimates);
+      EXPECT_EQ(chunked.final_output.misalignment_m, whole.final_output.misalignment_m);
+      EXPECT_EQ(chunked.onset_s, whole.onset_s);
+      EXPECT_EQ(chunked.motion_start_s, whole.motion_start_s);
+      EXPECT_EQ(chunked.settled_after_s, whole.settled_after_s);
+      EXPECT_EQ(chunked.alarms.size(), whole.alarms.size());
+      EXPECT_EQ(chunked.peak_force_n, whole.peak_force_n);
+      EXPECT_EQ(chunked.regime.samples, whole.regime.samples);
+    }
+  }
+}

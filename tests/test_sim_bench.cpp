@@ -148,12 +148,22 @@ TEST(SimBench, DeterministicBySeed) {
   config.seed = 2;
   const SimulatedTrial c = simulate_trial(config, m);
   EXPECT_GT((a.recording.recording.effort - c.recording.recording.effort).norm(), 1.0);
-  // Trials replay the same path: only the misalignment differs.
+  // By default each trial moves through its own path; shared, the trials replay
+  // the calibration's path and only the misalignment differs.
   SimConfig exact = short_config();
   exact.sensors.noise = false;
+  ASSERT_EQ(exact.protocol.trial_paths, "own");
+  const SimulatedTrial own_d = simulate_trial(exact, Eigen::Vector3d(0, 0, 0.02));
+  const SimulatedTrial own_e = simulate_trial(exact, Eigen::Vector3d(0, 0, 0.05));
+  EXPECT_GT((own_d.recording.truth.q - own_e.recording.truth.q).cwiseAbs().maxCoeff(), 0.02);
+  exact.protocol.trial_paths = "shared";
   const SimulatedTrial d = simulate_trial(exact, Eigen::Vector3d(0, 0, 0.02));
   const SimulatedTrial e = simulate_trial(exact, Eigen::Vector3d(0, 0, 0.05));
   EXPECT_LT((d.recording.truth.q - e.recording.truth.q).cwiseAbs().maxCoeff(), 0.01);
+  EXPECT_LT((d.recording.truth.q - simulate_calibration(exact).truth.q.topRows(d.recording.truth.q.rows()))
+                .cwiseAbs()
+                .maxCoeff(),
+            0.01);
 }
 
 TEST(SimBench, SessionFilesDoNotDependOnThreadCount) {
@@ -243,6 +253,32 @@ TEST(SimConfig, UnknownKeysAndWrongTypesAreLocated) {
   bad = make_default_config();
   bad.sensors.log_rate_hz = 300.0;
   EXPECT_THROW(validate_config(bad, "my.json"), rcm::InputError);
+  // Friction: slip elements located by index, at most kMaxSlipElements; the
+  // LuGre element's two levels both 0 (none) or both positive.
+  auto field_of = [](const SimConfig& config) {
+    try {
+      validate_config(config, "my.json");
+    } catch (const rcm::InputError& e) {
+      return e.where().field;
+    }
+    return std::string("no error");
+  };
+  bad = make_default_config();
+  bad.friction[1].slip_elements[2] = Eigen::Vector2d(0.0, 0.01);
+  EXPECT_EQ(field_of(bad), "friction.pitch.slip_elements[2]");
+  bad = make_default_config();
+  bad.friction[0].slip_elements.assign(kMaxSlipElements + 1, Eigen::Vector2d(1e-3, 0.01));
+  EXPECT_EQ(field_of(bad), "friction.yaw.slip_elements");
+  bad = make_default_config();
+  bad.friction[2].coulomb_pos = 0.5;
+  EXPECT_EQ(field_of(bad), "friction.insertion.coulomb_neg");
+  bad = make_default_config();
+  bad.protocol.trial_paths = "same";
+  EXPECT_EQ(field_of(bad), "protocol.trial_paths");
+  // The elements round-trip through JSON with the rest of the configuration.
+  SimConfig round = make_default_config();
+  apply_config_json(round, config_to_json(make_default_config()), "round.json");
+  EXPECT_EQ(round.friction[1].slip_elements, make_default_config().friction[1].slip_elements);
 }
 
 TEST(SimConfig, PresetThenExplicitFieldsAndExampleFile) {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
 #include "rcm/common/error.hpp"
@@ -170,11 +171,12 @@ TEST(SimTrajectory, QuinticMoveMeetsBoundaryConditionsAndDerivatives) {
 }
 
 TEST(SimFriction, HoldingForceDependsOnApproachDirection) {
-  const SimConfig config = make_default_config();
+  SimConfig config = make_default_config();
+  apply_friction_preset(config, "hysteretic");
   const auto& fp = config.friction;
   const double dt = 5e-4;
   auto hold_after = [&](double v) {
-    Eigen::Vector3d z = Eigen::Vector3d::Zero();
+    FrictionState z;
     for (int i = 0; i < 2000; ++i) z = advance_friction_state(fp, z, Eigen::Vector3d::Constant(v), dt);
     return compute_friction(fp, z, Eigen::Vector3d::Zero()).tau;  // at rest now
   };
@@ -187,23 +189,67 @@ TEST(SimFriction, HoldingForceDependsOnApproachDirection) {
   }
 }
 
+// The Maxwell-slip elements of the real preset, one joint at a time: sliding
+// far one way leaves the sum of the element forces (plus the offset) at rest;
+// after a reversal the friction changes by sum_i min(2 F_i, F_i travel / x_i),
+// at any speed (Masing's rule of the rate-independent model).
+TEST(SimFriction, MaxwellSlipLoopFollowsMasingRule) {
+  const SimConfig config = make_default_config();
+  ASSERT_EQ(config.friction_preset, "real");
+  const auto& fp = config.friction;
+  for (int j = 0; j < 3; ++j) {
+    const auto& p = fp[static_cast<std::size_t>(j)];
+    ASSERT_GE(p.slip_elements.size(), 4u) << "joint " << j + 1;
+    double level = 0.0;
+    for (const auto& e : p.slip_elements) level += e[1];
+    const double far = 2.0 * p.slip_elements.back()[0];
+    Eigen::Vector3d v = Eigen::Vector3d::Zero();
+    FrictionState z;
+    v[j] = 0.05;  // slide far in +q, in steps that move 1 % of the smallest element each
+    const double dt = 0.01 * p.slip_elements.front()[0] / v[j];
+    for (double x = 0.0; x < far; x += v[j] * dt) z = advance_friction_state(fp, z, v, dt);
+    const double held = compute_friction(fp, z, Eigen::Vector3d::Zero()).tau[j];
+    EXPECT_NEAR(held, level + p.offset, 1e-9 * level) << "joint " << j + 1;
+    for (const double speed : {0.002, 0.2}) {
+      FrictionState back = z;
+      const double travel = p.slip_elements[p.slip_elements.size() / 2][0];  // the middle element's breakaway
+      v[j] = -speed;
+      const int steps = 1000;
+      for (int k = 0; k < steps; ++k) back = advance_friction_state(fp, back, v, travel / speed / steps);
+      double expected = 0.0;
+      for (const auto& e : p.slip_elements) expected += std::min(2.0 * e[1], e[1] * travel / e[0]);
+      const double change = held - compute_friction(fp, back, Eigen::Vector3d::Zero()).tau[j];
+      EXPECT_NEAR(change, expected, 1e-6 * level) << "joint " << j + 1 << " at " << speed;
+    }
+    v[j] = 0.0;
+  }
+}
+
 TEST(SimFriction, StaticHoldInClosedLoopRemembersTheApproach) {
-  SimConfig config = make_default_config();
-  config.sensors.noise = false;
-  const Eigen::Vector3d q0 = config.protocol.q0;
-  auto held_friction = [&](double sign) {
-    ReferenceTrajectory ref;
-    ref.add_hold(0.0, q0 + sign * Eigen::Vector3d(0.2, 0.2, 0.02));
-    ref.add_move(0.0, 1.5, q0);
-    ref.add_hold(1.5, q0);
-    const auto recs = simulate_run(config, ref, nullptr, {{"hold", 0.0, 3.0}}, 1);
-    return Eigen::Vector3d(recs.front().truth.friction.bottomRows(1).transpose());
-  };
-  const Eigen::Vector3d from_above = held_friction(+1.0), from_below = held_friction(-1.0);
-  // Approaching q0 from above means moving in -q: friction at rest keeps the sign of that motion.
-  for (int j = 0; j < 3; ++j)
-    EXPECT_GT(from_below[j] - from_above[j], config.friction[static_cast<std::size_t>(j)].coulomb_pos)
-        << "joint " << j + 1;
+  for (const std::string preset : {"real", "hysteretic"}) {
+    SimConfig config = make_default_config();
+    apply_friction_preset(config, preset);
+    config.sensors.noise = false;
+    const Eigen::Vector3d q0 = config.protocol.q0;
+    auto held_friction = [&](double sign) {
+      ReferenceTrajectory ref;
+      ref.add_hold(0.0, q0 + sign * Eigen::Vector3d(0.2, 0.2, 0.02));
+      ref.add_move(0.0, 1.5, q0);
+      ref.add_hold(1.5, q0);
+      const auto recs = simulate_run(config, ref, nullptr, {{"hold", 0.0, 3.0}}, 1);
+      return Eigen::Vector3d(recs.front().truth.friction.bottomRows(1).transpose());
+    };
+    const Eigen::Vector3d from_above = held_friction(+1.0), from_below = held_friction(-1.0);
+    // Approaching q0 from above means moving in -q: friction at rest keeps the
+    // sign of that motion, the level a long motion leaves (the LuGre Coulomb
+    // level, the slip elements' sum) on either side.
+    for (int j = 0; j < 3; ++j) {
+      const auto& p = config.friction[static_cast<std::size_t>(j)];
+      double level = p.coulomb_pos;
+      for (const auto& e : p.slip_elements) level += e[1];
+      EXPECT_GT(from_below[j] - from_above[j], level) << preset << " joint " << j + 1;
+    }
+  }
 }
 
 TEST(SimTissue, StretchIsDTanThetaAndForceLiesInThePad) {

@@ -113,10 +113,11 @@ TEST(SimPlant, RigidArmIsTheRigidBodyDynamics) {
     PlantState s = make_plant_state_at_rest(plant, config.protocol.q0 + Eigen::Vector3d(0.3 * u(rng), 0.3 * u(rng),
                                                                                         0.02 * u(rng)));
     s.qd = s.qmd = Eigen::Vector3d(u(rng), u(rng), 0.05 * u(rng));
-    s.z_motor = Eigen::Vector3d(1e-4 * u(rng), 1e-4 * u(rng), 1e-5 * u(rng));
+    s.friction_motor.bristles = Eigen::Vector3d(1e-4 * u(rng), 1e-4 * u(rng), 1e-5 * u(rng));
+    s.friction_motor.slip.col(0) = s.friction_motor.bristles;
     const Eigen::Vector3d tau(u(rng), u(rng), 5.0 * u(rng)), tau_ext(0.2 * u(rng), 0.2 * u(rng), u(rng));
     const PlantAcceleration a = compute_plant_acceleration(plant, s, tau, tau_ext);
-    const FrictionOutput fr = compute_friction(config.friction, s.z_motor, s.qd);
+    const FrictionOutput fr = compute_friction(config.friction, s.friction_motor, s.qd);
     const Eigen::Vector3d h = compute_inverse_dynamics(arm, s.q, s.qd, Eigen::Vector3d::Zero(), true);
     const Eigen::Matrix3d M = compute_mass_matrix(arm, s.q);
     const Eigen::Vector3d qdd = M.llt().solve(tau - h - fr.tau - tau_ext);
@@ -127,7 +128,9 @@ TEST(SimPlant, RigidArmIsTheRigidBodyDynamics) {
     PlantState next = s;
     advance_plant_state(plant, next, a, 5e-4);
     EXPECT_EQ(next.q, next.qm);
-    EXPECT_EQ(next.z_motor, advance_friction_state(config.friction, s.z_motor, next.qd, 5e-4));
+    const FrictionState expected = advance_friction_state(config.friction, s.friction_motor, next.qd, 5e-4);
+    EXPECT_EQ(next.friction_motor.bristles, expected.bristles);
+    EXPECT_EQ(next.friction_motor.slip, expected.slip);
   }
 }
 

@@ -198,43 +198,61 @@ TEST(Study, OnlineEstimatorTracksEveryTrialAndStaysQuietInFreeSpace) {
   EXPECT_LT(free.misalignment_m.head<2>().norm(), 0.003) << free.misalignment_m.transpose();
 }
 
-// Beyond the paper: the joint estimator holds on stiffening and
-// axial-friction tissue too, where the three-step subtraction of radial from
-// total force is not exact.
-TEST(Study, JointMethodHoldsOnStiffeningAndSlidingTissue) {
+// The default bench (the real preset's friction, each trial its own
+// teleoperation) on two seeds and the three tissue laws of the worst-case
+// tables (docs/validation.md): the joint estimator's mean error per seed and
+// law, on the worst of them, within the targets of the 15-minute bench (0.5 mm
+// for D > 20 mm, 1.0 mm below) on this 3-minute one, online within 1.5 mm, the
+// stiffening law found as such and the sliding law's axial friction, and the
+// intervals covering.
+TEST(Study, JointMethodWorstSeedOverTheTissueLaws) {
   RCM_STATISTICAL_TEST();
   int covered = 0, trials = 0;
-  for (const std::string preset : {"stiffening", "sliding"}) {
-    std::random_device rd;
-    const fs::path dir = fs::temp_directory_path() / ("rcm_test_study_" + preset + std::to_string(rd()));
-    rcm::sim::SimConfig config = make_small_config();
-    rcm::sim::apply_tissue_preset(config.tissue, preset);
-    config.protocol.coaxial_offsets_m = {0.015, 0.040};
-    const auto written = rcm::sim::simulate_session(config, dir);
-    rcm::StudyOptions o = quick_joint_options();
-    const rcm::StudyResult r = rcm::run_study(rcm::load_session(written.manifest), o, linear_fitter());
-    ASSERT_TRUE(r.joint_tissue);
-    if (preset == "stiffening") EXPECT_EQ(r.joint_tissue->family, "stiffening");
-    if (preset == "sliding") EXPECT_GT(r.joint_tissue->parameters[3], 0.1) << "axial friction, N";
-    for (const auto& t : r.trials) {
-      ASSERT_TRUE(t.joint && t.online && t.truth_m);
-      const double bound = (*t.truth_m)[2] > 0.020 ? 0.001 : 0.0015;  // 1 mm for D > 20 mm, 1.5 mm below
-      EXPECT_LT((t.joint->misalignment_m - *t.truth_m).norm(), bound) << preset << " " << t.name;
-      EXPECT_LT((t.online->final_output.misalignment_m - *t.truth_m).norm(), 0.0015) << preset << " " << t.name;
-      const bool inside =
-          ((t.truth_m->array() >= t.joint->ci_low.array()) && (t.truth_m->array() <= t.joint->ci_high.array())).all();
-      covered += inside;
-      ++trials;
-      if (!inside)
-        std::cerr << preset << " " << t.name << ": truth outside " << t.joint->ci_low.transpose() << " .. "
-                  << t.joint->ci_high.transpose() << "\n";
+  double worst_far = 0.0, worst_near = 0.0;
+  for (const std::uint64_t seed : {21u, 22u}) {
+    for (const std::string preset : {"linear", "stiffening", "sliding"}) {
+      std::random_device rd;
+      const fs::path dir = fs::temp_directory_path() / ("rcm_test_study_" + preset + std::to_string(rd()));
+      rcm::sim::SimConfig config = make_small_config();
+      ASSERT_EQ(config.friction_preset, "real");
+      rcm::sim::apply_tissue_preset(config.tissue, preset);
+      config.seed = seed;
+      config.protocol.coaxial_offsets_m = {0.015, 0.040};
+      const auto written = rcm::sim::simulate_session(config, dir);
+      const rcm::StudyResult r = rcm::run_study(rcm::load_session(written.manifest), quick_joint_options(),
+                                                linear_fitter());
+      ASSERT_TRUE(r.joint_tissue);
+      if (preset == "stiffening") EXPECT_EQ(r.joint_tissue->family, "stiffening") << seed;
+      if (preset == "sliding") EXPECT_GT(r.joint_tissue->parameters[3], 0.1) << seed << ": axial friction, N";
+      double far = 0.0, near = 0.0;
+      int n_far = 0, n_near = 0;
+      for (const auto& t : r.trials) {
+        ASSERT_TRUE(t.joint && t.online && t.truth_m);
+        const double e = (t.joint->misalignment_m - *t.truth_m).norm();
+        ((*t.truth_m)[2] > 0.020 ? far : near) += e;
+        ++((*t.truth_m)[2] > 0.020 ? n_far : n_near);
+        EXPECT_LT((t.online->final_output.misalignment_m - *t.truth_m).norm(), 0.0015) << preset << " " << t.name;
+        const bool inside =
+            ((t.truth_m->array() >= t.joint->ci_low.array()) && (t.truth_m->array() <= t.joint->ci_high.array())).all();
+        covered += inside;
+        ++trials;
+        if (!inside)
+          std::cerr << seed << " " << preset << " " << t.name << ": truth outside " << t.joint->ci_low.transpose()
+                    << " .. " << t.joint->ci_high.transpose() << "\n";
+      }
+      worst_far = std::max(worst_far, far / n_far);
+      worst_near = std::max(worst_near, near / n_near);
+      std::cerr << "seed " << seed << ", " << preset << ": mean e " << 1e3 * far / n_far << " / "
+                << 1e3 * near / n_near << " mm\n";
+      std::error_code ec;
+      fs::remove_all(dir, ec);
     }
-    std::error_code ec;
-    fs::remove_all(dir, ec);
   }
-  // 95 % intervals: all 8 inside is not to be expected (0.95^8 = 66 %); 5 or
-  // fewer would happen with honest intervals less than 1 % of the time.
-  EXPECT_GE(covered, 6) << "of " << trials;
+  EXPECT_LT(worst_far, 0.0005);
+  EXPECT_LT(worst_near, 0.0010);
+  // 95 % intervals on 24 trials: 20 or fewer inside would happen with honest
+  // intervals less than 3 % of the time.
+  EXPECT_GE(covered, 21) << "of " << trials;
 }
 
 // A bench whose joints hold whatever friction their last motion left (the
@@ -290,11 +308,16 @@ TEST(Study, HystereticFrictionJointIntervalsCoverAndBalancedHoldsBeatTheLastHold
 }
 
 // A free-space model off its regime: the free-space recording is of the arm
-// without the 200 g that the instrument carries when docked. The aligned
-// baseline shows the missing weight along the shaft at q0, and the joint
-// intervals on D grow with the error it causes instead of staying as narrow as
-// on the matched bench. (The payload's gravity torque on yaw and pitch grows
-// with the pivot angle and is zero at q0: the baseline cannot see that part.)
+// without the 200 g that the instrument carries when docked. Without the
+// calibration's correction, the aligned baseline shows the missing weight along
+// the shaft at q0, and the joint intervals on D grow with the error it causes
+// instead of staying as narrow as on the matched bench. (The payload's gravity
+// torque on yaw and pitch grows with the pivot angle and is zero at q0: the
+// baseline cannot see that part.) With it (the default), the calibration takes
+// part of the missing weight as the model's torque offset on the insertion and
+// no estimate gets worse; the rest grows with the pivot as the tissue's torque
+// does, and a calibration at one offset cannot tell it from the tissue law
+// (docs/estimation.md, "Correcting the free-space model's bias").
 TEST(Study, JointIntervalsWidenWhenTheFreeSpaceModelMissesAPayload) {
   std::random_device rd;
   const fs::path dir = fs::temp_directory_path() / ("rcm_test_study_payload_" + std::to_string(rd()));
@@ -304,6 +327,7 @@ TEST(Study, JointIntervalsWidenWhenTheFreeSpaceModelMissesAPayload) {
   rcm::Session payload = rcm::load_session(rcm::sim::simulate_session(config, dir / "heavy").manifest);
   payload.free_space = matched.free_space;
   rcm::StudyOptions o = quick_joint_options();
+  o.joint.fit_torque_offset = false;
   const rcm::StudyResult r_matched = rcm::run_study(matched, o, linear_fitter());
   const rcm::StudyResult r = rcm::run_study(payload, o, linear_fitter());
   ASSERT_TRUE(r.baseline_hold) << r.baseline_message;
@@ -320,10 +344,12 @@ TEST(Study, JointIntervalsWidenWhenTheFreeSpaceModelMissesAPayload) {
     worst_D_error = std::max(worst_D_error, std::abs(t.joint->misalignment_m[2] - truth_D));
     covered_D += truth_D >= t.joint->ci_low[2] && truth_D <= t.joint->ci_high[2];
     EXPECT_TRUE(truth_D >= m.joint->ci_low[2] && truth_D <= m.joint->ci_high[2]) << "matched " << m.name;
-    EXPECT_GT(t.joint->ci_high[2] - t.joint->ci_low[2], 10.0 * (m.joint->ci_high[2] - m.joint->ci_low[2])) << t.name;
+    // Several times wider: the matched bench's own intervals hold its held-out
+    // self-check, and the baseline sees the payload only at q0.
+    EXPECT_GT(t.joint->ci_high[2] - t.joint->ci_low[2], 5.0 * (m.joint->ci_high[2] - m.joint->ci_low[2])) << t.name;
   }
   EXPECT_GT(worst_D_error, 0.002) << "the payload must matter for this test to mean anything";
-  EXPECT_GE(covered_D, 3) << "of " << r.trials.size();
+  EXPECT_GE(covered_D, 2) << "of " << r.trials.size();
   // The streamed trials say the torque residual is not what the models explain.
   int residual_flagged = 0;
   for (std::size_t i = 0; i < r.trials.size(); ++i) {
@@ -332,6 +358,23 @@ TEST(Study, JointIntervalsWidenWhenTheFreeSpaceModelMissesAPayload) {
     EXPECT_EQ(r_matched.trials[i].regime.counts[bit], 0u) << r_matched.trials[i].name;
   }
   EXPECT_GE(residual_flagged, 3) << "of " << r.trials.size();
+
+  // The default: the torque offset identified on the calibration takes part of
+  // the missing weight off every residual (its constant part on the insertion),
+  // and no estimate gets worse than without it.
+  o.joint.fit_torque_offset = true;
+  const rcm::StudyResult corrected = rcm::run_study(payload, o, linear_fitter());
+  ASSERT_TRUE(corrected.joint_tissue);
+  EXPECT_LT(corrected.joint_tissue->torque_offset[2], -0.5);
+  EXPECT_GT(corrected.joint_tissue->torque_offset[2], -0.2 * 9.81 - 0.3);
+  EXPECT_EQ(corrected.joint_tissue->calibration_check, "held-out halves");
+  ASSERT_EQ(corrected.trials.size(), r.trials.size());
+  for (std::size_t i = 0; i < r.trials.size(); ++i) {
+    const rcm::TrialOutcome &t = corrected.trials[i], &u = r.trials[i];
+    ASSERT_TRUE(t.joint && u.joint && t.truth_m);
+    EXPECT_LT((t.joint->misalignment_m - *t.truth_m).norm(), (u.joint->misalignment_m - *t.truth_m).norm() + 5e-4)
+        << t.name;
+  }
   std::error_code ec;
   fs::remove_all(dir, ec);
 }

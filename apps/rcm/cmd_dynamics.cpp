@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <iostream>
+#include <iterator>
 #include <memory>
 #include <optional>
 #include <string>
@@ -20,7 +21,9 @@
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/dynamics/payload.hpp"
 #include "rcm/dynamics/torque_model.hpp"
+#include "rcm/io/atomic_file.hpp"
 #include "rcm/io/json_file.hpp"
+#include "rcm/io/recording_reader.hpp"
 #if defined(RCM_HAVE_TORCH)
 #include "training_loader.hpp"
 #endif
@@ -165,51 +168,81 @@ void run_fit(const DynamicsArgs& a) {
 void run_eval(const DynamicsArgs& a) {
   using namespace rcm::dynamics;
   std::unique_ptr<TorqueModel> model = load_torque_model(a.model_path);
-  const auto recs = load_all(a.recordings, a.dedupe);
-  std::vector<std::string> warnings;
-  for (const auto& r : recs) {
-    if (r.num_joints() < model->num_joints()) {
-      rcm::InputLocation where;
-      where.file = r.source;
-      throw rcm::InputError(where, fmt::format("the model reads {} joints, the recording has {}",
-                                               model->num_joints(), r.num_joints()));
-    }
-    if (auto w = check_sample_period(*model, r); !w.empty()) warnings.push_back(w);
-  }
-  // Where the recordings leave what the model was fitted on, its error there is an
-  // extrapolation: say how much of each recording that is.
-  const RegimeMonitor regime(model->info().regime);
-  std::vector<RegimeSummary> regimes;
-  for (const auto& r : recs) regimes.push_back(compute_regime_summary(regime, r));
-  for (const auto& w : warnings) std::cerr << "warning: " << w << "\n";
+  rcm::RecordingReadOptions ro;
+  ro.dedupe = a.dedupe;
   const auto mode = a.streaming ? PredictionMode::streaming : PredictionMode::batch;
-  const auto errors = evaluate_torque_model(*model, recs, 0.0, mode);
+  const int M = model->num_outputs();
+  // --predictions: recording index, time, predicted and measured torque of every output joint.
+  std::optional<rcm::AtomicFileWriter> predictions;
   if (!a.predictions.empty()) {
-    // recording index, time, predicted and measured torque of every output joint.
-    std::string csv = "recording,time";
-    for (int j = 1; j <= model->num_outputs(); ++j) csv += fmt::format(",tau_fs_{}", j);
-    for (int j = 1; j <= model->num_outputs(); ++j) csv += fmt::format(",effort_{}", j);
-    csv += "\n";
-    for (std::size_t r = 0; r < recs.size(); ++r) {
-      const Eigen::MatrixXd p = predict_torque(*model, recs[r], mode);
+    predictions.emplace(a.predictions);
+    std::string header = "recording,time";
+    for (int j = 1; j <= M; ++j) header += fmt::format(",tau_fs_{}", j);
+    for (int j = 1; j <= M; ++j) header += fmt::format(",effort_{}", j);
+    predictions->append(header + "\n");
+  }
+  // Each recording streams through the model a chunk at a time: memory does not grow with the recordings.
+  std::vector<std::string> warnings, sources;
+  std::vector<RegimeSummary> regimes;
+  const RegimeMonitor regime(model->info().regime);
+  TorqueErrorAccumulator accumulator(M);
+  std::string csv;
+  for (std::size_t r = 0; r < a.recordings.size(); ++r) {
+    const auto reader = rcm::open_recording(a.recordings[r], ro);
+    if (reader->num_joints() < model->num_joints()) {
+      rcm::InputLocation where;
+      where.file = reader->source();
+      throw rcm::InputError(where, fmt::format("the model reads {} joints, the recording has {}",
+                                               model->num_joints(), reader->num_joints()));
+    }
+    sources.push_back(reader->source());
+    // Where the recordings leave what the model was fitted on, its error there is an
+    // extrapolation: say how much of each recording that is.
+    RegimeSummary summary;
+    auto regime_ws = regime.create_workspace();
+    RecordingTorqueStream stream(*model, mode);
+    auto take_ready = [&] {
+      const rcm::Recording& rec = stream.get_samples();
+      const Eigen::MatrixXd& p = stream.get_torque();
+      if (rec.num_samples() == 0) return;
+      accumulator.add(rec.effort.leftCols(M), p);
+      if (!predictions) return;
+      csv.clear();
       for (Eigen::Index t = 0; t < p.rows(); ++t) {
-        csv += fmt::format("{},{}", r + 1, recs[r].time(t));
-        for (int j = 0; j < model->num_outputs(); ++j) csv += fmt::format(",{}", p(t, j));
-        for (int j = 0; j < model->num_outputs(); ++j) csv += fmt::format(",{}", recs[r].effort(t, j));
+        fmt::format_to(std::back_inserter(csv), "{},{}", r + 1, rec.time(t));
+        for (int j = 0; j < M; ++j) fmt::format_to(std::back_inserter(csv), ",{}", p(t, j));
+        for (int j = 0; j < M; ++j) fmt::format_to(std::back_inserter(csv), ",{}", rec.effort(t, j));
         csv += "\n";
       }
+      predictions->append(csv);
+    };
+    rcm::Recording chunk;
+    for (bool first = true; reader->read_chunk(chunk); first = false) {
+      // The sampling-period check reads the first chunk (its median interval).
+      const std::string w = first ? check_sample_period(*model, chunk) : std::string();
+      if (!w.empty()) {
+        std::cerr << "warning: " << w << "\n";
+        warnings.push_back(w);
+      }
+      add_regime_samples(regime, regime_ws, chunk, summary);
+      stream.add(chunk);
+      take_ready();
     }
-    rcm::write_file_atomic(a.predictions, csv);
+    stream.finish();
+    take_ready();
+    regimes.push_back(summary);
   }
+  const auto errors = accumulator.get_errors();
+  if (predictions) predictions->commit();
   if (a.json) {
     auto j = to_json(errors);
     j["model"] = {{"kind", to_string(model->kind())}, {"path", a.model_path}};
     j["mode"] = a.streaming ? "streaming" : "batch";
     j["warnings"] = warnings;
     nlohmann::json regime_json = nlohmann::json::array();
-    for (std::size_t r = 0; r < recs.size(); ++r) {
+    for (std::size_t r = 0; r < sources.size(); ++r) {
       auto rj = regimes[r].to_json();
-      rj["recording"] = recs[r].source;
+      rj["recording"] = sources[r];
       regime_json.push_back(rj);
     }
     j["regime"] = regime_json;
@@ -226,8 +259,8 @@ void run_eval(const DynamicsArgs& a) {
   std::cout << "model: " << to_string(model->kind()) << " (" << a.model_path << "), "
             << (a.streaming ? "streaming (as live)" : "batch (offline)") << "\n"
             << rcm::cli::format_table({"joint", "RMSE", "NRMSE %", "range"}, rows);
-  for (std::size_t r = 0; r < recs.size(); ++r)
-    std::cout << "regime: " << (recs.size() > 1 ? recs[r].source + ": " : std::string()) << regimes[r].to_text() << "\n";
+  for (std::size_t r = 0; r < sources.size(); ++r)
+    std::cout << "regime: " << (sources.size() > 1 ? sources[r] + ": " : std::string()) << regimes[r].to_text() << "\n";
 }
 
 void run_payload(const DynamicsArgs& a) {
@@ -340,7 +373,8 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   fit->add_flag("--json", args->json, "print the fit summary as one JSON object");
   fit->callback([args] { run_fit(*args); });
 
-  auto* ev = dyn->add_subcommand("eval", "Per-joint RMSE and NRMSE (%) of a model on recordings (Table II)");
+  auto* ev = dyn->add_subcommand(
+      "eval", "Per-joint RMSE and NRMSE (%) of a model on recordings (Table II); streams in constant memory");
   ev->add_option("model", args->model_path, "model file")->required();
   ev->add_option("recordings", args->recordings, "recordings (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   ev->add_option("--predictions", args->predictions, "also write the predicted torque of every sample to this CSV");

@@ -10,6 +10,7 @@
 #include "message_cli.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/recording.hpp"
+#include "rcm/io/recording_reader.hpp"
 #include "rcm/io/session.hpp"
 
 namespace {
@@ -21,18 +22,24 @@ struct Options {
   double rate_hz = 0.0;
 };
 
-nlohmann::json summary_json(const rcm::Recording& r) {
-  const rcm::RecordingSummary s = rcm::summarize_recording(r);
+// A recording read in chunks: constant memory whatever its length (the exact
+// median interval may read it a second time, rcm/io/recording_reader.hpp).
+nlohmann::json summary_json(const std::filesystem::path& path, const rcm::RecordingReadOptions& read) {
+  const auto reader = rcm::open_recording(path, read);
+  const rcm::RecordingSummary s =
+      rcm::summarize_recording(*reader, [&] { return rcm::open_recording(path, read); });
+  const std::string& source = reader->source();
+  const rcm::RecordingLayout layout = reader->layout();
   auto ranges = [](const std::vector<rcm::RecordingSummary::Range>& v) {
     nlohmann::json a = nlohmann::json::array();
     for (const auto& x : v) a.push_back({x.min, x.max});
     return a;
   };
-  nlohmann::json j = {{"file", r.source},
-                      {"layout", r.layout == rcm::RecordingLayout::rostopic_csv ? "rostopic"
-                                : r.layout == rcm::RecordingLayout::rosbag     ? "rosbag"
-                                : r.layout == rcm::RecordingLayout::rosbag2    ? "rosbag2"
-                                                                                : "rcm"},
+  nlohmann::json j = {{"file", source},
+                      {"layout", layout == rcm::RecordingLayout::rostopic_csv ? "rostopic"
+                                : layout == rcm::RecordingLayout::rosbag     ? "rosbag"
+                                : layout == rcm::RecordingLayout::rosbag2    ? "rosbag2"
+                                                                              : "rcm"},
                       {"samples", s.samples},
                       {"joints", s.joints},
                       {"duration_s", s.duration_s},
@@ -49,7 +56,7 @@ nlohmann::json summary_json(const rcm::Recording& r) {
                       {"velocity_range", ranges(s.velocity)},
                       {"effort_range", ranges(s.effort)}};
   if (s.has_force) j["force_range"] = ranges(s.force);
-  if (const rcm::Rosbag2ReadInfo* b = rcm::cli::find_rosbag2_info(r.source))
+  if (const rcm::Rosbag2ReadInfo* b = rcm::cli::find_rosbag2_info(source))
     j["rosbag2"] = {{"storage", b->storage},
                     {"files", b->files},
                     {"metadata_version", b->metadata_version},
@@ -137,7 +144,7 @@ void run(const Options& o) {
       contents = rcm::list_rosbag2_contents(o.file);
       if (!o.json) print_contents(*contents);
     }
-    nlohmann::json j = summary_json(rcm::load_recording(o.file, read));
+    nlohmann::json j = summary_json(o.file, read);
     if (contents) j["rosbag2"]["topics"] = contents_json(*contents);
     if (o.json) rcm::cli::print_json(j);
     else print_recording(j, "");
@@ -147,7 +154,7 @@ void run(const Options& o) {
   nlohmann::json out = {{"file", o.file}, {"format", "rcm-session/1"}, {"robot", s.robot},
                         {"q0", rcm::cli::to_json(s.q0)}};
   const rcm::RecordingReadOptions session_read = rcm::get_read_options(s, read);
-  auto load = [&](const std::filesystem::path& p) { return summary_json(rcm::load_recording(p, session_read)); };
+  auto load = [&](const std::filesystem::path& p) { return summary_json(p, session_read); };
   out["free_space"] = nlohmann::json::array();
   for (const auto& p : s.free_space) out["free_space"].push_back(load(p));
   if (s.baseline) out["baseline"] = load(*s.baseline);
@@ -193,7 +200,9 @@ void run(const Options& o) {
 
 const bool registered = rcm::cli::register_command({"inspect", 10, [](CLI::App& app) {
   auto o = std::make_shared<Options>();
-  CLI::App* cmd = app.add_subcommand("inspect", "Validate and summarize a recording or a session (.json)");
+  CLI::App* cmd = app.add_subcommand(
+      "inspect",
+      "Validate and summarize a recording or a session (.json), read in chunks in constant memory");
   cmd->add_option("FILE", o->file,
                   "recording (rcm or rostopic CSV, ROS 1 .bag, rosbag2 directory, .db3 or .mcap) or session manifest")
       ->required();

@@ -7,7 +7,9 @@
 #include <cmath>
 #include <filesystem>
 #include <iostream>
+#include <iterator>
 #include <memory>
+#include <optional>
 
 #include "cli_util.hpp"
 #include "command_registry.hpp"
@@ -15,7 +17,9 @@
 #include "rcm/dynamics/torque_model.hpp"
 #include "rcm/estimation/correction.hpp"
 #include "rcm/estimation/online.hpp"
+#include "rcm/io/atomic_file.hpp"
 #include "rcm/io/json_file.hpp"
+#include "rcm/io/recording_reader.hpp"
 #include "rcm/io/session.hpp"
 #include "study_cli.hpp"
 
@@ -51,10 +55,14 @@ void run(const Options& o) {
   o.replay.apply(replay_options);
   const rcm::StudyOptions options = rcm::cli::make_study_options(o.study, o.options_file);
   const rcm::Session session = rcm::load_session(o.session);
-  const rcm::Recording rec = rcm::load_recording(o.recording, options.read);
+  // The recording streams through the pipeline a chunk at a time: memory does not grow with its length.
+  const auto reader = rcm::open_recording(o.recording, options.read);
+  rcm::Recording chunk;
+  const bool any = reader->read_chunk(chunk);
   const rcm::MonitorSetup setup = rcm::prepare_monitor(session, options, rcm::cli::get_torque_model_fitter());
   const rcm::dynamics::TorqueModel& model = *setup.free_space.model;
-  if (auto w = rcm::dynamics::check_sample_period(model, rec); !w.empty()) std::cerr << "warning: " << w << "\n";
+  // The sampling-period check reads the first chunk (its median interval), not the whole recording.
+  if (auto w = rcm::dynamics::check_sample_period(model, chunk); !w.empty()) std::cerr << "warning: " << w << "\n";
 
   rcm::OnlineEstimatorOptions online = rcm::make_online_options(setup.joint_options);
   o.online.apply(online);
@@ -74,25 +82,35 @@ void run(const Options& o) {
                              setup.free_space.model->get_output_delay_s());
 
   // Printing happens in the callback: events at once, the estimate at a cadence.
-  double next_print = rec.time(0);
-  std::string csv =
-      "time,dr_x,dr_y,D,sd_dr_x,sd_dr_y,sd_D,force_x,force_y,force_z,force_norm,cusum,onset,alarm,at_rest,hypothesis,"
-      "out_of_regime,regime_flags,action,move_x,move_y,move_z,step_x,step_y,step_z\n";
+  const double first_time = any ? chunk.time(0) : 0.0;
+  double next_print = first_time;
+  // --out: a line per estimate into the file's temporary, renamed when the replay is complete.
+  std::optional<rcm::AtomicFileWriter> trace;
+  std::string csv;
+  if (!o.out.empty()) {
+    trace.emplace(o.out);
+    trace->append(
+        "time,dr_x,dr_y,D,sd_dr_x,sd_dr_y,sd_D,force_x,force_y,force_z,force_norm,cusum,onset,alarm,at_rest,"
+        "hypothesis,out_of_regime,regime_flags,action,move_x,move_y,move_z,step_x,step_y,step_z\n");
+  }
   bool onset_printed = false;
-  double next_regime_print = rec.time(0);
+  double next_regime_print = first_time;
   std::uint32_t regime_since_print = 0;
   if (!o.json && !o.quiet)
     std::cout << fmt::format("{:>9} {:>8} {:>8} {:>8}   {:>6} {:>6} {:>6}  {:>7}  {}\n", "time (s)", "dr_x", "dr_y", "D",
                              "sd_x", "sd_y", "sd_D", "|f| (N)", "(mm)");
   auto on_sample = [&](const rcm::OnlineOutput& out) {
     const rcm::CorrectionOutput& c = corrector.compute_correction(correction_ws, out);
-    if (!o.out.empty())
-      csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", out.time,
+    if (trace) {
+      csv.clear();
+      fmt::format_to(std::back_inserter(csv), "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", out.time,
                          out.misalignment_m[0], out.misalignment_m[1], out.misalignment_m[2], out.sd_m[0], out.sd_m[1],
                          out.sd_m[2], out.f_inc_base[0], out.f_inc_base[1], out.f_inc_base[2], out.force_norm_n,
                          out.cusum, out.onset ? 1 : 0, out.alarm ? 1 : 0, out.at_rest ? 1 : 0, out.hypothesis,
                          out.out_of_regime ? 1 : 0, out.regime_flags, rcm::to_string(c.action), c.move_base[0],
                          c.move_base[1], c.move_base[2], c.step_base[0], c.step_base[1], c.step_base[2]);
+      trace->append(csv);
+    }
     if (c.changed) {
       const std::string advice = rcm::describe_correction(c, corrector);
       correction_events.push_back({{"time_s", out.time}, {"action", rcm::to_string(c.action)}, {"advice", advice}});
@@ -123,8 +141,14 @@ void run(const Options& o) {
       regime_since_print = 0;
     }
   };
-  const rcm::OnlineReplay replay = rcm::replay_online(pipeline, rec, replay_options, on_sample);
-  if (!o.out.empty()) rcm::write_file_atomic(o.out, csv);
+  rcm::OnlineReplayer replayer(pipeline, replay_options, on_sample);
+  double last_time = first_time;
+  for (bool more = any; more; more = reader->read_chunk(chunk)) {
+    replayer.add(chunk);
+    last_time = chunk.time(chunk.time.size() - 1);
+  }
+  const rcm::OnlineReplay replay = replayer.finish();
+  if (trace) trace->commit();
 
   const rcm::OnlineOutput& final_out = replay.final_output;
   const rcm::CorrectionOutput& final_correction = correction_ws.output;
@@ -132,16 +156,16 @@ void run(const Options& o) {
   const rcm::AlignmentCheck alignment = rcm::check_alignment(final_out, setup.incision, correction);
   const auto truth = find_truth(session, o.recording);
   const double mean_us = 1e6 * replay.mean_update_s;
-  const Eigen::Index T = rec.time.size();
+  const auto T = static_cast<Eigen::Index>(replay.samples);
   auto opt = [](const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); };
 
   if (o.json) {
     nlohmann::json j;
-    j["recording"] = rec.source;
+    j["recording"] = reader->source();
     j["samples"] = T;
     j["estimates"] = replay.estimates;
     j["output_delay_s"] = model.get_output_delay_s();
-    j["duration_s"] = rec.time(T - 1) - rec.time(0);
+    j["duration_s"] = last_time - first_time;
     j["free_space_model"] = rcm::dynamics::to_string(model.kind());
     j["tissue"] = {{"family", setup.tissue.family},
                    {"k1", setup.tissue.parameters[0]},
@@ -212,7 +236,7 @@ const bool registered = rcm::cli::register_command({"monitor", 65, [](CLI::App& 
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "monitor", "Replay a recording as a stream through the online estimator: running estimate of all three offsets, "
-                 "onset of the misalignment and incision-force alarms");
+                 "onset of the misalignment and incision-force alarms; streams in constant memory");
   cmd->add_option("--session", o->session, "rcm-session/1 manifest (free-space data, q0, calibration)")->required();
   cmd->add_option("RECORDING", o->recording, "recording to replay (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   rcm::cli::add_free_space_flags(cmd, o->study);

@@ -82,16 +82,24 @@ void add_topic_options(CLI::App& cmd) {
       ->group("Bags");
 }
 
+std::unique_ptr<Rosbag2RecordingReader> open_rosbag2(const std::filesystem::path& path,
+                                                     const TopicReadOptions& options, std::size_t chunk_rows) {
+  auto reader = open_rosbag2_recording(path, options, chunk_rows);
+  reader->set_on_end([key = path.string()](RecordingReader& r) {
+    const Rosbag2ReadInfo& info = static_cast<Rosbag2RecordingReader&>(r).info();
+    for (const std::string& w : info.warnings) std::cerr << "warning: " << w << "\n";
+    if (info.zero_stamp_messages > 0)
+      std::cerr << "note: " << key << " " << info.topic << ": " << info.zero_stamp_messages << " of " << info.messages
+                << " messages skipped (zero header.stamp: invalid data)\n";
+    const std::lock_guard<std::mutex> lock(info_mutex());
+    infos()[key] = info;
+  });
+  return reader;
+}
+
 Recording load_rosbag2(const std::filesystem::path& path, const TopicReadOptions& options) {
-  Rosbag2ReadInfo info;
-  Recording rec = load_rosbag2_recording(path, options, &info);
-  for (const std::string& w : info.warnings) std::cerr << "warning: " << w << "\n";
-  if (info.zero_stamp_messages > 0)
-    std::cerr << "note: " << path.string() << " " << info.topic << ": " << info.zero_stamp_messages << " of "
-              << info.messages << " messages skipped (zero header.stamp: invalid data)\n";
-  const std::lock_guard<std::mutex> lock(info_mutex());
-  infos()[path.string()] = info;
-  return rec;
+  const auto reader = open_rosbag2(path, options);
+  return read_whole_recording(*reader);
 }
 
 const Rosbag2ReadInfo* find_rosbag2_info(const std::string& path) {
@@ -114,13 +122,15 @@ void add_options_to_readers(CLI::App& app) {
 
 const bool registered = register_command({"(message recordings)", 1000, [](CLI::App& app) {
   add_options_to_readers(app);
-  auto rosbag2_reader = [](const std::filesystem::path& path, const RecordingReadOptions& read) {
-    return load_rosbag2(path, get_topic_options(read));
+  auto rosbag2_reader = [](const std::filesystem::path& path, const RecordingReadOptions& read,
+                           std::size_t chunk_rows) -> std::unique_ptr<RecordingReader> {
+    return open_rosbag2(path, get_topic_options(read), chunk_rows);
   };
-  for (const char* key : {".db3", ".mcap", "/"}) register_recording_reader(key, rosbag2_reader);
+  for (const char* key : {".db3", ".mcap", "/"}) register_recording_stream(key, rosbag2_reader);
 #if RCM_HAVE_ROS
-  register_recording_reader(".bag", [](const std::filesystem::path& path, const RecordingReadOptions& read) {
-    return load_bag_recording(path, get_topic_options(read));
+  register_recording_stream(".bag", [](const std::filesystem::path& path, const RecordingReadOptions& read,
+                                       std::size_t chunk_rows) -> std::unique_ptr<RecordingReader> {
+    return open_bag_recording(path, get_topic_options(read), chunk_rows);
   });
 #else
   register_recording_reader(".bag", [](const std::filesystem::path& path, const RecordingReadOptions&) -> Recording {

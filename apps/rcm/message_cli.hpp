@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include <filesystem>
+#include <memory>
 #include <string>
 
 #include "rcm/io/message_recording.hpp"
@@ -19,8 +20,12 @@ TopicReadOptions& get_topic_options();
 TopicReadOptions get_topic_options(const RecordingReadOptions& read);
 // Adds --topic, --force-topic and --time to `cmd` (once).
 void add_topic_options(CLI::App& cmd);
-// A rosbag2 recording with `options`; prints its warnings and skipped-message
-// count to stderr and keeps its read info for find_rosbag2_info().
+// A rosbag2 recording with `options`, in chunks; once it has been read to its
+// end, its warnings and skipped-message count go to stderr and its read info
+// is kept for find_rosbag2_info(). load_rosbag2: every chunk.
+std::unique_ptr<Rosbag2RecordingReader> open_rosbag2(const std::filesystem::path& path,
+                                                     const TopicReadOptions& options,
+                                                     std::size_t chunk_rows = kDefaultChunkRows);
 Recording load_rosbag2(const std::filesystem::path& path, const TopicReadOptions& options);
 // The read info of a rosbag2 recording loaded in this run (by path as given), or null.
 const Rosbag2ReadInfo* find_rosbag2_info(const std::string& path);

@@ -8,6 +8,7 @@
 
 #include "fuzz_support.hpp"
 #include "rcm/io/recording.hpp"
+#include "rcm/io/recording_reader.hpp"
 
 namespace rcm::fuzz {
 
@@ -48,6 +49,33 @@ inline void check_accepted_recording(const Recording& rec) {
   if (rec.has_force()) RCM_FUZZ_CHECK(*back.force == *rec.force);
 }
 
+// The same read in small chunks (io/recording_reader.hpp) gives the same
+// recording, or fails with the same message: every check that spans rows
+// holds across chunk boundaries. `whole` reads it at once, `open_chunked`
+// opens it with chunks of a few rows.
+template <class Whole, class Chunked>
+void check_chunked_read(Whole&& whole, Chunked&& open_chunked) {
+  Recording a, b;
+  std::string error_a, error_b;
+  try {
+    a = whole();
+  } catch (const InputError& e) {
+    error_a = e.what();
+  }
+  try {
+    const auto reader = open_chunked();
+    b = read_whole_recording(*reader);
+  } catch (const InputError& e) {
+    error_b = e.what();
+  }
+  if (error_a != error_b) std::fprintf(stderr, "whole: %s\nchunked: %s\n", error_a.c_str(), error_b.c_str());
+  RCM_FUZZ_CHECK(error_a == error_b);
+  if (!error_a.empty()) return;
+  RCM_FUZZ_CHECK(a.time == b.time && a.position == b.position && a.velocity == b.velocity && a.effort == b.effort);
+  RCM_FUZZ_CHECK(a.has_force() == b.has_force() && (!a.has_force() || *a.force == *b.force));
+  RCM_FUZZ_CHECK(a.line == b.line && a.repeated_rows == b.repeated_rows);
+}
+
 // Reads `text` as the CSV reader would read the file, first with the default
 // options, then as `--dedupe --rate 100` with one joint allowed.
 inline void fuzz_csv(const std::uint8_t* data, std::size_t size, const char* name,
@@ -58,6 +86,8 @@ inline void fuzz_csv(const std::uint8_t* data, std::size_t size, const char* nam
   options[1].assumed_rate_hz = 100.0;
   options[1].min_joints = 1;
   for (const RecordingReadOptions& o : options) {
+    check_chunked_read([&] { return parse_recording(text, name, o); },
+                       [&] { return open_recording_text(text, name, o, 2); });
     Recording rec;
     if (!accepts([&] { rec = parse_recording(text, name, o); })) continue;
     if (expect_rostopic_layout_when_percent_time && text.rfind("%time", 0) == 0)

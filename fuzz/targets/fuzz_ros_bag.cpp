@@ -11,6 +11,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   o.force_topic = "/PSM1/body/measured_cf";
   o.read.min_joints = 1;
   o.time = size % 2 == 1 ? MessageTime::receive : MessageTime::header;
+  fuzz::check_chunked_read([&] { return load_bag_recording(path, o); }, [&] { return open_bag_recording(path, o, 3); });
   Recording rec;
   BagReadInfo info;
   if (!fuzz::accepts([&] { rec = load_bag_recording(path, o, &info); })) return 0;

@@ -26,6 +26,8 @@ inline void fuzz_rosbag2_path(const std::filesystem::path& path, bool receive_ti
   {
     TopicReadOptions o = rosbag2_options();
     o.time = receive_time ? MessageTime::receive : MessageTime::header;
+    check_chunked_read([&] { return load_rosbag2_recording(path, o); },
+                       [&] { return open_rosbag2_recording(path, o, 3); });
     Recording rec;
     Rosbag2ReadInfo info;
     if (!accepts([&] { rec = load_rosbag2_recording(path, o, &info); })) return;

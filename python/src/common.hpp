@@ -73,5 +73,6 @@ void bind_estimation(py::module_& m);
 void bind_online(py::module_& m);
 void bind_study(py::module_& m);
 void bind_sim(py::module_& m, py::module_& sim);
+void bind_plot(py::module_& m);
 
 }  // namespace rcm::python

@@ -172,6 +172,33 @@ void bind_dynamics(py::module_& m, py::module_& d) {
            "Advance by one sample at time t (s) and return tau_fs of joints 1..num_outputs (N m, N for joint 3).\n"
            "q, qd: at least num_joints values. The same as predict_torque_streaming, sample by sample;\n"
            "with output_delay d > 0, the torque of the sample output_delay_s earlier (d calls at the model's rate).")
+      .def("compute_steps", [](const TorqueModel& self, TorqueWorkspace& ws, py::handle time, py::handle q,
+                               py::handle qd) {
+        const std::string fn = "TorqueModel.compute_steps";
+        check_owner(self, ws, fn);
+        const Eigen::VectorXd t = to_vector(time, argument_location(fn, "time"));
+        const Eigen::MatrixXd qm = to_matrix(q, argument_location(fn, "q"), t.size());
+        const Eigen::MatrixXd qdm = to_matrix(qd, argument_location(fn, "qd"), t.size(), qm.cols());
+        if (qm.cols() < self.num_joints())
+          throw InputError(argument_location(fn, "q"),
+                           "expected at least " + std::to_string(self.num_joints()) + " columns (the joints the model reads)");
+        for (Eigen::Index k = 0; k < t.size(); ++k) to_finite(t[k], argument_location(fn, "time"));
+        Eigen::MatrixXd out(t.size(), self.num_outputs());
+        {
+          py::gil_scoped_release release;
+          using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+          const RowMajor qr = qm, qdr = qdm;
+          Eigen::VectorXd tau(self.num_outputs());
+          for (Eigen::Index k = 0; k < t.size(); ++k) {
+            self.compute_step(*ws.workspace, t[k], qr.row(k).data(), qdr.row(k).data(), tau.data());
+            out.row(k) = tau.transpose();
+          }
+        }
+        return out;
+      }, py::arg("workspace"), py::arg("time"), py::arg("q"), py::arg("qd"),
+           "compute_step over a block of samples (time (T,), q and qd (T, >= num_joints), e.g. a chunk of\n"
+           "rcm.iter_recording), the state carried in the workspace from block to block: (T, num_outputs), row k\n"
+           "what compute_step returns for sample k.")
       .def("get_step_runs", [](const TorqueModel& self, const TorqueWorkspace& ws) -> py::object {
         check_owner(self, ws, "TorqueModel.get_step_runs");
         const TorqueModel::StepRuns runs = self.get_step_runs(*ws.workspace);
@@ -360,6 +387,32 @@ void bind_dynamics(py::module_& m, py::module_& d) {
     const Eigen::MatrixXd b = to_matrix(predicted, argument_location(fn, "predicted"), a.rows(), a.cols());
     return compute_torque_errors(a, b);
   }, py::arg("measured"), py::arg("predicted"), "Per-joint RMSE / NRMSE of two (T, M) arrays");
+  py::class_<RecordingTorqueStream>(
+      d, "RecordingTorqueStream",
+      "predict_torque over a recording given in chunks (rcm.iter_recording): add(chunk) returns the samples\n"
+      "whose torque is final and their torque, (rcm.Recording, (n, num_outputs) array); finish() the rest.\n"
+      "The rows are exactly predict_torque's (streaming=True: predict_torque_streaming's); memory holds only\n"
+      "what the model looks ahead (the linear model's zero-phase window, a network's output delay).")
+      .def(py::init([](std::shared_ptr<TorqueModel> model, bool streaming) {
+             // The stream refers to the model: keep it alive with the stream (keep_alive below).
+             return std::make_unique<RecordingTorqueStream>(*model, streaming ? PredictionMode::streaming
+                                                                              : PredictionMode::batch);
+           }),
+           py::arg("model"), py::arg("streaming") = false, py::keep_alive<1, 2>())
+      .def("add", [](RecordingTorqueStream& self, const Recording& chunk) {
+        {
+          py::gil_scoped_release release;
+          self.add(chunk);
+        }
+        return py::make_tuple(std::make_shared<Recording>(self.get_samples()), Eigen::MatrixXd(self.get_torque()));
+      }, py::arg("chunk"))
+      .def("finish", [](RecordingTorqueStream& self) {
+        {
+          py::gil_scoped_release release;
+          self.finish();
+        }
+        return py::make_tuple(std::make_shared<Recording>(self.get_samples()), Eigen::MatrixXd(self.get_torque()));
+      });
   d.def("evaluate_torque_model", [](const TorqueModel& model, const std::vector<Recording>& recordings, double first_fraction,
                                     bool streaming) {
     py::gil_scoped_release release;

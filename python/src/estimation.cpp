@@ -127,7 +127,12 @@ void bind_estimation(py::module_& m) {
       .def_readonly("bic", &JointTissueModel::bic)
       .def_readonly("covariance", &JointTissueModel::covariance)
       .def_readonly("bootstrap_replicates", &JointTissueModel::bootstrap_replicates)
-      .def_readonly("calibration_bias_m", &JointTissueModel::calibration_bias_m)
+      .def_readonly("torque_offset", &JointTissueModel::torque_offset,
+                    "the free-space model's torque error identified on the calibration (N m, N m, N)")
+      .def_readonly("torque_offset_covariance", &JointTissueModel::torque_offset_covariance)
+      .def_readonly("calibration_bias_m", &JointTissueModel::calibration_bias_m,
+                    "the held-out self-check: RMS per component of what one half's models find on the other half")
+      .def_readonly("calibration_check", &JointTissueModel::calibration_check)
       .def_readonly("calibration_offset_m", &JointTissueModel::calibration_offset_m)
       .def("__repr__", [](const JointTissueModel& t) {
         return "<rcm.JointTissueModel " + t.family + ": k1 " + std::to_string(t.parameters[0]) + " N/m, c " +

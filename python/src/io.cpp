@@ -4,6 +4,7 @@
 
 #include "common.hpp"
 #include "rcm/io/recording.hpp"
+#include "rcm/io/recording_reader.hpp"
 #include "rcm/io/rosbag2.hpp"
 #include "rcm/io/session.hpp"
 
@@ -177,6 +178,71 @@ void bind_io(py::module_& m) {
         py::arg("text"), py::arg("source") = "<text>", py::kw_only(), py::arg("dedupe") = false,
         py::arg("assumed_rate_hz") = py::none(), py::arg("min_joints") = 3,
         "Same as load_recording, from CSV text in memory; `source` names it in error messages.");
+  // A recording as a stream of chunks: each a Recording of at most chunk_rows samples.
+  py::class_<RecordingReader>(
+      m, "RecordingChunks",
+      "The chunks of one recording (rcm.iter_recording): iterate to get rcm.Recording blocks of at most\n"
+      "chunk_rows consecutive samples, each with time, position, velocity, effort and force as numpy arrays.")
+      .def("__iter__", [](py::object self) { return self; })
+      .def("__next__", [](RecordingReader& r) {
+        auto chunk = std::make_shared<Recording>();
+        bool more;
+        {
+          py::gil_scoped_release release;
+          more = r.read_chunk(*chunk);
+        }
+        if (!more) throw py::stop_iteration();
+        return chunk;
+      })
+      .def_property_readonly("source", &RecordingReader::source)
+      .def_property_readonly("layout", &RecordingReader::layout)
+      .def_property_readonly("num_joints", &RecordingReader::num_joints)
+      .def_property_readonly("has_force", &RecordingReader::has_force)
+      .def_property_readonly("chunk_rows", &RecordingReader::chunk_rows)
+      .def_property_readonly("samples_read", &RecordingReader::samples_read, "samples handed out so far")
+      .def_property_readonly("repeated_rows", &RecordingReader::repeated_rows,
+                             "repeated rows met so far (the total once exhausted)");
+  m.def("iter_recording",
+        [](const std::filesystem::path& path, std::size_t chunk_rows, bool dedupe, std::optional<double> rate,
+           int min_joints, std::optional<std::string> topic, std::optional<std::string> force_topic,
+           const std::string& time) -> std::unique_ptr<RecordingReader> {
+          const RecordingReadOptions o = make_read_options(dedupe, rate, min_joints);
+          if (chunk_rows == 0)
+            throw InputError(argument_location("rcm.iter_recording", "chunk_rows"), "must be at least 1");
+          if (time != "header" && time != "receive")
+            throw InputError(argument_location("rcm.iter_recording", "time"), "'header' or 'receive', got '" + time + "'");
+          const bool bag_options = topic || force_topic || time != "header";
+          if (!is_rosbag2_path(path)) {
+            if (bag_options)
+              throw InputError(argument_location("rcm.iter_recording", topic ? "topic" : force_topic ? "force_topic" : "time"),
+                               "applies to rosbag2 recordings (a bag directory, .db3 or .mcap), not to " + path.string());
+            py::gil_scoped_release release;
+            return open_recording(path, o, chunk_rows);
+          }
+          TopicReadOptions t;
+          t.read = o;
+          if (topic) t.topic = *topic;
+          if (force_topic) t.force_topic = *force_topic;
+          t.time = time == "receive" ? MessageTime::receive : MessageTime::header;
+          std::unique_ptr<Rosbag2RecordingReader> reader;
+          {
+            py::gil_scoped_release release;
+            reader = open_rosbag2_recording(path, t, chunk_rows);
+          }
+          reader->set_on_end([](RecordingReader& r) {
+            const py::gil_scoped_acquire acquire;
+            for (const std::string& w : static_cast<Rosbag2RecordingReader&>(r).info().warnings)
+              PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1);
+          });
+          return reader;
+        },
+        py::arg("path"), py::arg("chunk_rows") = kDefaultChunkRows, py::kw_only(), py::arg("dedupe") = false,
+        py::arg("assumed_rate_hz") = py::none(), py::arg("min_joints") = 3, py::arg("topic") = py::none(),
+        py::arg("force_topic") = py::none(), py::arg("time") = "header",
+        "Read a recording as load_recording does, as an iterator of rcm.Recording chunks of at most chunk_rows\n"
+        "samples: memory does not grow with the recording's length. The chunks concatenated are exactly\n"
+        "load_recording's arrays; the same checks, and rcm.InputError names the line (or message) of a defect\n"
+        "when the iteration reaches it. Same keywords as load_recording.");
   m.def("save_recording",
         [](const std::filesystem::path& path, const Recording& r) {
           py::gil_scoped_release release;
@@ -205,7 +271,7 @@ void bind_io(py::module_& m) {
         return "<rcm.RecordingSummary " + std::to_string(s.samples) + " samples, " + std::to_string(s.joints) +
                " joints, " + std::to_string(s.duration_s) + " s, " + std::to_string(s.rate_hz) + " Hz>";
       });
-  m.def("summarize_recording", &summarize_recording, py::arg("recording"),
+  m.def("summarize_recording", py::overload_cast<const Recording&>(&summarize_recording), py::arg("recording"),
         "Samples, joints, duration, rate, jitter, repeated rows and per-joint ranges (rcm inspect).");
 
   py::class_<CalibrationSpec>(m, "CalibrationSpec", "Step 2: teleoperation under a pure, known coaxial offset")

@@ -1,15 +1,18 @@
-// The Python module `rcm`: rcm::core (no LibTorch) for Python. See docs/howto-python.md.
+// The compiled half of the Python package `rcm`: rcm::core (no LibTorch) for
+// Python, as the extension `rcm._core`, whose every public name the package
+// (python/rcm/__init__.py) re-exports. See docs/howto-python.md.
 
 #include "common.hpp"
 
 namespace py = pybind11;
 
-PYBIND11_MODULE(rcm, m) {
+PYBIND11_MODULE(_core, m) {
   m.doc() =
       "Sensorless RCM misalignment estimation for the dVRK PSM (the rcm C++ library).\n\n"
       "SI units throughout (m, rad, s, N, N m). Arrays are numpy float64; T x N arrays have one row per\n"
       "sample. Bad input raises rcm.InputError (a ValueError) naming the file, line and column or field.\n"
-      "Submodules: rcm.dynamics (free-space torque models), rcm.sim (the simulated bench).";
+      "Submodules: rcm.dynamics (free-space torque models), rcm.sim (the simulated bench), rcm.batch (many\n"
+      "sessions or seeds side by side on Dask; docs/howto-batch.md).";
   m.attr("__version__") = RCM_VERSION;
 
   // rcm.InputError: the C++ InputError with its location kept as attributes, so
@@ -49,4 +52,5 @@ PYBIND11_MODULE(rcm, m) {
   rcm::python::bind_online(m);
   rcm::python::bind_study(m);
   rcm::python::bind_sim(m, sim);
+  rcm::python::bind_plot(m);
 }

@@ -246,16 +246,34 @@ void bind_online(py::module_& m) {
       .def_readonly("mean_update_s", &OnlineReplay::mean_update_s, "wall clock per sample (with a callback: includes it)")
       .def_readonly("max_update_s", &OnlineReplay::max_update_s)
       .def_readonly("regime", &OnlineReplay::regime, "samples outside the free-space model's training regime");
-  m.def("replay_online", [](const OnlinePipeline& pipeline, const Recording& rec, const OnlineReplayOptions& o,
-                            py::object on_sample) {
-    // With a callback the GIL stays held: it is called from this thread for every sample.
+  // One home for both: a whole Recording is one chunk.
+  auto replay = [](const OnlinePipeline& pipeline, py::object recording, const OnlineReplayOptions& o,
+                   py::object on_sample) {
+    std::function<void(const OnlineOutput&)> callback;
+    // With a callback the GIL stays held around it: it is called from this thread for every sample.
     if (!on_sample.is_none())
-      return replay_online(pipeline, rec, o, [&on_sample](const OnlineOutput& out) { on_sample(out); });
+      callback = [&on_sample](const OnlineOutput& out) {
+        const py::gil_scoped_acquire acquire;
+        on_sample(out);
+      };
+    OnlineReplayer replayer(pipeline, o, callback);
+    auto add = [&](const Recording& chunk) {
+      py::gil_scoped_release release;
+      replayer.add(chunk);
+    };
+    if (py::isinstance<Recording>(recording)) {
+      add(recording.cast<const Recording&>());
+    } else {
+      for (py::handle chunk : recording) add(chunk.cast<const Recording&>());
+    }
     py::gil_scoped_release release;
-    return replay_online(pipeline, rec, o);
-  }, py::arg("pipeline"), py::arg("recording"), py::arg("options") = OnlineReplayOptions{}, py::arg("on_sample") = py::none(),
+    return replayer.finish();
+  };
+  m.def("replay_online", replay, py::arg("pipeline"), py::arg("recording"), py::arg("options") = OnlineReplayOptions{},
+        py::arg("on_sample") = py::none(),
         "Stream a recording through the pipeline from its reset state; on_sample(OnlineOutput) is called\n"
-        "after every sample when given.");
+        "after every sample when given. `recording`: an rcm.Recording, or an iterable of them in order (the\n"
+        "chunks of rcm.iter_recording): the same OnlineReplay, in memory that does not grow with the length.");
 }
 
 }  // namespace rcm::python

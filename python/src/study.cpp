@@ -74,12 +74,23 @@ void bind_study(py::module_& m) {
       .def_readonly("seconds", &StudyResult::seconds)
       .def("to_json", [](const StudyResult& r) { return to_python(r.to_json()); },
            "The rcm-results/1 object (what `rcm run --json` prints) as a dict");
-  m.def("run_study", [](const Session& session, const StudyOptions& o) {
+  m.def("run_study", [](const Session& session, const StudyOptions& o, std::optional<FreeSpaceModelStep> free_space) {
     py::gil_scoped_release release;
+    if (free_space) return run_study(session, o, std::move(*free_space));
     return run_study(session, o, get_python_fitter());
-  }, py::arg("session"), py::arg("options") = StudyOptions{},
+  }, py::arg("session"), py::arg("options") = StudyOptions{}, py::arg("free_space") = py::none(),
         "The whole study (`rcm run`): free-space model (fitted, linear, or options.model_file), tissue law on\n"
-        "the calibration, every trial of session.trials (assign a shorter list to estimate fewer).");
+        "the calibration, every trial of session.trials (assign a shorter list to estimate fewer).\n"
+        "free_space: a FreeSpaceModelStep from fit_free_space_step, used instead of fitting again (as `rcm run`,\n"
+        "which saves the model before the rest of the study).");
+  m.def("check_study_inputs", &check_study_inputs, py::arg("session"), py::arg("options") = StudyOptions{},
+        "What run_study checks before any work (a calibration, a trial, the options' limits); raises InputError");
+  m.def("check_study_recordings", [](const Session& session, const StudyOptions& o) {
+    py::gil_scoped_release release;
+    check_study_recordings(session, o);
+  }, py::arg("session"), py::arg("options") = StudyOptions{},
+        "Reads every recording the study reads after the free-space fit (calibration, baseline, trials) and\n"
+        "discards it, so that a bad file raises InputError (file, line, field) before the fit, as `rcm run` does");
   m.def("format_table_iv", &format_table_iv, py::arg("result"), "Table IV as `rcm run` prints it");
   m.def("write_study_report", [](const StudyResult& r, const Session& s, const std::filesystem::path& out_dir) {
     py::gil_scoped_release release;

@@ -286,3 +286,41 @@ class TestKinematics(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class TestIterRecording(unittest.TestCase):
+    def test_chunks_are_the_whole_recording(self):
+        path = session_file("D30_r10_15.csv")
+        whole = rcm.load_recording(path)
+        chunks = list(rcm.iter_recording(path, chunk_rows=1000))
+        self.assertEqual([len(c) for c in chunks[:-1]], [1000] * (len(chunks) - 1))
+        for name in ("time", "position", "velocity", "effort", "force", "line"):
+            np.testing.assert_array_equal(np.concatenate([getattr(c, name) for c in chunks]), getattr(whole, name))
+
+    def test_a_defect_in_a_later_chunk_names_its_line(self):
+        path = tmp_path("late_defect.csv")
+        with open(path, "w") as f:
+            f.write("time,position_1,position_2,position_3,velocity_1,velocity_2,velocity_3,effort_1,effort_2,effort_3\n")
+            for k in range(100):
+                f.write(f"{0.005 * k},0,0,0.1,0,0,0,0,{'x' if k == 90 else 0},0\n")
+        chunks = rcm.iter_recording(path, chunk_rows=16)
+        self.assertEqual(len(next(chunks)), 16)
+        with self.assertRaises(rcm.InputError) as cm:
+            list(chunks)
+        self.assertEqual((cm.exception.line, cm.exception.field), (92, "effort_2"))
+
+    def test_torque_stream_and_steps_take_chunks(self):
+        path = session_file("D30_r10_15.csv")
+        model = rcm.dynamics.load_torque_model(_state["model_path"])
+        whole = rcm.dynamics.predict_torque(model, rcm.load_recording(path))
+        stream = rcm.dynamics.RecordingTorqueStream(model)
+        rows = [stream.add(c)[1] for c in rcm.iter_recording(path, chunk_rows=500)] + [stream.finish()[1]]
+        np.testing.assert_array_equal(np.concatenate(rows), whole)
+        # compute_steps carries the state from block to block: blocks give one pass's outputs.
+        ws = model.create_workspace()
+        steps = [model.compute_steps(ws, c.time, c.position, c.velocity) for c in rcm.iter_recording(path, 300)]
+        rec = rcm.load_recording(path)
+        one_pass = model.compute_steps(model.create_workspace(), rec.time, rec.position, rec.velocity)
+        np.testing.assert_array_equal(np.concatenate(steps), one_pass)
+        if model.output_delay == 0:
+            np.testing.assert_array_equal(one_pass, rcm.dynamics.predict_torque_streaming(model, rec))

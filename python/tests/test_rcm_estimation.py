@@ -126,6 +126,16 @@ class TestOnline(unittest.TestCase):
         self.assertEqual(replay.regime.flagged, cli["regime"]["flagged"])
         self.assertEqual(replay.regime.samples, cli["regime"]["samples"])
 
+    def test_replay_of_chunks_equals_the_whole_replay(self):
+        path = session_file("D30_r10_15.csv")
+        whole = rcm.replay_online(self.make_pipeline(), self.trial)
+        chunked = rcm.replay_online(self.make_pipeline(), rcm.iter_recording(path, chunk_rows=777))
+        self.assertEqual(chunked.samples, whole.samples)
+        self.assertEqual(chunked.estimates, whole.estimates)
+        np.testing.assert_array_equal(chunked.final_output.misalignment_m, whole.final_output.misalignment_m)
+        self.assertEqual(chunked.settled_after_s, whole.settled_after_s)
+        self.assertEqual(chunked.onset_s, whole.onset_s)
+
     def test_training_regime_flags_a_faster_replay(self):
         model = self.setup.free_space.model
         regime = model.info.regime

@@ -8,6 +8,7 @@
 #include <boost/make_shared.hpp>
 
 #include <map>
+#include <memory>
 #include <optional>
 
 #include "bag_check.hpp"
@@ -142,82 +143,106 @@ boost::shared_ptr<M> read_message(const rosbag::MessageInstance& mi, std::vector
   return m;
 }
 
-Recording read_bag(const std::filesystem::path& path, const BagReadOptions& options, BagReadInfo* info_out) {
-  BagReadInfo info;
-  std::vector<std::uint8_t> buffer;
-  rosbag::Bag bag;
-  try {
-    bag.open(path.string(), rosbag::bagmode::Read);
-  } catch (const rosbag::BagException& e) {
-    throw InputError(locate(path, ""), std::string("not a readable rosbag: ") + e.what());
+// A bag's two topics in bag-time order (rosbag::View), for MessageRecordingReader.
+class BagSource final : public MessageSource {
+ public:
+  BagSource(std::shared_ptr<rosbag::Bag> bag, std::filesystem::path path, const BagReadOptions& options,
+            BagReadInfo& info, bool force_only)
+      : bag_(std::move(bag)), path_(std::move(path)), options_(options), info_(info), force_only_(force_only) {
+    std::vector<std::string> topics;
+    if (!force_only) topics.push_back(options.topic);
+    if (!options.force_topic.empty()) topics.push_back(options.force_topic);
+    view_ = std::make_unique<rosbag::View>(*bag_, rosbag::TopicQuery(topics));
+    it_ = view_->begin();
   }
-  if (options.topic.empty()) throw InputError(locate(path, ""), "no JointState topic given");
-  check_topic(bag, path, options.topic, "sensor_msgs/JointState", "joint state");
 
-  const std::string& topic = options.topic;
-  // The clock is known after the first message; the builder words errors with it.
-  TimeRule rule;
-  std::optional<JointStateRecordingBuilder> builder;
-  rosbag::View view(bag, rosbag::TopicQuery(topic));
-  std::size_t k = 0;
-  for (const rosbag::MessageInstance& mi : view) {
-    sensor_msgs::JointState::ConstPtr msg = read_message<sensor_msgs::JointState>(mi, buffer, path, topic, k);
-    if (!msg)
-      throw InputError(locate(path, describe_message_place(topic, k, std::nullopt, 0)),
-                       "cannot be read as sensor_msgs/JointState");
-    const std::int64_t t = get_time(rule, options.time, path, topic, k, msg->header.stamp, mi.getTime());
-    if (!builder) builder.emplace(path.string(), topic, options, time_label(*rule.use_bag_time));
-    builder->add(k, t, view_joint_state(*msg));
-    ++k;
-  }
-  info.messages = k;
-  info.bag_time = rule.use_bag_time.value_or(false);
-  Recording rec = builder->finish(RecordingLayout::rosbag);
-  info.joint_names = builder->joint_names();
-  info.time_origin_ns = builder->time_origin_ns();
-
-  if (!options.force_topic.empty()) {
-    const std::string& ftopic = options.force_topic;
-    check_topic(bag, path, ftopic, "geometry_msgs/WrenchStamped", "force");
-    TimeRule frule;
-    std::optional<ForceSamples> force;
-    rosbag::View fview(bag, rosbag::TopicQuery(ftopic));
-    std::size_t n = 0;
-    for (const rosbag::MessageInstance& mi : fview) {
-      const auto msg = read_message<geometry_msgs::WrenchStamped>(mi, buffer, path, ftopic, n);
-      if (!msg)
-        throw InputError(locate(path, describe_message_place(ftopic, n, std::nullopt, 0)),
-                         "cannot be read as geometry_msgs/WrenchStamped");
-      const std::int64_t t = get_time(frule, options.time, path, ftopic, n, msg->header.stamp, mi.getTime());
-      if (!force) {
-        force.emplace(path.string(), ftopic, time_label(*frule.use_bag_time));
-        info.force_frame_id = msg->header.frame_id;
-      }
-      force->add(n, t, Eigen::Vector3d(msg->wrench.force.x, msg->wrench.force.y, msg->wrench.force.z));
-      ++n;
+  bool next(RecordingMessage& m) override {
+    if (started_ && it_ != view_->end()) ++it_;
+    started_ = true;
+    if (it_ == view_->end()) return false;
+    const rosbag::MessageInstance& mi = *it_;
+    if (!force_only_ && mi.getTopic() == options_.topic) {
+      const std::string& topic = options_.topic;
+      const std::size_t k = info_.messages++;
+      joint_ = read_message<sensor_msgs::JointState>(mi, buffer_, path_, topic, k);
+      if (!joint_)
+        throw InputError(locate(path_, describe_message_place(topic, k, std::nullopt, 0)),
+                         "cannot be read as sensor_msgs/JointState");
+      m.topic = RecordingMessage::Topic::joints;
+      m.index = k;
+      m.t_ns = get_time(rule_, options_.time, path_, topic, k, joint_->header.stamp, mi.getTime());
+      m.joints.emplace(view_joint_state(*joint_));
+      info_.bag_time = rule_.use_bag_time.value_or(false);
+      return true;
     }
-    info.force_messages = n;
-    info.force_bag_time = frule.use_bag_time.value_or(false);
-    if (n >= 2 && info.force_bag_time != info.bag_time)
-      throw InputError(locate(path, ftopic),
-                       std::string("its time is the ") + (info.force_bag_time ? "bag time" : "header stamp") +
-                           " but the joint topic's is the " + (info.bag_time ? "bag time" : "header stamp") +
-                           ": the two clocks cannot be aligned");
-    builder->attach_force(rec, *force);
+    const std::string& ftopic = options_.force_topic;
+    const std::size_t n = info_.force_messages++;
+    const auto msg = read_message<geometry_msgs::WrenchStamped>(mi, buffer_, path_, ftopic, n);
+    if (!msg)
+      throw InputError(locate(path_, describe_message_place(ftopic, n, std::nullopt, 0)),
+                       "cannot be read as geometry_msgs/WrenchStamped");
+    m.topic = RecordingMessage::Topic::force;
+    m.index = n;
+    m.t_ns = get_time(frule_, options_.time, path_, ftopic, n, msg->header.stamp, mi.getTime());
+    m.force = Eigen::Vector3d(msg->wrench.force.x, msg->wrench.force.y, msg->wrench.force.z);
+    if (n == 0) info_.force_frame_id = msg->header.frame_id;
+    info_.force_bag_time = frule_.use_bag_time.value_or(false);
+    return true;
   }
-  if (info_out) *info_out = std::move(info);
-  return rec;
-}
 
-}  // namespace
+  std::string get_time_label(RecordingMessage::Topic topic) const override {
+    const TimeRule& rule = topic == RecordingMessage::Topic::joints ? rule_ : frule_;
+    return time_label(rule.use_bag_time.value_or(false));
+  }
 
-Recording load_bag_recording(const std::filesystem::path& path, const BagReadOptions& options, BagReadInfo* info_out) {
-  if (!std::filesystem::exists(path)) throw InputError(locate(path, ""), "no such file");
-  ros1::check_bag_structure(path);
-  // What rosbag_storage and roscpp throw for what the structure check cannot
-  // see (an unknown connection, a time beyond ros::Time) is bad input too.
+  void finish() override {
+    if (!options_.force_topic.empty() && info_.force_messages >= 2 && info_.force_bag_time != info_.bag_time)
+      throw InputError(locate(path_, options_.force_topic),
+                       std::string("its time is the ") + (info_.force_bag_time ? "bag time" : "header stamp") +
+                           " but the joint topic's is the " + (info_.bag_time ? "bag time" : "header stamp") +
+                           ": the two clocks cannot be aligned");
+  }
+
+  std::unique_ptr<MessageSource> reopen_force() const override {
+    auto info = std::make_shared<BagReadInfo>();
+    return std::make_unique<Owning>(info, std::make_unique<BagSource>(bag_, path_, options_, *info, true));
+  }
+
+ private:
+  // A second pass's source and the counts it makes, which are not reported.
+  class Owning final : public MessageSource {
+   public:
+    Owning(std::shared_ptr<BagReadInfo> info, std::unique_ptr<BagSource> source)
+        : info_(std::move(info)), source_(std::move(source)) {}
+    bool next(RecordingMessage& m) override { return source_->next(m); }
+    std::string get_time_label(RecordingMessage::Topic t) const override { return source_->get_time_label(t); }
+    std::unique_ptr<MessageSource> reopen_force() const override { return source_->reopen_force(); }
+
+   private:
+    std::shared_ptr<BagReadInfo> info_;
+    std::unique_ptr<BagSource> source_;
+  };
+
+  std::shared_ptr<rosbag::Bag> bag_;
+  std::filesystem::path path_;
+  BagReadOptions options_;
+  BagReadInfo& info_;
+  bool force_only_;
+  std::unique_ptr<rosbag::View> view_;
+  rosbag::View::iterator it_;
+  bool started_ = false;
+  std::vector<std::uint8_t> buffer_;
+  sensor_msgs::JointState::ConstPtr joint_;
+  // The clock is known after each topic's first message.
+  TimeRule rule_, frule_;
+};
+
+// What rosbag_storage and roscpp throw for what the structure check cannot
+// see (an unknown connection, a time beyond ros::Time) is bad input too.
+template <class F>
+auto as_input_errors(const std::filesystem::path& path, F&& f) -> decltype(f()) {
   try {
-    return read_bag(path, options, info_out);
+    return f();
   } catch (const InputError&) {
     throw;
   } catch (const rosbag::BagException& e) {
@@ -230,9 +255,63 @@ Recording load_bag_recording(const std::filesystem::path& path, const BagReadOpt
   }
 }
 
+std::unique_ptr<MessageSource> open_bag_source(const std::filesystem::path& path, const BagReadOptions& options,
+                                               BagReadInfo& info) {
+  auto bag = std::make_shared<rosbag::Bag>();
+  try {
+    bag->open(path.string(), rosbag::bagmode::Read);
+  } catch (const rosbag::BagException& e) {
+    throw InputError(locate(path, ""), std::string("not a readable rosbag: ") + e.what());
+  }
+  if (options.topic.empty()) throw InputError(locate(path, ""), "no JointState topic given");
+  check_topic(*bag, path, options.topic, "sensor_msgs/JointState", "joint state");
+  if (!options.force_topic.empty())
+    check_topic(*bag, path, options.force_topic, "geometry_msgs/WrenchStamped", "force");
+  return std::make_unique<BagSource>(bag, path, options, info, false);
+}
+
+}  // namespace
+
+BagRecordingReader::BagRecordingReader(const std::filesystem::path& path, const BagReadOptions& options,
+                                       std::size_t chunk_rows, std::unique_ptr<BagReadInfo> info,
+                                       std::unique_ptr<MessageSource> source)
+    : MessageRecordingReader(path.string(), options, RecordingLayout::rosbag, std::move(source), chunk_rows),
+      info_(std::move(info)),
+      path_(path) {}
+
+const BagReadInfo& BagRecordingReader::info() const {
+  info_->joint_names = joint_names();
+  info_->time_origin_ns = time_origin_ns();
+  return *info_;
+}
+
+std::size_t BagRecordingReader::fill_chunk(Recording& chunk, std::size_t filled) {
+  return as_input_errors(path_, [&] { return MessageRecordingReader::fill_chunk(chunk, filled); });
+}
+
+std::unique_ptr<BagRecordingReader> open_bag_recording(const std::filesystem::path& path,
+                                                       const BagReadOptions& options, std::size_t chunk_rows) {
+  if (!std::filesystem::exists(path)) throw InputError(locate(path, ""), "no such file");
+  ros1::check_bag_structure(path);
+  return as_input_errors(path, [&] {
+    auto info = std::make_unique<BagReadInfo>();
+    auto source = open_bag_source(path, options, *info);
+    return std::unique_ptr<BagRecordingReader>(
+        new BagRecordingReader(path, options, chunk_rows, std::move(info), std::move(source)));
+  });
+}
+
+Recording load_bag_recording(const std::filesystem::path& path, const BagReadOptions& options, BagReadInfo* info_out) {
+  const auto reader = open_bag_recording(path, options);
+  Recording rec = read_whole_recording(*reader);
+  if (info_out) *info_out = reader->info();
+  return rec;
+}
+
 void register_bag_recording_reader(const BagReadOptions& options) {
-  register_recording_reader(".bag", [options](const std::filesystem::path& path, const RecordingReadOptions& read) {
-    return load_bag_recording(path, with_session_topics(options, read));
+  register_recording_stream(".bag", [options](const std::filesystem::path& path, const RecordingReadOptions& read,
+                                              std::size_t chunk_rows) -> std::unique_ptr<RecordingReader> {
+    return open_bag_recording(path, with_session_topics(options, read), chunk_rows);
   });
 }
 

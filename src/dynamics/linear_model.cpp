@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <deque>
 #include <iostream>
 #include <limits>
 #include <memory>
@@ -25,7 +26,6 @@ namespace rcm::dynamics {
 namespace {
 
 using detail::AccelerationEstimator;
-using detail::compute_zero_phase_acceleration;
 using detail::is_time_sorted;
 using detail::kDefaultAccelerationFilter;
 using detail::kDefaultAccelerationWindow;
@@ -300,27 +300,114 @@ double LinearTorqueModel::get_coulomb_level(int j, double q) const {
   return p.coulomb[j] + ((1.0 - w) * p.coulomb_profile(j, k) + w * p.coulomb_profile(j, k + 1));
 }
 
+// The whole-recording prediction with the zero-phase qddot, a sample as soon
+// as its window is complete: the samples from the oldest any window still
+// reaches to the newest are kept, with the windows' running sums
+// (detail::ZeroPhaseSlope) exactly as over the whole recording.
+class LinearSequencePredictor final : public TorqueSequencePredictor {
+ public:
+  explicit LinearSequencePredictor(const LinearTorqueModel& model)
+      : model_(model),
+        ws_(model.create_workspace()),
+        N_(model.num_joints()),
+        M_(model.num_outputs()),
+        half_(static_cast<std::size_t>(M_), 0.0),
+        q_(N_),
+        qd_(N_),
+        qdd_(Eigen::VectorXd::Zero(M_)),
+        tau_(M_) {
+    const auto& p = model.parameters();
+    for (int j = 0; j < M_; ++j) {
+      slopes_.emplace_back(p.batch_acceleration_window_s[j], p.batch_acceleration_degree);
+      half_[static_cast<std::size_t>(j)] = 0.5 * p.batch_acceleration_window_s[j];
+    }
+  }
+
+  void add(const Eigen::VectorXd& time, const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity,
+           Eigen::MatrixXd& out) override {
+    for (Eigen::Index i = 0; i < time.size(); ++i) {
+      times_.push_back(time(i));
+      for (int j = 0; j < N_; ++j) samples_.push_back(position(i, j));
+      for (int j = 0; j < N_; ++j) samples_.push_back(velocity(i, j));
+    }
+    count_ += static_cast<std::size_t>(time.size());
+    compute_ready(false, out);
+  }
+  void finish(Eigen::MatrixXd& out) override { compute_ready(true, out); }
+
+ private:
+  double time_at(Eigen::Index k) const { return times_[static_cast<std::size_t>(k) - base_]; }
+  double value_at(Eigen::Index k, int i) const {
+    return samples_[(static_cast<std::size_t>(k) - base_) * static_cast<std::size_t>(2 * N_) +
+                    static_cast<std::size_t>(i)];
+  }
+
+  void compute_ready(bool ended, Eigen::MatrixXd& out) {
+    rows_.clear();
+    const auto end = static_cast<Eigen::Index>(count_);
+    while (next_ < count_) {
+      const auto c = static_cast<Eigen::Index>(next_);
+      const double t_c = time_at(c);
+      // Every window of sample c complete: a sample beyond its upper edge, or the end.
+      bool complete = true;
+      for (int j = 0; j < M_ && !ended; ++j)
+        if (half_[static_cast<std::size_t>(j)] > 0 &&
+            !(time_at(end - 1) > t_c + half_[static_cast<std::size_t>(j)] * (1.0 + detail::kWindowSlack)))
+          complete = false;
+      if (!complete) break;
+      const auto begin = static_cast<Eigen::Index>(base_);
+      for (int j = 0; j < M_; ++j)
+        if (half_[static_cast<std::size_t>(j)] > 0)
+          qdd_[j] = slopes_[static_cast<std::size_t>(j)].compute(
+              c, begin, end, [&](Eigen::Index k) { return time_at(k); },
+              [&](Eigen::Index k) { return value_at(k, N_ + j); });
+      for (int j = 0; j < N_; ++j) {
+        q_[j] = value_at(c, j);
+        qd_[j] = value_at(c, N_ + j);
+      }
+      model_.compute_step_with_acceleration(*ws_, t_c, q_.data(), qd_.data(), qdd_.data(), tau_.data());
+      rows_.insert(rows_.end(), tau_.data(), tau_.data() + M_);
+      ++next_;
+      // The samples below the lowest window edge of sample c are not reached again.
+      double lowest = t_c;
+      for (int j = 0; j < M_; ++j) lowest = std::min(lowest, t_c - half_[static_cast<std::size_t>(j)] * (1.0 + detail::kWindowSlack));
+      while (base_ < next_ - 1 && times_.front() < lowest) {
+        times_.pop_front();
+        samples_.erase(samples_.begin(), samples_.begin() + 2 * N_);
+        ++base_;
+      }
+    }
+    out.resize(static_cast<Eigen::Index>(rows_.size() / static_cast<std::size_t>(M_)), M_);
+    for (Eigen::Index r = 0; r < out.rows(); ++r)
+      for (int j = 0; j < M_; ++j) out(r, j) = rows_[static_cast<std::size_t>(r * M_ + j)];
+  }
+
+  const LinearTorqueModel& model_;
+  std::unique_ptr<TorqueModelWorkspace> ws_;
+  int N_, M_;
+  std::vector<detail::ZeroPhaseSlope> slopes_;
+  std::vector<double> half_;
+  Eigen::VectorXd q_, qd_, qdd_, tau_;
+  std::deque<double> times_, samples_;  // samples base_, base_ + 1, ...: time; q and qd (N each)
+  std::size_t base_ = 0, count_ = 0, next_ = 0;
+  std::vector<double> rows_;
+};
+
+std::unique_ptr<TorqueSequencePredictor> LinearTorqueModel::create_sequence_predictor() const {
+  if (!(parameters_.batch_acceleration_window_s.array() > 0).any()) return TorqueModel::create_sequence_predictor();
+  return std::make_unique<LinearSequencePredictor>(*this);
+}
+
 Eigen::MatrixXd LinearTorqueModel::predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
                                                     const Eigen::MatrixXd& velocity) const {
-  const int M = num_outputs(), N = num_joints();
-  const Eigen::Index T = time.size();
-  if (!is_time_sorted(time) || !(parameters_.batch_acceleration_window_s.array() > 0).any())
-    return TorqueModel::predict_sequence(time, position, velocity);
-  Eigen::MatrixXd qdd = Eigen::MatrixXd::Zero(M, T);  // column per sample
-  for (int j = 0; j < M; ++j)
-    if (parameters_.batch_acceleration_window_s[j] > 0)
-      qdd.row(j) = compute_zero_phase_acceleration(time, velocity.col(j), parameters_.batch_acceleration_window_s[j],
-                                                   parameters_.batch_acceleration_degree)
-                       .transpose();
-  auto ws = create_workspace();
-  Eigen::VectorXd q(N), qd(N), tau(M);
-  Eigen::MatrixXd out(T, M);
-  for (Eigen::Index t = 0; t < T; ++t) {
-    q = position.row(t).head(N).transpose();
-    qd = velocity.row(t).head(N).transpose();
-    compute_step_with_acceleration(*ws, time(t), q.data(), qd.data(), qdd.col(t).data(), tau.data());
-    out.row(t) = tau.transpose();
-  }
+  // Time that goes back (a caller's concatenation) has no zero-phase window: the causal estimate.
+  if (!is_time_sorted(time)) return TorqueModel::predict_sequence(time, position, velocity);
+  const auto predictor = create_sequence_predictor();
+  Eigen::MatrixXd head, tail;
+  predictor->add(time, position, velocity, head);
+  predictor->finish(tail);
+  Eigen::MatrixXd out(head.rows() + tail.rows(), num_outputs());
+  out << head, tail;
   return out;
 }
 

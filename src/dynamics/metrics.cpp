@@ -1,50 +1,69 @@
 #include "rcm/dynamics/metrics.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include "rcm/dynamics/torque_model.hpp"
 
 namespace rcm::dynamics {
 
-std::vector<JointTorqueError> compute_torque_errors(const Eigen::MatrixXd& measured,
-                                                    const Eigen::MatrixXd& predicted) {
-  if (measured.rows() != predicted.rows() || measured.cols() != predicted.cols())
+TorqueErrorAccumulator::TorqueErrorAccumulator(int joints)
+    : squares_(static_cast<std::size_t>(joints), 0.0),
+      min_(static_cast<std::size_t>(joints), std::numeric_limits<double>::infinity()),
+      max_(static_cast<std::size_t>(joints), -std::numeric_limits<double>::infinity()) {}
+
+void TorqueErrorAccumulator::add(const Eigen::MatrixXd& measured, const Eigen::MatrixXd& predicted) {
+  if (measured.rows() != predicted.rows() || measured.cols() != predicted.cols() ||
+      measured.cols() != static_cast<Eigen::Index>(squares_.size()))
     throw std::invalid_argument("compute_torque_errors: measured and predicted differ in shape");
-  if (measured.rows() == 0) throw std::invalid_argument("compute_torque_errors: no samples");
-  std::vector<JointTorqueError> errors;
   for (Eigen::Index j = 0; j < measured.cols(); ++j) {
+    const auto k = static_cast<std::size_t>(j);
+    for (Eigen::Index t = 0; t < measured.rows(); ++t) {
+      const double e = measured(t, j) - predicted(t, j);
+      squares_[k] += e * e;
+      min_[k] = std::min(min_[k], measured(t, j));
+      max_[k] = std::max(max_[k], measured(t, j));
+    }
+  }
+  rows_ += static_cast<std::size_t>(measured.rows());
+}
+
+std::vector<JointTorqueError> TorqueErrorAccumulator::get_errors() const {
+  if (rows_ == 0) throw std::invalid_argument("compute_torque_errors: no samples");
+  std::vector<JointTorqueError> errors;
+  for (std::size_t j = 0; j < squares_.size(); ++j) {
     JointTorqueError e;
     e.index = static_cast<int>(j) + 1;
-    e.rmse = std::sqrt((measured.col(j) - predicted.col(j)).squaredNorm() / static_cast<double>(measured.rows()));
-    e.range = measured.col(j).maxCoeff() - measured.col(j).minCoeff();
+    e.rmse = std::sqrt(squares_[j] / static_cast<double>(rows_));
+    e.range = max_[j] - min_[j];
     e.nrmse_percent = e.range > 0 ? 100.0 * e.rmse / e.range : std::numeric_limits<double>::infinity();
     errors.push_back(e);
   }
   return errors;
 }
 
+std::vector<JointTorqueError> compute_torque_errors(const Eigen::MatrixXd& measured,
+                                                    const Eigen::MatrixXd& predicted) {
+  TorqueErrorAccumulator errors(static_cast<int>(measured.cols()));
+  errors.add(measured, predicted);
+  return errors.get_errors();
+}
+
 std::vector<JointTorqueError> evaluate_torque_model(const TorqueModel& model,
                                                     const std::vector<Recording>& recordings,
                                                     double first_fraction, PredictionMode mode) {
-  Eigen::Index total = 0;
-  std::vector<Eigen::Index> start(recordings.size());
-  for (std::size_t r = 0; r < recordings.size(); ++r) {
-    const auto T = static_cast<Eigen::Index>(recordings[r].num_samples());
-    start[r] = static_cast<Eigen::Index>(std::floor(first_fraction * static_cast<double>(T)));
-    total += T - start[r];
-  }
+  TorqueErrorAccumulator errors(model.num_outputs());
   const int M = model.num_outputs();
-  Eigen::MatrixXd measured(total, M), predicted(total, M);
-  Eigen::Index row = 0;
-  for (std::size_t r = 0; r < recordings.size(); ++r) {
-    const Eigen::MatrixXd p = predict_torque(model, recordings[r], mode);
-    const Eigen::Index n = p.rows() - start[r];
-    predicted.middleRows(row, n) = p.bottomRows(n);
-    measured.middleRows(row, n) = recordings[r].effort.leftCols(M).bottomRows(n);
-    row += n;
+  for (const Recording& r : recordings) {
+    const auto T = static_cast<Eigen::Index>(r.num_samples());
+    const auto start = static_cast<Eigen::Index>(std::floor(first_fraction * static_cast<double>(T)));
+    const Eigen::MatrixXd p = predict_torque(model, r, mode);
+    const Eigen::Index n = p.rows() - start;
+    errors.add(r.effort.leftCols(M).bottomRows(n), p.bottomRows(n));
   }
-  return compute_torque_errors(measured, predicted);
+  return errors.get_errors();
 }
 
 nlohmann::json to_json(const std::vector<JointTorqueError>& errors) {

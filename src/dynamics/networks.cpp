@@ -6,6 +6,7 @@
 // file in network_io.cpp.
 
 #include <algorithm>
+#include <deque>
 #include <stdexcept>
 
 #include "network_parts.hpp"
@@ -286,22 +287,71 @@ void HybridTorqueModel::compute_step(TorqueModelWorkspace& workspace, double t, 
     tau[j] += static_cast<double>(ws.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
 }
 
+// The base's whole-recording prediction (its residual was trained against
+// that one, see training), plus the residual network stepped with its state,
+// a sample as soon as the base has its row.
+class HybridSequencePredictor final : public TorqueSequencePredictor {
+ public:
+  explicit HybridSequencePredictor(const HybridTorqueModel& model)
+      : model_(model),
+        base_(model.base_->create_sequence_predictor()),
+        ws_(model.create_workspace()),
+        N_(model.num_joints()),
+        M_(model.num_outputs()),
+        sample_(1 + 2 * static_cast<std::size_t>(N_)) {}
+
+  void add(const Eigen::VectorXd& time, const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity,
+           Eigen::MatrixXd& out) override {
+    for (Eigen::Index i = 0; i < time.size(); ++i) {
+      waiting_.push_back(time(i));
+      for (int j = 0; j < N_; ++j) waiting_.push_back(position(i, j));
+      for (int j = 0; j < N_; ++j) waiting_.push_back(velocity(i, j));
+    }
+    base_->add(time, position, velocity, out);
+    add_residual(out);
+  }
+  void finish(Eigen::MatrixXd& out) override {
+    base_->finish(out);
+    add_residual(out);
+  }
+
+ private:
+  void add_residual(Eigen::MatrixXd& out) {
+    auto& lw = static_cast<LstmWorkspace&>(*ws_);
+    const std::size_t stride = 1 + 2 * static_cast<std::size_t>(N_);
+    for (Eigen::Index r = 0; r < out.rows(); ++r) {
+      for (std::size_t k = 0; k < stride; ++k) {
+        sample_[k] = waiting_.front();
+        waiting_.pop_front();
+      }
+      advance_network(model_.kernel_, model_.normalization_, N_, model_.info().sample_period_s, lw, sample_[0],
+                      &sample_[1], &sample_[1 + static_cast<std::size_t>(N_)]);
+      for (int j = 0; j < M_; ++j)
+        out(r, j) += static_cast<double>(lw.y[j]) * model_.normalization_.output_scale[j] +
+                     model_.normalization_.output_mean[j];
+    }
+  }
+
+  const HybridTorqueModel& model_;
+  std::unique_ptr<TorqueSequencePredictor> base_;
+  std::unique_ptr<TorqueModelWorkspace> ws_;
+  int N_, M_;
+  std::deque<double> waiting_;  // per sample: time, q (N), qd (N)
+  std::vector<double> sample_;
+};
+
+std::unique_ptr<TorqueSequencePredictor> HybridTorqueModel::create_sequence_predictor() const {
+  return std::make_unique<HybridSequencePredictor>(*this);
+}
+
 Eigen::MatrixXd HybridTorqueModel::predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
                                                     const Eigen::MatrixXd& velocity) const {
-  // The base's whole-recording prediction (its residual was trained against
-  // that one, see training), plus the residual network stepped with its state.
-  Eigen::MatrixXd out = base_->predict_sequence(time, position, velocity);
-  auto ws = create_workspace();
-  auto& lw = static_cast<LstmWorkspace&>(*ws);
-  const int N = num_joints();
-  Eigen::VectorXd q(N), qd(N);
-  for (Eigen::Index t = 0; t < time.size(); ++t) {
-    q = position.row(t).head(N).transpose();
-    qd = velocity.row(t).head(N).transpose();
-    advance_network(kernel_, normalization_, N, info().sample_period_s, lw, time[t], q.data(), qd.data());
-    for (int j = 0; j < num_outputs(); ++j)
-      out(t, j) += static_cast<double>(lw.y[j]) * normalization_.output_scale[j] + normalization_.output_mean[j];
-  }
+  const auto predictor = create_sequence_predictor();
+  Eigen::MatrixXd head, tail;
+  predictor->add(time, position, velocity, head);
+  predictor->finish(tail);
+  Eigen::MatrixXd out(head.rows() + tail.rows(), num_outputs());
+  out << head, tail;
   return out;
 }
 

@@ -245,10 +245,9 @@ nlohmann::json RegimeSummary::to_json() const {
   return j;
 }
 
-RegimeSummary compute_regime_summary(const RegimeMonitor& monitor, const Recording& recording) {
-  RegimeSummary s;
+void add_regime_samples(const RegimeMonitor& monitor, RegimeMonitor::Workspace& w, const Recording& recording,
+                        RegimeSummary& s) {
   s.known = monitor.known();
-  auto w = monitor.create_workspace();
   const int n = monitor.regime().num_joints();
   if (s.known && recording.num_joints() < n)
     throw std::invalid_argument(
@@ -263,6 +262,12 @@ RegimeSummary compute_regime_summary(const RegimeMonitor& monitor, const Recordi
     }
     s.add(recording.time(t), flags);
   }
+}
+
+RegimeSummary compute_regime_summary(const RegimeMonitor& monitor, const Recording& recording) {
+  RegimeSummary s;
+  auto w = monitor.create_workspace();
+  add_regime_samples(monitor, w, recording, s);
   return s;
 }
 

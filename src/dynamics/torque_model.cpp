@@ -6,6 +6,9 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <deque>
+#include <stdexcept>
+#include <utility>
 
 #include "model_io.hpp"
 #include "rcm/common/options.hpp"
@@ -212,59 +215,146 @@ Eigen::MatrixXd predict_torque(const TorqueModel& model, const Eigen::VectorXd& 
   return model.predict_sequence(time, position, velocity);
 }
 
+namespace {
+
+// compute_step() on every sample, each row paired with the call whose torque
+// is for it: what a live caller gets. The times of the samples from the last
+// paired row on are kept for find_delayed_sample's walk.
+class StreamingPredictor final : public TorqueSequencePredictor {
+ public:
+  explicit StreamingPredictor(const TorqueModel& model)
+      : model_(model),
+        ws_(model.create_workspace()),
+        N_(model.num_joints()),
+        M_(model.num_outputs()),
+        q_(N_),
+        qd_(N_),
+        tau_(M_),
+        delay_s_(model.get_output_delay_s()) {}
+
+  void add(const Eigen::VectorXd& time, const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity,
+           Eigen::MatrixXd& out) override {
+    rows_.clear();
+    for (Eigen::Index i = 0; i < time.size(); ++i) {
+      if (calls_ == 0) first_time_ = time(i);
+      last_time_ = time(i);
+      times_.push_back(time(i));
+      q_ = position.row(i).head(N_).transpose();
+      qd_ = velocity.row(i).head(N_).transpose();
+      ++samples_;
+      call(time(i));
+    }
+    give(out);
+  }
+
+  void finish(Eigen::MatrixXd& out) override {
+    rows_.clear();
+    const auto T = static_cast<Eigen::Index>(samples_);
+    if (T > 0) {
+      // The recording's period (the model's own when they agree within 1 %): the
+      // step of the held last sample (a repeated stamp would be read as the same
+      // sample).
+      const double model_dt = model_.info().sample_period_s;
+      double dt = T > 1 && last_time_ > first_time_ ? (last_time_ - first_time_) / static_cast<double>(T - 1)
+                  : model_dt > 0                     ? model_dt
+                                                     : 1.0;
+      if (model_dt > 0 && std::abs(dt / model_dt - 1.0) < 0.01) dt = model_dt;
+      dt_ = dt;
+      ended_ = true;
+      const Eigen::Index max_calls = T + static_cast<Eigen::Index>(std::ceil(delay_s_ / dt)) + 2;
+      while (static_cast<Eigen::Index>(filled_) < T && static_cast<Eigen::Index>(calls_) < max_calls)
+        call(time_of_call(static_cast<Eigen::Index>(calls_)));
+      while (filled_ < samples_) emit();
+    }
+    give(out);
+  }
+
+ private:
+  // Calls past the last sample repeat it, time advancing by dt_.
+  double time_of_call(Eigen::Index k) const {
+    const auto T = static_cast<Eigen::Index>(samples_);
+    if (k < T) return times_[static_cast<std::size_t>(k - base_)];
+    return last_time_ + static_cast<double>(k - T + 1) * dt_;
+  }
+
+  // One compute_step (call number calls_) and the rows it pairs.
+  void call(double t) {
+    const auto k = static_cast<Eigen::Index>(calls_++);
+    model_.compute_step(*ws_, t, q_.data(), qd_.data(), tau_.data());
+    const TorqueModel::StepRuns runs = model_.get_step_runs(*ws_);
+    if (runs.count >= 0) {
+      for (int i = 0; i < runs.count && filled_ < samples_; ++i)
+        emit(runs.torque + static_cast<std::ptrdiff_t>(i) * M_);
+      prune();
+      return;
+    }
+    Eigen::Index row = k;
+    if (delay_s_ > 0) {
+      const int back = find_delayed_sample(
+          static_cast<int>(k + 1), time_of_call(k) - delay_s_, [&](int b) { return time_of_call(k + 1 - b); },
+          last_back_ + 1);
+      if (back == 0) return;
+      last_back_ = back;
+      row = k + 1 - back;
+      if (ended_) row = std::min(row, static_cast<Eigen::Index>(samples_) - 1);
+    }
+    while (static_cast<Eigen::Index>(filled_) <= row) emit();
+    prune();
+  }
+
+  void emit(const double* tau = nullptr) {
+    const double* v = tau ? tau : tau_.data();
+    rows_.insert(rows_.end(), v, v + M_);
+    ++filled_;
+  }
+  // Keeps the times from the last paired row on (the walk starts there).
+  void prune() {
+    const std::size_t keep_from = filled_ > 1 ? filled_ - 1 : 0;
+    while (base_ < keep_from && !times_.empty()) {
+      times_.pop_front();
+      ++base_;
+    }
+  }
+  void give(Eigen::MatrixXd& out) const {
+    out.resize(static_cast<Eigen::Index>(rows_.size() / static_cast<std::size_t>(M_)), M_);
+    for (Eigen::Index r = 0; r < out.rows(); ++r)
+      for (int j = 0; j < M_; ++j) out(r, j) = rows_[static_cast<std::size_t>(r * M_ + j)];
+  }
+
+  const TorqueModel& model_;
+  std::unique_ptr<TorqueModelWorkspace> ws_;
+  int N_, M_;
+  Eigen::VectorXd q_, qd_, tau_;
+  double delay_s_;
+  std::size_t calls_ = 0, samples_ = 0, filled_ = 0;
+  int last_back_ = 0;  // the last pick's distance from the newest call (find_delayed_sample's hint)
+  double first_time_ = 0.0, last_time_ = 0.0, dt_ = 1.0;
+  bool ended_ = false;
+  std::deque<double> times_;  // of samples base_, base_ + 1, ...
+  std::size_t base_ = 0;
+  std::vector<double> rows_;
+};
+
+}  // namespace
+
+std::unique_ptr<TorqueSequencePredictor> TorqueModel::create_sequence_predictor() const {
+  return std::make_unique<StreamingPredictor>(*this);
+}
+
+std::unique_ptr<TorqueSequencePredictor> create_torque_predictor(const TorqueModel& model, PredictionMode mode) {
+  return mode == PredictionMode::streaming ? std::make_unique<StreamingPredictor>(model)
+                                           : model.create_sequence_predictor();
+}
+
 Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Eigen::VectorXd& time,
                                          const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity) {
   check_sizes(model, time, position, velocity);
-  const Eigen::Index T = time.size();
-  auto ws = model.create_workspace();
-  const int N = model.num_joints();
-  Eigen::VectorXd q(N), qd(N), tau(model.num_outputs());
-  Eigen::MatrixXd out(T, model.num_outputs());
-  if (T == 0) return out;
-  // The recording's period (the model's own when they agree within 1 %): the
-  // step of the held last sample (a repeated stamp would be read as the same
-  // sample).
-  const double model_dt = model.info().sample_period_s;
-  double dt = T > 1 && time(T - 1) > time(0) ? (time(T - 1) - time(0)) / static_cast<double>(T - 1)
-              : model_dt > 0                  ? model_dt
-                                              : 1.0;
-  if (model_dt > 0 && std::abs(dt / model_dt - 1.0) < 0.01) dt = model_dt;
-  const double delay_s = model.get_output_delay_s();
-  auto time_of_call = [&](Eigen::Index k) {
-    return k < T ? time(k) : time(T - 1) + static_cast<double>(k - T + 1) * dt;
-  };
-  // Row r gets the torque of sample r: from the samples each call ran
-  // (get_step_runs), in order, or else the output of the call whose torque is
-  // for sample r, picked by find_delayed_sample as a live caller pairs it; a
-  // row that no call picks (stamps jittered across the delay) takes the next
-  // picked output.
-  Eigen::Index filled = 0;  // rows 0..filled-1 written
-  int last_back = 0;         // the last pick's distance from the newest call (find_delayed_sample's hint)
-  const Eigen::Index max_calls = T + static_cast<Eigen::Index>(std::ceil(delay_s / dt)) + 2;
-  for (Eigen::Index k = 0; filled < T && k < max_calls; ++k) {
-    const Eigen::Index t = std::min(k, T - 1);
-    q = position.row(t).head(N).transpose();
-    qd = velocity.row(t).head(N).transpose();
-    model.compute_step(*ws, time_of_call(k), q.data(), qd.data(), tau.data());
-    const TorqueModel::StepRuns runs = model.get_step_runs(*ws);
-    if (runs.count >= 0) {
-      for (int i = 0; i < runs.count && filled < T; ++i, ++filled)
-        out.row(filled) = Eigen::Map<const Eigen::RowVectorXd>(runs.torque + static_cast<std::ptrdiff_t>(i) * tau.size(),
-                                                                tau.size());
-      continue;
-    }
-    Eigen::Index row = k;
-    if (delay_s > 0) {
-      const int back = find_delayed_sample(
-          static_cast<int>(k + 1), time_of_call(k) - delay_s, [&](int b) { return time_of_call(k + 1 - b); },
-          last_back + 1);
-      if (back == 0) continue;
-      last_back = back;
-      row = std::min(k + 1 - back, T - 1);
-    }
-    for (; filled <= row; ++filled) out.row(filled) = tau.transpose();
-  }
-  for (; filled < T; ++filled) out.row(filled) = tau.transpose();
+  StreamingPredictor predictor(model);
+  Eigen::MatrixXd head, tail;
+  predictor.add(time, position, velocity, head);
+  predictor.finish(tail);
+  Eigen::MatrixXd out(head.rows() + tail.rows(), model.num_outputs());
+  out << head, tail;
   return out;
 }
 
@@ -297,6 +387,55 @@ Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Recordi
 Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording, PredictionMode mode) {
   return mode == PredictionMode::streaming ? predict_torque_streaming(model, recording)
                                            : predict_torque(model, recording);
+}
+
+RecordingTorqueStream::RecordingTorqueStream(const TorqueModel& model, PredictionMode mode)
+    : model_(model), predictor_(create_torque_predictor(model, mode)) {}
+
+void RecordingTorqueStream::add(const Recording& chunk) {
+  check_recording_joints(model_, chunk);
+  predictor_->add(chunk.time, chunk.position, chunk.velocity, rows_);
+  // The samples still waiting for their torque, then this chunk's.
+  if (waiting_.time.size() == 0) {
+    waiting_ = chunk;
+  } else {
+    const Eigen::Index a = waiting_.time.size(), b = chunk.time.size();
+    Recording both = get_recording_rows(waiting_, 0, a);
+    both.time.conservativeResize(a + b);
+    both.time.tail(b) = chunk.time;
+    for (auto [dst, src] : {std::pair{&both.position, &chunk.position}, std::pair{&both.velocity, &chunk.velocity},
+                            std::pair{&both.effort, &chunk.effort}}) {
+      dst->conservativeResize(a + b, Eigen::NoChange);
+      dst->bottomRows(b) = *src;
+    }
+    if (both.force) {
+      both.force->conservativeResize(a + b, Eigen::NoChange);
+      both.force->bottomRows(b) = *chunk.force;
+    }
+    both.line.insert(both.line.end(), chunk.line.begin(), chunk.line.end());
+    both.repeated_rows = chunk.repeated_rows;
+    both.repeated_rows_removed = chunk.repeated_rows_removed;
+    waiting_ = std::move(both);
+  }
+  take_ready();
+}
+
+void RecordingTorqueStream::finish() {
+  predictor_->finish(rows_);
+  take_ready();
+}
+
+void RecordingTorqueStream::take_ready() {
+  const Eigen::Index n = rows_.rows(), T = waiting_.time.size();
+  if (n > T) throw std::logic_error("RecordingTorqueStream: more torque rows than samples");
+  ready_ = get_recording_rows(waiting_, 0, n);
+  ready_.repeated_rows = waiting_.repeated_rows;
+  ready_.repeated_rows_removed = waiting_.repeated_rows_removed;
+  torque_ = rows_;
+  Recording rest = get_recording_rows(waiting_, n, T);
+  rest.repeated_rows = waiting_.repeated_rows;
+  rest.repeated_rows_removed = waiting_.repeated_rows_removed;
+  waiting_ = std::move(rest);
 }
 
 namespace {

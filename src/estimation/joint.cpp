@@ -18,11 +18,12 @@
 namespace rcm {
 namespace {
 
-// One sample's normalized torque residual (dtau - tau_pred) / sigma, with its
+// One sample's normalized torque residual (dtau - b - tau_pred) / sigma, b the
+// free-space model's torque offset (JointTissueModel::torque_offset), with its
 // Jacobians in closed form: automatic differentiation of the same model costs
 // several times more per evaluation, and the bootstrap evaluates it for every
 // sample at every iteration of every replicate.
-class JointResidual final : public ceres::SizedCostFunction<3, 3, 4> {
+class JointResidual final : public ceres::SizedCostFunction<3, 3, 4, 3> {
  public:
   JointResidual(const JointSample& sample, const Eigen::Matrix3d& R_base_inc, double v0,
                 const Eigen::Vector3d& sigma, const Eigen::Vector3d& dtau)
@@ -45,9 +46,14 @@ class JointResidual final : public ceres::SizedCostFunction<3, 3, 4> {
         Eigen::Map<Eigen::Matrix<double, 3, 4, Eigen::RowMajor>> J_tissue(jacobians[1]);
         J_tissue = -(inv_sigma_.asDiagonal() * dtau_dtissue);
       }
+      if (jacobians[2] != nullptr) {
+        Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> J_offset(jacobians[2]);
+        J_offset = -Eigen::Matrix3d(inv_sigma_.asDiagonal());
+      }
     }
+    const Eigen::Map<const Eigen::Vector3d> offset(parameters[2]);
     Eigen::Map<Eigen::Vector3d> r(residuals);
-    r = (dtau_ - tau).cwiseProduct(inv_sigma_);
+    r = (dtau_ - offset - tau).cwiseProduct(inv_sigma_);
     return true;
   }
 
@@ -69,22 +75,32 @@ struct InterruptCallback : ceres::IterationCallback {
 struct Fit {
   Eigen::Vector3d p;
   Eigen::Vector4d tissue;
+  Eigen::Vector3d torque_offset = Eigen::Vector3d::Zero();
   double cost = 0.0;
   ceres::Solver::Summary summary;
+};
+
+// What one solve fits; the rest stays at its start.
+struct Unknowns {
+  bool offsets = false, tissue = false, cubic = false, torque_offset = false;
 };
 
 // One bounded robust solve; `dtau` overrides the samples' residuals (bootstrap).
 Fit solve(const IncisionFrame& incision, const std::vector<JointSample>& samples,
           const std::vector<Eigen::Vector3d>* dtau, const JointEstimatorOptions& o, double v0, Eigen::Vector3d p0,
-          Eigen::Vector4d tissue0, bool fit_offsets, bool fit_tissue, bool fit_cubic) {
+          Eigen::Vector4d tissue0, const Eigen::Vector3d& torque_offset0, Unknowns unknowns) {
+  const bool fit_offsets = unknowns.offsets, fit_tissue = unknowns.tissue, fit_cubic = unknowns.cubic;
   Fit fit;
   fit.p = p0;
   fit.tissue = tissue0;
+  fit.torque_offset = torque_offset0;
   ceres::Problem problem;
   for (std::size_t i = 0; i < samples.size(); ++i) {
     auto* cost = new JointResidual(samples[i], incision.R_base_inc, v0, o.torque_sigma, dtau ? (*dtau)[i] : samples[i].dtau);
-    problem.AddResidualBlock(cost, new ceres::HuberLoss(o.huber_scale), fit.p.data(), fit.tissue.data());
+    problem.AddResidualBlock(cost, new ceres::HuberLoss(o.huber_scale), fit.p.data(), fit.tissue.data(),
+                             fit.torque_offset.data());
   }
+  if (!unknowns.torque_offset) problem.SetParameterBlockConstant(fit.torque_offset.data());
   if (fit_offsets) {
     for (int k = 0; k < 2; ++k) {
       problem.SetParameterLowerBound(fit.p.data(), k, -o.radial_max);
@@ -233,6 +249,60 @@ Eigen::Vector3d compute_joint_model_torque(const IncisionFrame& incision, const 
   return tau;
 }
 
+namespace {
+
+// The tissue parameters at the known offset [0, 0, D*], with the free-space
+// model's torque offset when the options fit it: the linear family and, unless
+// `family` names one, the stiffening one, chosen by BIC counting one effective
+// sample per second of data (model errors are correlated over about that long).
+struct TissueFit {
+  Fit fit;
+  bool stiff = false;
+  double bic = 0.0;
+};
+TissueFit fit_tissue_at(const IncisionFrame& incision, const std::vector<JointSample>& samples, double D_star,
+                        const JointEstimatorOptions& o, double v0, const std::optional<bool>& stiff_family) {
+  const Eigen::Vector3d p(0.0, 0.0, D_star);
+  Unknowns u;
+  u.tissue = true;
+  u.torque_offset = o.fit_torque_offset;
+  const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
+  const double n_eff = std::max(10.0, static_cast<double>(samples.size()) * o.sample_period_s);
+  const double n = static_cast<double>(samples.size());
+  auto bic = [&](double cost, int k) { return n_eff * std::log(std::max(cost, 1e-300) / n) + k * std::log(n_eff); };
+  const int k_offset = o.fit_torque_offset ? 3 : 0;
+  TissueFit out;
+  out.fit = solve(incision, samples, nullptr, o, v0, p, Eigen::Vector4d(800, 0, 0, 0), zero, u);
+  out.bic = bic(out.fit.cost, 3 + k_offset);
+  if (stiff_family && !*stiff_family) return out;
+  u.cubic = true;
+  Fit cubic = solve(incision, samples, nullptr, o, v0, p, out.fit.tissue, out.fit.torque_offset, u);
+  const double bic_cubic = bic(cubic.cost, 4 + k_offset);
+  if (stiff_family || bic_cubic < out.bic) {
+    out.fit = std::move(cubic);
+    out.bic = bic_cubic;
+    out.stiff = true;
+  }
+  return out;
+}
+
+// The offsets that fit the samples best with the tissue and the torque offset
+// held (multi-start over options.D_starts).
+Fit solve_offsets(const IncisionFrame& incision, const std::vector<JointSample>& samples, const JointEstimatorOptions& o,
+                  double v0, const Eigen::Vector4d& tissue, const Eigen::Vector3d& torque_offset) {
+  Fit best;
+  best.cost = std::numeric_limits<double>::infinity();
+  Unknowns u;
+  u.offsets = true;
+  for (double D0 : o.D_starts) {
+    Fit f = solve(incision, samples, nullptr, o, v0, Eigen::Vector3d(0, 0, D0), tissue, torque_offset, u);
+    if (f.cost < best.cost) best = std::move(f);
+  }
+  return best;
+}
+
+}  // namespace
+
 JointTissueModel fit_joint_tissue_model(const IncisionFrame& incision, const std::vector<JointSample>& calibration,
                                         double D_star, const JointEstimatorOptions& o) {
   o.check();
@@ -243,46 +313,56 @@ JointTissueModel fit_joint_tissue_model(const IncisionFrame& incision, const std
   }
   const double v0 = JointTissueModel{}.axial_velocity_scale;
   const Eigen::Vector3d p(0.0, 0.0, D_star);
-  const Fit linear = solve(incision, calibration, nullptr, o, v0, p, Eigen::Vector4d(800, 0, 0, 0), false, true, false);
-  const Fit cubic = solve(incision, calibration, nullptr, o, v0, p, linear.tissue, false, true, true);
-  // Effective sample count: one per second, the correlation time of model errors.
-  const double n_eff = std::max(10.0, static_cast<double>(calibration.size()) * o.sample_period_s);
-  const double n = static_cast<double>(calibration.size());
-  auto bic = [&](double cost, int k) { return n_eff * std::log(std::max(cost, 1e-300) / n) + k * std::log(n_eff); };
+  const TissueFit chosen = fit_tissue_at(incision, calibration, D_star, o, v0, std::nullopt);
+  const bool stiff = chosen.stiff;
   JointTissueModel out;
   out.axial_velocity_scale = v0;
-  const double bic_linear = bic(linear.cost, 3), bic_cubic = bic(cubic.cost, 4);
-  const bool stiff = bic_cubic < bic_linear;
-  const Fit& chosen = stiff ? cubic : linear;
-  out.parameters = chosen.tissue;
+  out.parameters = chosen.fit.tissue;
+  out.torque_offset = chosen.fit.torque_offset;
   out.family = stiff ? "stiffening" : "linear";
-  out.cost = chosen.cost;
-  out.bic = stiff ? bic_cubic : bic_linear;
+  out.cost = chosen.fit.cost;
+  out.bic = chosen.bic;
+  out.calibration_offset_m = D_star;
 
-  {
-    // The fitted model re-estimates the calibration's own offsets (multi-start,
-    // as a trial): any departure from [0, 0, D*] is systematic.
-    Fit best;
-    best.cost = std::numeric_limits<double>::infinity();
-    for (double D0 : o.D_starts) {
-      Fit f = solve(incision, calibration, nullptr, o, v0, Eigen::Vector3d(0, 0, D0), out.parameters, true, false, false);
-      if (f.cost < best.cost) best = f;
+  // The self-check on data the fit did not use: the models fitted on one half
+  // of the calibration (in time) re-estimate the offsets of the other half;
+  // any departure from [0, 0, D*] is what a trial may carry too. RMS over the
+  // two halves. A calibration too short to halve is checked on itself.
+  const std::size_t half = calibration.size() / 2;
+  if (half >= 50) {
+    const std::vector<JointSample> first(calibration.begin(), calibration.begin() + static_cast<std::ptrdiff_t>(half)),
+        second(calibration.begin() + static_cast<std::ptrdiff_t>(half), calibration.end());
+    Eigen::Vector3d sq = Eigen::Vector3d::Zero();
+    for (int fold = 0; fold < 2; ++fold) {
+      const std::vector<JointSample>& fitted_on = fold == 0 ? first : second;
+      const std::vector<JointSample>& checked_on = fold == 0 ? second : first;
+      const Fit model = fit_tissue_at(incision, fitted_on, D_star, o, v0, stiff).fit;
+      const Fit found = solve_offsets(incision, checked_on, o, v0, model.tissue, model.torque_offset);
+      sq += (found.p - p).array().square().matrix();
     }
-    out.calibration_bias_m = best.p - p;
-    out.calibration_offset_m = D_star;
+    out.calibration_bias_m = (0.5 * sq).cwiseSqrt();
+    out.calibration_check = "held-out halves";
+  } else {
+    out.calibration_bias_m = (solve_offsets(incision, calibration, o, v0, out.parameters, out.torque_offset).p - p).cwiseAbs();
+    out.calibration_check = "in-sample";
   }
 
+  Unknowns refit;
+  refit.tissue = true;
+  refit.cubic = stiff;
+  refit.torque_offset = o.fit_torque_offset;
   if (o.calibration_offset_sd_m > 0) {
     const Eigen::Vector3d shifted(0.0, 0.0, D_star + o.calibration_offset_sd_m);
-    const Fit f = solve(incision, calibration, nullptr, o, v0, shifted, out.parameters, false, true, stiff);
+    const Fit f = solve(incision, calibration, nullptr, o, v0, shifted, out.parameters, out.torque_offset, refit);
     out.dparameters_dD_star = (f.tissue - out.parameters) / o.calibration_offset_sd_m;
+    out.dtorque_offset_dD_star = (f.torque_offset - out.torque_offset) / o.calibration_offset_sd_m;
     out.calibration_offset_sd_m = o.calibration_offset_sd_m;
   }
 
   if (o.calibration_bootstrap_replicates > 1) {
     std::vector<Eigen::Vector3d> fitted(calibration.size()), resid(calibration.size()), dtau;
     for (std::size_t i = 0; i < calibration.size(); ++i) {
-      fitted[i] = compute_joint_model_torque(incision, out, calibration[i], p);
+      fitted[i] = compute_joint_model_torque(incision, out, calibration[i], p) + out.torque_offset;
       resid[i] = calibration[i].dtau - fitted[i];
     }
     const std::size_t block =
@@ -290,15 +370,25 @@ JointTissueModel fit_joint_tissue_model(const IncisionFrame& incision, const std
     out.bootstrap_block_s = static_cast<double>(block) * o.sample_period_s;
     std::mt19937_64 rng(o.seed ^ 0x7157u);
     std::vector<Eigen::Vector4d> draws;
+    std::vector<Eigen::Vector3d> offset_draws;
     for (int b = 0; b < o.calibration_bootstrap_replicates; ++b) {
       draw_block_bootstrap(fitted, resid, block, rng, dtau);
-      draws.push_back(solve(incision, calibration, &dtau, o, v0, p, out.parameters, false, true, stiff).tissue);
+      const Fit f = solve(incision, calibration, &dtau, o, v0, p, out.parameters, out.torque_offset, refit);
+      draws.push_back(f.tissue);
+      offset_draws.push_back(f.torque_offset);
     }
+    const double m = static_cast<double>(draws.size());
     Eigen::Vector4d mean = Eigen::Vector4d::Zero();
-    for (const auto& d : draws) mean += d;
-    mean /= static_cast<double>(draws.size());
-    for (const auto& d : draws) out.covariance += (d - mean) * (d - mean).transpose();
-    out.covariance /= static_cast<double>(draws.size() - 1);
+    Eigen::Vector3d offset_mean = Eigen::Vector3d::Zero();
+    for (std::size_t b = 0; b < draws.size(); ++b) {
+      mean += draws[b] / m;
+      offset_mean += offset_draws[b] / m;
+    }
+    for (std::size_t b = 0; b < draws.size(); ++b) {
+      out.covariance += (draws[b] - mean) * (draws[b] - mean).transpose() / (m - 1.0);
+      out.torque_offset_covariance +=
+          (offset_draws[b] - offset_mean) * (offset_draws[b] - offset_mean).transpose() / (m - 1.0);
+    }
     out.bootstrap_replicates = o.calibration_bootstrap_replicates;
   }
   return out;
@@ -314,12 +404,15 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
   }
   const auto start = std::chrono::steady_clock::now();
   const double v0 = tissue.axial_velocity_scale;
-  Fit best;
-  best.cost = std::numeric_limits<double>::infinity();
-  for (double D0 : o.D_starts) {
-    Fit f = solve(incision, samples, nullptr, o, v0, Eigen::Vector3d(0, 0, D0), tissue.parameters, true, false, false);
-    if (f.cost < best.cost) best = f;
-  }
+  const Eigen::Vector3d& b = tissue.torque_offset;
+  const Fit best = solve_offsets(incision, samples, o, v0, tissue.parameters, b);
+  Unknowns offsets_only;
+  offsets_only.offsets = true;
+  // The offsets re-solved from the optimum with the model or the residuals moved.
+  auto resolve = [&](const Eigen::Vector4d& tissue_parameters, const Eigen::Vector3d& torque_offset,
+                     const std::vector<Eigen::Vector3d>* dtau) {
+    return solve(incision, samples, dtau, o, v0, best.p, tissue_parameters, torque_offset, offsets_only).p;
+  };
   JointEstimate out;
   out.misalignment_m = best.p;
   out.samples = samples.size();
@@ -332,8 +425,9 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
     ceres::Problem problem;
     for (const auto& s : samples)
       problem.AddResidualBlock(new JointResidual(s, incision.R_base_inc, v0, o.torque_sigma, s.dtau), nullptr,
-                               at.p.data(), at.tissue.data());
+                               at.p.data(), at.tissue.data(), at.torque_offset.data());
     problem.SetParameterBlockConstant(at.tissue.data());
+    problem.SetParameterBlockConstant(at.torque_offset.data());
     ceres::Covariance::Options co;
     ceres::Covariance covariance(co);
     std::vector<std::pair<const double*, const double*>> blocks = {{at.p.data(), at.p.data()}};
@@ -352,7 +446,7 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
     const std::size_t n = samples.size();
     std::vector<Eigen::Vector3d> fitted(n), resid(n), dtau;
     for (std::size_t i = 0; i < n; ++i) {
-      fitted[i] = compute_joint_model_torque(incision, tissue, samples[i], best.p);
+      fitted[i] = compute_joint_model_torque(incision, tissue, samples[i], best.p) + b;
       resid[i] = samples[i].dtau - fitted[i];
     }
     const std::size_t block =
@@ -360,9 +454,9 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
     out.bootstrap_block_s = static_cast<double>(block) * o.sample_period_s;
     std::mt19937_64 rng(o.seed);
     std::vector<Eigen::Vector3d> draws;
-    for (int b = 0; b < o.bootstrap_replicates; ++b) {
+    for (int r = 0; r < o.bootstrap_replicates; ++r) {
       draw_block_bootstrap(fitted, resid, block, rng, dtau);
-      draws.push_back(solve(incision, samples, &dtau, o, v0, best.p, tissue.parameters, true, false, false).p);
+      draws.push_back(resolve(tissue.parameters, b, &dtau));
     }
     out.bootstrap_replicates = o.bootstrap_replicates;
     for (int k = 0; k < 3; ++k) {
@@ -387,18 +481,28 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
     if (!(sd > 0.0)) continue;
     Eigen::Vector4d moved = tissue.parameters;
     moved[j] += sd;
-    S.col(j) = (solve(incision, samples, nullptr, o, v0, best.p, moved, true, false, false).p - best.p) / sd;
+    S.col(j) = (resolve(moved, b, nullptr) - best.p) / sd;
   }
   const Eigen::Matrix3d cov_tissue = S * tissue.covariance * S.transpose();
-  out.sd_tissue = cov_tissue.diagonal().cwiseMax(0.0).cwiseSqrt();
+  // The torque offset's uncertainty the same way, joint by joint.
+  Eigen::Matrix3d S_offset = Eigen::Matrix3d::Zero();
+  for (int j = 0; j < 3; ++j) {
+    const double sd = std::sqrt(std::max(0.0, tissue.torque_offset_covariance(j, j)));
+    if (!(sd > 0.0)) continue;
+    Eigen::Vector3d moved = b;
+    moved[j] += sd;
+    S_offset.col(j) = (resolve(tissue.parameters, moved, nullptr) - best.p) / sd;
+  }
+  const Eigen::Matrix3d cov_offset = S_offset * tissue.torque_offset_covariance * S_offset.transpose();
+  out.sd_tissue = (cov_tissue + cov_offset).diagonal().cwiseMax(0.0).cwiseSqrt();
   out.sd_systematic = tissue.calibration_bias_m.cwiseAbs();
   if (std::abs(tissue.calibration_offset_m) > 0.0)
     out.sd_systematic_scale =
         tissue.calibration_bias_m.norm() / std::abs(tissue.calibration_offset_m) * best.p.cwiseAbs();
   if (tissue.calibration_offset_sd_m > 0) {
     const Eigen::Vector4d moved = tissue.parameters + tissue.dparameters_dD_star * tissue.calibration_offset_sd_m;
-    out.sd_calibration_offset =
-        (solve(incision, samples, nullptr, o, v0, best.p, moved, true, false, false).p - best.p).cwiseAbs();
+    const Eigen::Vector3d moved_offset = b + tissue.dtorque_offset_dD_star * tissue.calibration_offset_sd_m;
+    out.sd_calibration_offset = (resolve(moved, moved_offset, nullptr) - best.p).cwiseAbs();
   }
   // The free-space model's error off the trials, as a torque offset on each
   // joint in turn: what it moves the estimate by adds in quadrature.
@@ -411,10 +515,7 @@ JointEstimate estimate_joint(const IncisionFrame& incision, const JointTissueMod
         shifted[i] = samples[i].dtau;
         shifted[i][j] += o.torque_bias[j];
       }
-      sq += (solve(incision, samples, &shifted, o, v0, best.p, tissue.parameters, true, false, false).p - best.p)
-                .array()
-                .square()
-                .matrix();
+      sq += (resolve(tissue.parameters, b, &shifted) - best.p).array().square().matrix();
     }
     out.sd_free_space_model = sq.cwiseSqrt();
   }
@@ -454,6 +555,9 @@ const OptionTable<JointEstimatorOptions>& get_option_table(OptionTag<JointEstima
                OptionLimits::above(0))
           .add("torque_bias", &JointEstimatorOptions::torque_bias,
                "the free-space model's torque error on the arm as it is now (0: not known)", "N m, N m, N")
+          .add("fit_torque_offset", &JointEstimatorOptions::fit_torque_offset,
+               "identify the free-space model's torque offset on the calibration with the tissue law and take it off "
+               "every residual")
           .add("seed", &JointEstimatorOptions::seed, "seed of the bootstrap")
           .add("max_iterations", &JointEstimatorOptions::max_iterations, "Ceres iteration limit", "",
                OptionLimits::at_least(1))

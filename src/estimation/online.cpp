@@ -108,8 +108,10 @@ int get_best_hypothesis(const OnlineEstimator::Workspace& ws) {
 }  // namespace
 
 const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, const Eigen::Vector3d& q,
-                                                    const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau) const {
+                                                    const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau_measured) const {
   const OnlineEstimatorOptions& o = options_;
+  // The free-space model's torque offset the calibration found (0 when not fitted).
+  const Eigen::Vector3d dtau = dtau_measured - tissue_.torque_offset;
   const double dt = ws.started ? std::max(time - ws.last_time, o.min_dt_s) : o.min_dt_s;
   // What one sample can tell: samples a correlation time apart are independent,
   // so a sample after a gap in the stream weighs as one such sample, not as the
@@ -405,60 +407,6 @@ void OnlinePipeline::apply_rcm_shift(Workspace& ws, const Eigen::Vector3d& shift
   }
   ws.shift_declared_base += shift_base;
   ws.estimator.output.misalignment_m -= estimator_.incision().R_base_inc.transpose() * shift_base;
-}
-
-OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& r, const OnlineReplayOptions& options,
-                           const std::function<void(const OnlineOutput&)>& on_sample) {
-  if (r.num_joints() < pipeline.model().num_joints()) {
-    InputLocation where;
-    where.file = r.source;
-    throw InputError(where, "the free-space model reads " + std::to_string(pipeline.model().num_joints()) +
-                                " joints, the recording has " + std::to_string(r.num_joints()));
-  }
-  OnlineReplay out;
-  out.regime.known = pipeline.regime_monitor().known();
-  const Eigen::Index T = r.time.size();
-  out.samples = static_cast<std::size_t>(T);
-  // Row-major copies so that each sample is contiguous, as from a live topic.
-  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-  const RowMajor q = r.position, qd = r.velocity, effort = r.effort;
-  std::vector<Eigen::Vector3d> trace(static_cast<std::size_t>(T));
-  auto ws = pipeline.create_workspace();
-  double total = 0.0;
-  std::uint64_t updates = 0;
-  for (Eigen::Index t = 0; t < T; ++t) {
-    const auto start = std::chrono::steady_clock::now();
-    const OnlineOutput& o = pipeline.compute_sample(ws, r.time(t), q.row(t).data(), qd.row(t).data(), effort.row(t).data());
-    const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    total += took;
-    out.max_update_s = std::max(out.max_update_s, took);
-    trace[static_cast<std::size_t>(t)] = o.misalignment_m;
-    if (!out.motion_start_s && std::hypot(r.velocity(t, 0), r.velocity(t, 1)) > options.motion_speed)
-      out.motion_start_s = r.time(t);
-    // What follows counts estimates, each once (a model whose torque trails
-    // brings none for its delay's first samples, or after a long gap).
-    if (o.updates == updates) continue;
-    out.estimates += static_cast<std::size_t>(o.updates - updates);
-    updates = o.updates;
-    if (o.onset && !out.onset_s) out.onset_s = o.onset_time;
-    if (o.alarm_raised) out.alarms.push_back({o.time, std::nullopt, o.force_norm_n});
-    if (o.alarm && !out.alarms.empty()) out.alarms.back().peak_force_n = std::max(out.alarms.back().peak_force_n, o.force_norm_n);
-    if (o.alarm_cleared && !out.alarms.empty()) out.alarms.back().cleared_s = o.time;
-    out.peak_force_n = std::max(out.peak_force_n, o.force_norm_n);
-    out.regime.add(o.time, o.regime_flags);
-    if (on_sample) on_sample(o);
-  }
-  out.mean_update_s = T > 0 ? total / static_cast<double>(T) : 0.0;
-  out.final_output = get_online_output(ws.estimator);
-  if (out.motion_start_s && T > 0) {
-    Eigen::Index last_outside = -1;
-    for (Eigen::Index t = 0; t < T; ++t)
-      if ((trace[static_cast<std::size_t>(t)] - out.final_output.misalignment_m).norm() > options.settle_band_m)
-        last_outside = t;
-    const double settled_at = last_outside + 1 < T ? r.time(last_outside + 1) : r.time(T - 1);
-    out.settled_after_s = std::max(0.0, settled_at - *out.motion_start_s);
-  }
-  return out;
 }
 
 const OptionTable<OnlineEstimatorOptions>& get_option_table(OptionTag<OnlineEstimatorOptions>) {

@@ -85,7 +85,10 @@ nlohmann::json StudyResult::to_json() const {
                                {"parameter_sd", {std::sqrt(joint_tissue->covariance(0, 0)), std::sqrt(joint_tissue->covariance(1, 1)),
                                                  std::sqrt(joint_tissue->covariance(2, 2)), std::sqrt(joint_tissue->covariance(3, 3))}},
                                {"bootstrap_replicates", joint_tissue->bootstrap_replicates},
+                               {"torque_offset", vec_json(joint_tissue->torque_offset)},
+                               {"torque_offset_sd", vec_json(joint_tissue->torque_offset_covariance.diagonal().cwiseMax(0.0).cwiseSqrt())},
                                {"calibration_bias_m", vec_json(joint_tissue->calibration_bias_m)},
+                               {"calibration_check", joint_tissue->calibration_check},
                                {"bootstrap_block_s", joint_tissue->bootstrap_block_s},
                                {"calibration_offset_sd_m", joint_tissue->calibration_offset_sd_m}};
   nlohmann::json trials_json = nlohmann::json::array();

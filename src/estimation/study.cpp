@@ -12,6 +12,7 @@
 #include "rcm/dynamics/metrics.hpp"
 #include "rcm/force/incision_force.hpp"
 #include "rcm/io/json_file.hpp"
+#include "rcm/io/recording_reader.hpp"
 
 namespace rcm {
 namespace {
@@ -224,9 +225,12 @@ void check_study_recordings(const Session& session, const StudyOptions& options)
     paths.push_back(spec.recording);
     if (spec.static_recording) paths.push_back(*spec.static_recording);
   }
+  // Read through in chunks, every check made and nothing kept: memory does not grow with the files' length.
+  Recording chunk;
   for (const auto& path : paths) {
     throw_if_interrupted("checking the session's recordings");
-    (void)load_recording(path, read);
+    const auto reader = open_recording(path, read);
+    while (reader->read_chunk(chunk)) throw_if_interrupted("checking the session's recordings");
   }
 }
 
@@ -332,6 +336,13 @@ void identify_joint_tissue(StudyContext& c, const FreeSpaceModelStep& free_space
       c.incision,
       make_joint_samples(c.incision, calibration.recording, calibration.tau_fs, options.three_step.coaxial.max_theta_rad),
       result.calibration_offset_m, c.joint_options);
+  // The intervals widen by what the correction leaves of the baseline's error.
+  if (result.baseline_hold) c.joint_options.torque_bias -= result.joint_tissue->torque_offset;
+  const Eigen::Vector3d& b = result.joint_tissue->torque_offset;
+  progress(options.verbose, "free-space model's torque offset from the calibration [" + std::to_string(b[0]) + ", " +
+                                std::to_string(b[1]) + ", " + std::to_string(b[2]) + "], self-check " +
+                                std::to_string(1e3 * result.joint_tissue->calibration_bias_m.norm()) + " mm (" +
+                                result.joint_tissue->calibration_check + ")");
 }
 
 // Step 3 on one trial: its static hold (step 3b), the joint estimate and the

@@ -102,11 +102,9 @@ void finish(const std::filesystem::path& path, const std::filesystem::path& temp
   sync_directory(path);
 }
 
-}  // namespace
 
-void write_file_atomic(const std::filesystem::path& path, std::string_view bytes) {
-  std::filesystem::path temp;
-  const int fd = create_temporary(path, temp);
+// Writes every byte to fd; on failure closes fd, removes the temporary and throws.
+void write_all(const std::filesystem::path& path, const std::filesystem::path& temp, int fd, std::string_view bytes) {
   const char* data = bytes.data();
   std::size_t left = bytes.size();
   while (left > 0) {
@@ -121,7 +119,47 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view bytes
     data += n;
     left -= static_cast<std::size_t>(n);
   }
+}
+
+}  // namespace
+
+void write_file_atomic(const std::filesystem::path& path, std::string_view bytes) {
+  std::filesystem::path temp;
+  const int fd = create_temporary(path, temp);
+  write_all(path, temp, fd, bytes);
   finish(path, temp, fd);
+}
+
+AtomicFileWriter::AtomicFileWriter(std::filesystem::path path) : path_(std::move(path)) {
+  fd_ = create_temporary(path_, temp_);
+}
+
+AtomicFileWriter::~AtomicFileWriter() {
+  if (fd_ < 0) return;
+  ::close(fd_);
+  ::unlink(temp_.c_str());
+}
+
+void AtomicFileWriter::append(std::string_view bytes) {
+  if (fd_ < 0) fail(path_, "already committed");
+  buffer_.append(bytes);
+  if (buffer_.size() >= kFlushBytes) flush();
+}
+
+void AtomicFileWriter::flush() {
+  const int fd = fd_;
+  fd_ = -1;  // write_all closes it on failure
+  write_all(path_, temp_, fd, buffer_);
+  fd_ = fd;
+  buffer_.clear();
+}
+
+void AtomicFileWriter::commit() {
+  if (fd_ < 0) fail(path_, "already committed");
+  flush();
+  const int fd = fd_;
+  fd_ = -1;
+  finish(path_, temp_, fd);
 }
 
 AtomicFile::AtomicFile(std::filesystem::path path) : path_(std::move(path)) {

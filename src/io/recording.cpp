@@ -3,16 +3,14 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
-#include <iostream>
 #include <map>
-#include <mutex>
 #include <stdexcept>
 #include <string_view>
 
 #include "rcm/common/options.hpp"
 #include "rcm/common/error.hpp"
+#include "rcm/io/atomic_file.hpp"
 #include "rcm/io/json_file.hpp"
-#include "rcm/io/rosbag2.hpp"
 #include "csv_parts.hpp"
 
 namespace rcm {
@@ -136,229 +134,6 @@ std::vector<std::pair<std::size_t, std::string_view>> split_lines(std::string_vi
 
 }  // namespace detail
 
-namespace {
-
-using detail::Column;
-using detail::find_series;
-using detail::index_header;
-using detail::locate;
-using detail::parse_cell;
-using detail::split_fields;
-using detail::split_lines;
-using detail::trim;
-
-struct Layout {
-  RecordingLayout kind = RecordingLayout::rcm_csv;
-  std::optional<Column> time;
-  bool time_in_ns = false;
-  int joints = 0;
-  std::vector<Column> position, velocity, effort, force;
-  std::size_t header_fields = 0;
-};
-
-Layout parse_header(const std::vector<std::string_view>& fields, const std::string& source,
-                    const RecordingReadOptions& options) {
-  Layout layout;
-  layout.header_fields = fields.size();
-  std::map<std::string, std::size_t> by_name = index_header(fields, source);
-
-  const bool rostopic = by_name.count("%time") || by_name.count("field.position0");
-  std::string pos_prefix = "position_", vel_prefix = "velocity_", eff_prefix = "effort_";
-  int first = 1;
-  if (rostopic) {
-    layout.kind = RecordingLayout::rostopic_csv;
-    pos_prefix = "field.position";
-    vel_prefix = "field.velocity";
-    eff_prefix = "field.effort";
-    first = 0;
-    if (by_name.count("%time")) {
-      layout.time = Column{by_name["%time"], "%time"};
-      layout.time_in_ns = true;
-    }
-  } else if (by_name.count("time")) {
-    layout.time = Column{by_name["time"], "time"};
-  }
-  if (!layout.time && !options.assumed_rate_hz) {
-    throw InputError(locate(source, 1, ""),
-                     std::string("no time column ('") + (rostopic ? "%time" : "time") +
-                         "'); give the sampling rate explicitly (--rate HZ) to number the samples");
-  }
-
-  layout.position = find_series(by_name, pos_prefix, first, source);
-  layout.velocity = find_series(by_name, vel_prefix, first, source);
-  layout.effort = find_series(by_name, eff_prefix, first, source);
-  const std::size_t n = std::max({layout.position.size(), layout.velocity.size(), layout.effort.size()});
-  const std::string* prefixes[3] = {&pos_prefix, &vel_prefix, &eff_prefix};
-  const std::vector<Column>* series[3] = {&layout.position, &layout.velocity, &layout.effort};
-  for (int k = 0; k < 3; ++k) {
-    if (series[k]->size() < n) {
-      throw InputError(locate(source, 1, *prefixes[k] + std::to_string(first + static_cast<int>(series[k]->size()))),
-                       "missing: position, velocity and effort must be given for the same " +
-                           std::to_string(n) + " joints");
-    }
-  }
-  if (static_cast<int>(n) < options.min_joints) {
-    throw InputError(locate(source, 1, pos_prefix + std::to_string(first + static_cast<int>(n))),
-                     "missing: too few joints (" + std::to_string(n) + "), at least " +
-                         std::to_string(options.min_joints) + " are required");
-  }
-  layout.joints = static_cast<int>(n);
-
-  if (!rostopic) {
-    const char* axes[3] = {"force_x", "force_y", "force_z"};
-    int present = 0;
-    for (const char* a : axes) present += by_name.count(a) ? 1 : 0;
-    if (present != 0 && present != 3) {
-      for (const char* a : axes)
-        if (!by_name.count(a))
-          throw InputError(locate(source, 1, a), "missing: force columns come as force_x, force_y, force_z together");
-    }
-    if (present == 3)
-      for (const char* a : axes) layout.force.push_back({by_name[a], a});
-  }
-  return layout;
-}
-
-}  // namespace
-
-Recording parse_recording(const std::string& text, const std::string& source,
-                          const RecordingReadOptions& options) {
-  if (options.assumed_rate_hz && !(*options.assumed_rate_hz > 0.0 && std::isfinite(*options.assumed_rate_hz)))
-    throw InputError(locate(source, 0, ""), "the assumed sampling rate must be a positive number of Hz");
-
-  const std::vector<std::pair<std::size_t, std::string_view>> lines = split_lines(text);
-  if (lines.empty()) throw InputError(locate(source, 0, ""), "file is empty, expected a header row");
-  if (lines.front().first != 1)
-    throw InputError(locate(source, 1, ""), "expected the header row on line 1, found a blank line");
-
-  std::vector<std::string_view> fields;
-  split_fields(lines.front().second, fields);
-  const Layout layout = parse_header(fields, source, options);
-  if (lines.size() == 1) throw InputError(locate(source, 1, ""), "header only, no data rows");
-
-  const Eigen::Index T = static_cast<Eigen::Index>(lines.size() - 1);
-  const int N = layout.joints;
-  Recording rec;
-  rec.source = source;
-  rec.layout = layout.kind;
-  rec.time.resize(T);
-  rec.position.resize(T, N);
-  rec.velocity.resize(T, N);
-  rec.effort.resize(T, N);
-  if (!layout.force.empty()) rec.force = Eigen::MatrixXd(T, 3);
-  rec.line.resize(static_cast<std::size_t>(T));
-
-  for (Eigen::Index t = 0; t < T; ++t) {
-    const auto& [number, line] = lines[static_cast<std::size_t>(t + 1)];
-    split_fields(line, fields);
-    if (fields.size() != layout.header_fields) {
-      InputLocation where = locate(source, number, "");
-      throw InputError(where, "expected " + std::to_string(layout.header_fields) +
-                                  " comma-separated fields as in the header, found " +
-                                  std::to_string(fields.size()) +
-                                  (fields.size() < layout.header_fields ? " (truncated row?)" : ""));
-    }
-    rec.line[static_cast<std::size_t>(t)] = number;
-    if (layout.time) {
-      const double v = parse_cell(fields[layout.time->index], source, number, layout.time->name);
-      rec.time[t] = layout.time_in_ns ? v * 1e-9 : v;
-    } else {
-      rec.time[t] = static_cast<double>(t) / *options.assumed_rate_hz;
-    }
-    for (int j = 0; j < N; ++j) {
-      rec.position(t, j) = parse_cell(fields[layout.position[j].index], source, number, layout.position[j].name);
-      rec.velocity(t, j) = parse_cell(fields[layout.velocity[j].index], source, number, layout.velocity[j].name);
-      rec.effort(t, j) = parse_cell(fields[layout.effort[j].index], source, number, layout.effort[j].name);
-    }
-    for (int k = 0; k < static_cast<int>(layout.force.size()); ++k)
-      (*rec.force)(t, k) = parse_cell(fields[layout.force[k].index], source, number, layout.force[k].name);
-  }
-  rec.time_from_rate = !layout.time.has_value();
-
-  // Repeated samples: the logger wrote the same joint message again.
-  std::vector<char> repeated(static_cast<std::size_t>(T), 0);
-  for (Eigen::Index t = 1; t < T; ++t) {
-    if (rec.position.row(t) == rec.position.row(t - 1) && rec.velocity.row(t) == rec.velocity.row(t - 1) &&
-        rec.effort.row(t) == rec.effort.row(t - 1)) {
-      repeated[static_cast<std::size_t>(t)] = 1;
-      ++rec.repeated_rows;
-    }
-  }
-  if (options.dedupe && rec.repeated_rows > 0) {
-    if (rec.time_from_rate) {
-      // Time was numbered from the rate over the rows as written; dropping rows
-      // would leave gaps that the rate no longer describes.
-      throw InputError(locate(source, 0, ""),
-                       "cannot drop repeated rows of a file without a time column (the rate numbers the rows as written)");
-    }
-    Eigen::Index k = 0;
-    for (Eigen::Index t = 0; t < T; ++t) {
-      if (repeated[static_cast<std::size_t>(t)]) continue;
-      rec.time[k] = rec.time[t];
-      rec.position.row(k) = rec.position.row(t);
-      rec.velocity.row(k) = rec.velocity.row(t);
-      rec.effort.row(k) = rec.effort.row(t);
-      if (rec.force) rec.force->row(k) = rec.force->row(t);
-      rec.line[static_cast<std::size_t>(k)] = rec.line[static_cast<std::size_t>(t)];
-      ++k;
-    }
-    rec.time.conservativeResize(k);
-    rec.position.conservativeResize(k, N);
-    rec.velocity.conservativeResize(k, N);
-    rec.effort.conservativeResize(k, N);
-    if (rec.force) rec.force->conservativeResize(k, 3);
-    rec.line.resize(static_cast<std::size_t>(k));
-    rec.repeated_rows_removed = true;
-  }
-
-  for (Eigen::Index t = 1; t < rec.time.size(); ++t) {
-    if (!(rec.time[t] > rec.time[t - 1])) {
-      const bool is_repeat = !rec.repeated_rows_removed && repeated[static_cast<std::size_t>(t)];
-      throw InputError(locate(source, rec.line[static_cast<std::size_t>(t)], layout.time ? layout.time->name : "time"),
-                       "time must increase strictly: " + std::to_string(rec.time[t]) + " s after " +
-                           std::to_string(rec.time[t - 1]) + " s on line " +
-                           std::to_string(rec.line[static_cast<std::size_t>(t - 1)]) +
-                           (is_repeat ? " (this row repeats the previous sample; --dedupe drops repeated rows)" : ""));
-    }
-  }
-  return rec;
-}
-
-namespace {
-std::mutex& reader_mutex() {
-  static std::mutex m;
-  return m;
-}
-std::map<std::string, RecordingFileReader>& readers() {
-  static std::map<std::string, RecordingFileReader> r;  // function-local: safe across TUs
-  return r;
-}
-}  // namespace
-
-void register_recording_reader(const std::string& extension, RecordingFileReader reader) {
-  const std::lock_guard<std::mutex> lock(reader_mutex());
-  readers()[extension] = std::move(reader);
-}
-
-Recording load_recording(const std::filesystem::path& path, const RecordingReadOptions& options) {
-  std::error_code ec;
-  const std::string key = std::filesystem::is_directory(path, ec) ? "/" : path.extension().string();
-  RecordingFileReader reader;
-  {
-    const std::lock_guard<std::mutex> lock(reader_mutex());
-    const auto it = readers().find(key);
-    if (it != readers().end()) reader = it->second;
-  }
-  if (reader) return reader(path, options);
-  if (is_rosbag2_path(path)) {
-    Rosbag2ReadInfo info;
-    Recording rec = load_rosbag2_recording(path, with_session_topics({}, options), &info);
-    for (const std::string& w : info.warnings) std::cerr << "warning: " << w << "\n";
-    return rec;
-  }
-  return parse_recording(read_text_file(path), path.string(), options);
-}
-
 Recording get_recording_rows(const Recording& recording, Eigen::Index begin, Eigen::Index end) {
   const Eigen::Index T = recording.time.size();
   if (begin < 0 || end > T || begin > end)
@@ -417,16 +192,31 @@ void validate_recording(const Recording& r) {
     }
 }
 
-void save_recording(const std::filesystem::path& path, const Recording& r) {
-  validate_recording(r);
-  const int N = r.num_joints();
-  std::string out;
-  out.reserve(static_cast<std::size_t>(r.time.size()) * static_cast<std::size_t>(3 * N + 4) * 14 + 256);
-  out += "time";
+RecordingWriter::RecordingWriter(const std::filesystem::path& path, int joints, bool has_force)
+    : file_(path), joints_(joints), has_force_(has_force) {
+  std::string header = "time";
   for (const char* prefix : {"position_", "velocity_", "effort_"})
-    for (int j = 1; j <= N; ++j) (out += ',') += prefix + std::to_string(j);
-  if (r.force) out += ",force_x,force_y,force_z";
-  out += '\n';
+    for (int j = 1; j <= joints; ++j) (header += ',') += prefix + std::to_string(j);
+  if (has_force) header += ",force_x,force_y,force_z";
+  header += '\n';
+  file_.append(header);
+}
+
+void RecordingWriter::write(const Recording& r) {
+  if (r.num_samples() == 0) return;
+  validate_recording(r);
+  if (r.num_joints() != joints_ || r.has_force() != has_force_)
+    throw std::invalid_argument("RecordingWriter: a chunk of another shape than the file's");
+  if (samples_ > 0 && !(r.time[0] > last_time_)) {
+    InputLocation where;
+    where.file = r.source.empty() ? "<recording>" : r.source;
+    where.field = "time";
+    where.line = r.line.empty() ? 0 : r.line.front();
+    throw InputError(where, "time must increase strictly (sample " + std::to_string(samples_) + ")");
+  }
+  const int N = joints_;
+  std::string& out = text_;
+  out.clear();
   char buf[32];
   auto put = [&](double v) {
     const auto res = std::to_chars(buf, buf + sizeof buf, v);  // shortest round-trip form
@@ -446,45 +236,18 @@ void save_recording(const std::filesystem::path& path, const Recording& r) {
       }
     out += '\n';
   }
-  write_file_atomic(path, out);
+  file_.append(out);
+  samples_ += r.num_samples();
+  last_time_ = r.time[r.time.size() - 1];
 }
 
-RecordingSummary summarize_recording(const Recording& r) {
-  RecordingSummary s;
-  const Eigen::Index T = r.time.size();
-  s.samples = static_cast<std::size_t>(T);
-  s.joints = r.num_joints();
-  s.repeated_rows = r.repeated_rows;
-  s.repeated_rows_removed = r.repeated_rows_removed;
-  s.has_force = r.has_force();
-  s.time_from_rate = r.time_from_rate;
-  if (T >= 2) {
-    s.duration_s = r.time[T - 1] - r.time[0];
-    std::vector<double> dt(static_cast<std::size_t>(T - 1));
-    for (Eigen::Index t = 1; t < T; ++t) dt[static_cast<std::size_t>(t - 1)] = r.time[t] - r.time[t - 1];
-    double mean = 0.0;
-    for (double d : dt) mean += d;
-    mean /= static_cast<double>(dt.size());
-    double var = 0.0;
-    for (double d : dt) var += (d - mean) * (d - mean);
-    s.jitter_s = std::sqrt(var / static_cast<double>(dt.size()));
-    s.dt_min_s = *std::min_element(dt.begin(), dt.end());
-    s.dt_max_s = *std::max_element(dt.begin(), dt.end());
-    std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
-    s.dt_median_s = dt[dt.size() / 2];
-    s.rate_hz = s.dt_median_s > 0 ? 1.0 / s.dt_median_s : 0.0;
-  }
-  auto ranges = [&](const Eigen::MatrixXd& m) {
-    std::vector<RecordingSummary::Range> out;
-    for (Eigen::Index j = 0; j < m.cols(); ++j)
-      out.push_back({T ? m.col(j).minCoeff() : 0.0, T ? m.col(j).maxCoeff() : 0.0});
-    return out;
-  };
-  s.position = ranges(r.position);
-  s.velocity = ranges(r.velocity);
-  s.effort = ranges(r.effort);
-  if (r.force) s.force = ranges(*r.force);
-  return s;
+void RecordingWriter::commit() { file_.commit(); }
+
+void save_recording(const std::filesystem::path& path, const Recording& r) {
+  validate_recording(r);
+  RecordingWriter writer(path, r.num_joints(), r.has_force());
+  writer.write(r);
+  writer.commit();
 }
 
 const OptionTable<RecordingReadOptions>& get_option_table(OptionTag<RecordingReadOptions>) {

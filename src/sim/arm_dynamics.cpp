@@ -1,6 +1,7 @@
 #include "rcm/sim/arm_dynamics.hpp"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
 namespace rcm::sim {
@@ -163,29 +164,57 @@ double advance_lugre_state(double coulomb_pos, double coulomb_neg, double sticti
   return z_ss + (z - z_ss) * std::exp(-rate * dt);
 }
 
-FrictionOutput compute_friction(const std::array<JointFrictionParams, 3>& params,
-                                const Eigen::Vector3d& z, const Eigen::Vector3d& qd) {
+namespace {
+
+// One joint's slip elements: force and, while sticking, damping.
+double compute_slip_force(const JointFrictionParams& p, const FrictionState& state, int joint, double v) {
+  double f = 0.0, k_sticking = 0.0, k_total = 0.0;
+  for (std::size_t i = 0; i < p.slip_elements.size(); ++i) {
+    const double width = p.slip_elements[i][0], level = p.slip_elements[i][1];
+    const double z = state.slip(joint, static_cast<Eigen::Index>(i));
+    const double k = level / width;
+    f += k * z;
+    k_total += k;
+    // Sticking: not at its limit, or at it and moving back from it.
+    if (std::abs(z) < width || z * v < 0.0) k_sticking += k;
+  }
+  if (p.slip_damping > 0.0 && k_total > 0.0) f += p.slip_damping * (k_sticking / k_total) * v;
+  return f;
+}
+
+}  // namespace
+
+FrictionOutput compute_friction(const std::array<JointFrictionParams, 3>& params, const FrictionState& state,
+                                const Eigen::Vector3d& qd) {
   FrictionOutput out;
   for (int j = 0; j < 3; ++j) {
     const auto& p = params[static_cast<std::size_t>(j)];
-    double zd = 0.0;
-    const double f = compute_lugre_force(p.coulomb_pos, p.coulomb_neg, p.stiction_ratio,
-                                         p.stribeck_velocity, p.bristle_stiffness,
-                                         p.bristle_damping, z[j], qd[j], &zd);
-    out.tau[j] = f + p.viscous * qd[j] + p.offset;
-    out.zdot[j] = zd;
+    double f = p.viscous * qd[j] + p.offset;
+    if (p.coulomb_pos > 0.0 || p.coulomb_neg > 0.0) {
+      double zd = 0.0;
+      f += compute_lugre_force(p.coulomb_pos, p.coulomb_neg, p.stiction_ratio, p.stribeck_velocity,
+                               p.bristle_stiffness, p.bristle_damping, state.bristles[j], qd[j], &zd);
+      out.zdot[j] = zd;
+    }
+    if (!p.slip_elements.empty()) f += compute_slip_force(p, state, j, qd[j]);
+    out.tau[j] = f;
   }
   return out;
 }
 
-Eigen::Vector3d advance_friction_state(const std::array<JointFrictionParams, 3>& params,
-                                       const Eigen::Vector3d& z, const Eigen::Vector3d& qd,
-                                       double dt) {
-  Eigen::Vector3d out;
+FrictionState advance_friction_state(const std::array<JointFrictionParams, 3>& params, const FrictionState& state,
+                                     const Eigen::Vector3d& qd, double dt) {
+  FrictionState out = state;
   for (int j = 0; j < 3; ++j) {
     const auto& p = params[static_cast<std::size_t>(j)];
-    out[j] = advance_lugre_state(p.coulomb_pos, p.coulomb_neg, p.stiction_ratio,
-                                 p.stribeck_velocity, p.bristle_stiffness, z[j], qd[j], dt);
+    if (p.coulomb_pos > 0.0 || p.coulomb_neg > 0.0)
+      out.bristles[j] = advance_lugre_state(p.coulomb_pos, p.coulomb_neg, p.stiction_ratio, p.stribeck_velocity,
+                                            p.bristle_stiffness, state.bristles[j], qd[j], dt);
+    for (std::size_t i = 0; i < p.slip_elements.size(); ++i) {
+      const double width = p.slip_elements[i][0];
+      const Eigen::Index c = static_cast<Eigen::Index>(i);
+      out.slip(j, c) = std::clamp(state.slip(j, c) + qd[j] * dt, -width, width);
+    }
   }
   return out;
 }

@@ -269,15 +269,21 @@ SimulatedTrial simulate_trial(const SimConfig& config, const Eigen::Vector3d& mi
   SimulatedTrial trial;
   trial.name = get_trial_name(misalignment_m);
   trial.misalignment_m = misalignment_m;
-  // The same path as the calibration, so that trials differ only by the misalignment.
-  ReferenceTrajectory ref = make_teleop_reference(config, "teleop", std::max(P.calibration_s, P.trial_s));
+  ReferenceTrajectory ref = make_teleop_reference(config, P.trial_paths == "own" ? "teleop:" + trial.name : "teleop",
+                                                  std::max(P.calibration_s, P.trial_s));
   // The static file: return to q0 and hold; with several approaches the arm then
   // moves out to the other side of q0 on every joint and comes back, so that
   // each joint's holds alternate the direction of the motion that ended there.
-  Eigen::Vector3d side = (ref.evaluate(P.trial_s).q - P.q0).unaryExpr([](double d) { return d < 0.0 ? -1.0 : 1.0; });
+  const Eigen::Vector3d end = ref.evaluate(P.trial_s).q;
+  Eigen::Vector3d side = (end - P.q0).unaryExpr([](double d) { return d < 0.0 ? -1.0 : 1.0; });
   const double hold_s = P.static_hold_s / P.static_approaches;
   double t = P.trial_s;
-  ref.add_move(t, P.static_return_s, P.q0);
+  // The return leaves the trial's path with its velocity, which may swing a
+  // joint past q0 before it comes back: it ends through q0 + side x offset, so
+  // that every joint's first hold ends a motion from that side, as the later
+  // approaches do.
+  ref.add_move(t, 2.0 * P.static_return_s / 3.0, P.q0 + side.cwiseProduct(P.static_approach_offset));
+  ref.add_move(t + 2.0 * P.static_return_s / 3.0, P.static_return_s / 3.0, P.q0);
   t += P.static_return_s;
   for (int a = 0; a < P.static_approaches; ++a) {
     ref.add_hold(t, P.q0);

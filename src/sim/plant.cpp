@@ -30,12 +30,12 @@ PlantState make_plant_state_at_rest(const Plant& plant, const Eigen::Vector3d& q
 PlantAcceleration compute_plant_acceleration(const Plant& plant, const PlantState& s, const Eigen::Vector3d& tau,
                                              const Eigen::Vector3d& tau_ext) {
   PlantAcceleration a;
-  // Each side carries its share of the same friction law; the bristle states of
+  // Each side carries its share of the same friction law; the friction states of
   // the two sides follow their own velocities.
-  const Eigen::Vector3d f_motor = compute_friction(plant.friction, s.z_motor, s.qmd).tau;
+  const Eigen::Vector3d f_motor = compute_friction(plant.friction, s.friction_motor, s.qmd).tau;
   a.friction_motor = (Eigen::Vector3d::Ones() - plant.link_share).cwiseProduct(f_motor);
   if (plant.link_share.maxCoeff() > 0.0)
-    a.friction_link = plant.link_share.cwiseProduct(compute_friction(plant.friction, s.z_link, s.qd).tau);
+    a.friction_link = plant.link_share.cwiseProduct(compute_friction(plant.friction, s.friction_link, s.qd).tau);
 
   const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
   const Eigen::Vector3d h = compute_inverse_dynamics(plant.arm, s.q, s.qd, zero, true);
@@ -75,8 +75,9 @@ void advance_plant_state(const Plant& plant, PlantState& s, const PlantAccelerat
       s.qm[j] = s.q[j];
     }
   }
-  s.z_motor = advance_friction_state(plant.friction, s.z_motor, s.qmd, dt);
-  if (plant.link_share.maxCoeff() > 0.0) s.z_link = advance_friction_state(plant.friction, s.z_link, s.qd, dt);
+  s.friction_motor = advance_friction_state(plant.friction, s.friction_motor, s.qmd, dt);
+  if (plant.link_share.maxCoeff() > 0.0)
+    s.friction_link = advance_friction_state(plant.friction, s.friction_link, s.qd, dt);
 }
 
 double compute_plant_energy(const Plant& plant, const PlantState& s) {

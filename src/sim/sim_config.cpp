@@ -71,21 +71,25 @@ std::vector<Field> get_fields(SimConfig& c) {
     add(k + ".friction_link_share", &t.friction_link_share,
         "share of the joint's friction on the link side of the cable, 0..1");
   }
-  add("friction.preset", &c.friction_preset, "hysteretic | smooth (applied first)");
+  add("friction.preset", &c.friction_preset, "real | hysteretic | smooth (applied first)");
   for (int j = 0; j < 3; ++j) {
     JointFrictionParams& p = c.friction[static_cast<std::size_t>(j)];
     const std::string k = std::string("friction.") + kJointKeys[j];
     const std::string u = j == 2 ? "N" : "N m";
     const std::string v = j == 2 ? "m/s" : "rad/s";
     const std::string x = j == 2 ? "m" : "rad";
-    add(k + ".coulomb_pos", &p.coulomb_pos, "Coulomb level moving in +q, " + u);
-    add(k + ".coulomb_neg", &p.coulomb_neg, "Coulomb level moving in -q, " + u);
+    add(k + ".coulomb_pos", &p.coulomb_pos, "LuGre Coulomb level moving in +q, " + u + " (0 with coulomb_neg: no LuGre element)");
+    add(k + ".coulomb_neg", &p.coulomb_neg, "LuGre Coulomb level moving in -q, " + u);
     add(k + ".stiction_ratio", &p.stiction_ratio, "stiction / Coulomb (Stribeck peak), -");
     add(k + ".stribeck_velocity", &p.stribeck_velocity, "Stribeck velocity, " + v);
     add(k + ".viscous", &p.viscous, "viscous coefficient, " + u + " per " + v);
     add(k + ".bristle_stiffness", &p.bristle_stiffness, "LuGre sigma_0, " + u + "/" + x);
     add(k + ".bristle_damping", &p.bristle_damping, "LuGre sigma_1, " + u + " per " + v);
     add(k + ".offset", &p.offset, "constant bias (cable preload), " + u);
+    add(k + ".slip_elements", &p.slip_elements,
+        "Maxwell-slip elements, each [breakaway displacement " + x + ", force " + u + "], at most " +
+            std::to_string(kMaxSlipElements));
+    add(k + ".slip_damping", &p.slip_damping, "damping of the slip elements while they stick, " + u + " per " + v);
   }
   auto& C = c.controller;
   add("controller.physics_rate_hz", &C.physics_rate_hz, "integration and control rate, Hz");
@@ -146,6 +150,8 @@ std::vector<Field> get_fields(SimConfig& c) {
   add("protocol.calibration_offset_m", &P.calibration_offset_m, "known pure coaxial offset D*, m");
   add("protocol.calibration_s", &P.calibration_s, "calibration teleoperation, s");
   add("protocol.trial_s", &P.trial_s, "trial teleoperation, s");
+  add("protocol.trial_paths", &P.trial_paths,
+      "own (each trial its own draw of teleoperation) | shared (every trial the calibration's path)");
   add("protocol.static_return_s", &P.static_return_s, "static file: return to q0, s");
   add("protocol.static_hold_s", &P.static_hold_s, "static file: time at q0, shared by its holds, s");
   add("protocol.static_approaches", &P.static_approaches,

@@ -62,13 +62,24 @@ void validate_config(const SimConfig& c, const std::string& source) {
   for (int j = 0; j < 3; ++j) {
     const auto& p = c.friction[static_cast<std::size_t>(j)];
     const std::string k = std::string("friction.") + kJointKeys[j];
-    require(p.coulomb_pos > 0, k + ".coulomb_pos", "expected > 0");
-    require(p.coulomb_neg > 0, k + ".coulomb_neg", "expected > 0");
+    // A LuGre element needs both levels; both 0 leaves it out.
+    const bool lugre = p.coulomb_pos > 0 || p.coulomb_neg > 0;
+    require(lugre ? p.coulomb_pos > 0 : p.coulomb_pos == 0, k + ".coulomb_pos",
+            "expected > 0 (or 0 with coulomb_neg: no LuGre element)");
+    require(lugre ? p.coulomb_neg > 0 : p.coulomb_neg == 0, k + ".coulomb_neg",
+            "expected > 0 (or 0 with coulomb_pos: no LuGre element)");
     require(p.stiction_ratio >= 1.0, k + ".stiction_ratio", "expected >= 1");
     require(p.stribeck_velocity > 0, k + ".stribeck_velocity", "expected > 0");
     require(p.viscous >= 0, k + ".viscous", "expected >= 0");
-    require(p.bristle_stiffness > 0, k + ".bristle_stiffness", "expected > 0");
+    require(!lugre || p.bristle_stiffness > 0, k + ".bristle_stiffness", "expected > 0");
     require(p.bristle_damping >= 0, k + ".bristle_damping", "expected >= 0");
+    require(p.slip_elements.size() <= static_cast<std::size_t>(kMaxSlipElements), k + ".slip_elements",
+            fmt::format("{} elements, at most {} expected", p.slip_elements.size(), kMaxSlipElements));
+    for (std::size_t i = 0; i < p.slip_elements.size(); ++i)
+      require(p.slip_elements[i][0] > 0 && p.slip_elements[i][1] >= 0 && p.slip_elements[i].allFinite(),
+              fmt::format("{}.slip_elements[{}]", k, i),
+              "expected [breakaway displacement > 0, force >= 0]");
+    require(p.slip_damping >= 0, k + ".slip_damping", "expected >= 0");
   }
   const auto& C = c.controller;
   require(C.physics_rate_hz >= 200 && C.physics_rate_hz <= 1e5, "controller.physics_rate_hz",
@@ -159,6 +170,8 @@ void validate_config(const SimConfig& c, const std::string& source) {
   require(P.baseline_hold_s > 0, "protocol.baseline_hold_s", "expected > 0");
   require(P.calibration_s > 0, "protocol.calibration_s", "expected > 0");
   require(P.trial_s > 0, "protocol.trial_s", "expected > 0");
+  require(P.trial_paths == "own" || P.trial_paths == "shared", "protocol.trial_paths",
+          "expected own or shared, got '" + P.trial_paths + "'");
   require(P.static_return_s > 0, "protocol.static_return_s", "expected > 0");
   require(P.static_hold_s > 0, "protocol.static_hold_s", "expected > 0");
   require(P.static_approaches >= 1 && P.static_approaches <= 8, "protocol.static_approaches", "expected 1..8");

@@ -23,10 +23,14 @@ namespace {
 SimConfig make_default_config() {
   SimConfig c;
   // Mass model: effective inertia ~0.16 (yaw) and ~0.20 kg m^2 (pitch) at q0 and
-  // 0.85 kg on the insertion axis; counterweighted parallelogram (COM 11 cm above the RCM),
-  // yaw link COM 8 cm below it.
+  // 0.85 kg on the insertion axis; yaw link COM 8 cm below the RCM. The
+  // parallelogram is counterweighted against the insertion stage (its lumped COM
+  // 2.9 cm below the RCM): the pitch's gravity torque is 0.2 N m per unit
+  // sin(q2) at q3 = 0.12 m, and changes by 8.3 N m per metre of insertion, so
+  // that over the real Classic PSM's recorded pitch range it spans a few tenths
+  // of a N m, as there (docs/validation.md, "Real friction").
   c.arm.yaw_link = {1.0, Eigen::Vector3d(0.0, 0.0, -0.08), Eigen::Vector3d(0.010, 0.0076, 0.010)};
-  c.arm.pitch_link = {2.2, Eigen::Vector3d(0.0, 0.0, -0.11), Eigen::Vector3d(0.0909, 0.1449, 0.020)};
+  c.arm.pitch_link = {2.2, Eigen::Vector3d(0.0, 0.0, 0.0294), Eigen::Vector3d(0.1156, 0.1696, 0.020)};
   c.arm.insertion_stage = {0.85, Eigen::Vector3d(0.0, 0.0, -0.22), Eigen::Vector3d(0.020, 0.020, 0.001)};
   c.arm.gravity_base_m_s2 = Eigen::Vector3d(0.0, 0.0, -9.81);
   c.arm.insertion_counterbalance_n = 7.0;
@@ -34,15 +38,42 @@ SimConfig make_default_config() {
   // finds 1.6-2.0 N/m on its recordings (docs/dynamics.md).
   c.arm.insertion_stiffness_n_per_m = 1.8;
   apply_arm_preset(c, "rigid");
-  apply_friction_preset(c, "hysteretic");
+  apply_friction_preset(c, "real");
   apply_tissue_preset(c.tissue, "linear");
   return c;
 }
 
-std::vector<std::string> get_friction_preset_names() { return {"hysteretic", "smooth"}; }
+std::vector<std::string> get_friction_preset_names() { return {"real", "hysteretic", "smooth"}; }
 
 void apply_friction_preset(SimConfig& c, const std::string& name) {
-  if (name == "hysteretic") {
+  for (auto& f : c.friction) f = JointFrictionParams{};
+  if (name == "real") {
+    // Identified on real Classic PSM1 recordings by bench/real_friction_fit.py
+    // (docs/validation.md, "Real friction"): Maxwell-slip elements whose
+    // breakaway displacements spread from a fraction of a milliradian to tens of
+    // them (tenths of a millimetre to millimetres on the insertion), so that the
+    // friction builds over the travel after a reversal as the real arm's does and
+    // a joint at rest keeps whatever its last motion left, plus the viscous
+    // friction the fit found. No LuGre element. The offsets are the hysteretic
+    // preset's (a constant torque the recordings cannot tell from gravity), the
+    // damping while sticking its bristle damping (the recordings are too slow to
+    // show it).
+    c.friction[0].slip_elements = {{5.0e-5, 0.0233}, {5.87e-4, 0.0076}, {2.01e-3, 0.0082},
+                                  {3.73e-3, 0.0079}, {6.90e-3, 0.0405}, {1.28e-2, 0.0135}};
+    c.friction[0].viscous = 0.1425;
+    c.friction[0].offset = 0.008;
+    c.friction[0].slip_damping = 1.0;
+    c.friction[1].slip_elements = {{5.0e-5, 0.0158},  {3.17e-4, 0.0093}, {5.87e-4, 0.0211}, {3.73e-3, 0.0419},
+                                  {6.90e-3, 0.0469}, {2.36e-2, 0.0117}, {4.38e-2, 0.0037}, {8.10e-2, 0.0597}};
+    c.friction[1].viscous = 0.1493;
+    c.friction[1].offset = -0.012;
+    c.friction[1].slip_damping = 2.0;
+    c.friction[2].slip_elements = {{5.0e-6, 0.125},   {3.17e-5, 0.0354}, {5.87e-5, 0.0667}, {1.09e-4, 0.1008},
+                                  {2.01e-4, 0.1132}, {3.73e-4, 0.0571}, {1.28e-3, 0.0446}};
+    c.friction[2].viscous = 0.0;
+    c.friction[2].slip_damping = 40.0;
+    for (auto& f : c.friction) f.coulomb_pos = f.coulomb_neg = 0.0;
+  } else if (name == "hysteretic") {
     // The real Classic PSM: friction that barely depends on speed and keeps what
     // the last motion left, so a joint at rest holds anywhere in a band of about
     // +-0.12 / +-0.24 N m / +-0.6 N. Coulomb levels at the band, a little viscous

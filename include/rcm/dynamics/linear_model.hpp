@@ -219,6 +219,7 @@ class LinearTorqueModel final : public TorqueModel {
   // whose batch_acceleration_window_s > 0 (and a time axis that never decreases).
   Eigen::MatrixXd predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
                                    const Eigen::MatrixXd& velocity) const override;
+  std::unique_ptr<TorqueSequencePredictor> create_sequence_predictor() const override;
   const LinearTorqueParameters& parameters() const { return parameters_; }
   // The coefficient of joint j's Dahl state at position q: `coulomb` plus the
   // profile there (compute_knot_weights), or `coulomb` alone without one.
@@ -242,6 +243,7 @@ class LinearTorqueModel final : public TorqueModel {
   // The torque of a sample taken at `t` (the Dahl states step by DahlClock).
   void compute_torque(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                       double* tau) const;
+  friend class LinearSequencePredictor;
   LinearTorqueParameters parameters_;
   bool has_extra_friction_ = false;  // coulomb_slow and sqrt_viscous present
   int live_delay_samples_ = 0;       // output_delay()

@@ -23,6 +23,22 @@ struct JointTorqueError {
 std::vector<JointTorqueError> compute_torque_errors(const Eigen::MatrixXd& measured,
                                                     const Eigen::MatrixXd& predicted);
 
+// The same over rows given in parts (recordings read in chunks), in memory
+// that does not grow with their number: the sums of squares run sample by
+// sample, as compute_torque_errors() sums them.
+class TorqueErrorAccumulator {
+ public:
+  explicit TorqueErrorAccumulator(int joints);
+  // measured and predicted: rows x joints; throws std::invalid_argument otherwise.
+  void add(const Eigen::MatrixXd& measured, const Eigen::MatrixXd& predicted);
+  // Throws std::invalid_argument when no row was added.
+  std::vector<JointTorqueError> get_errors() const;
+
+ private:
+  std::vector<double> squares_, min_, max_;
+  std::size_t rows_ = 0;
+};
+
 // Runs the model over every recording (state reset at each start; predict_torque
 // or, in streaming mode, predict_torque_streaming) and pools the samples of all
 // recordings, from `first_fraction` of each recording on (0 = all).

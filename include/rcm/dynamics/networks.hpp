@@ -270,8 +270,10 @@ class HybridTorqueModel final : public TorqueModel {
   const LinearTorqueModel& base() const { return *base_; }
   const LstmNetwork& residual_network() const { return kernel_.network(); }
   const Normalization& normalization() const { return normalization_; }
+  std::unique_ptr<TorqueSequencePredictor> create_sequence_predictor() const override;
 
  private:
+  friend class HybridSequencePredictor;
   std::shared_ptr<const LinearTorqueModel> base_;
   LstmKernel kernel_;
   Normalization normalization_;

@@ -128,5 +128,9 @@ struct RegimeSummary {
 };
 
 RegimeSummary compute_regime_summary(const RegimeMonitor& monitor, const Recording& recording);
+// The same over a recording given in chunks: one workspace and one summary
+// for all of them, the chunks in order.
+void add_regime_samples(const RegimeMonitor& monitor, RegimeMonitor::Workspace& workspace, const Recording& chunk,
+                        RegimeSummary& summary);
 
 }  // namespace rcm::dynamics

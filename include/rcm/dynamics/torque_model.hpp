@@ -50,6 +50,8 @@ class TorqueModelWorkspace {
   virtual ~TorqueModelWorkspace() = default;
 };
 
+class TorqueSequencePredictor;
+
 class TorqueModel {
  public:
   explicit TorqueModel(TorqueModelInfo info) : info_(std::move(info)) {}
@@ -108,6 +110,11 @@ class TorqueModel {
   // by predict_torque().
   virtual Eigen::MatrixXd predict_sequence(const Eigen::VectorXd& time, const Eigen::MatrixXd& position,
                                            const Eigen::MatrixXd& velocity) const;
+  // predict_sequence() over a recording given in chunks (TorqueSequencePredictor).
+  // By default the live prediction's (predict_torque_streaming); a model that
+  // overrides predict_sequence overrides this too, and predict_sequence is
+  // this over one chunk.
+  virtual std::unique_ptr<TorqueSequencePredictor> create_sequence_predictor() const;
 
  private:
   TorqueModelInfo info_;
@@ -175,6 +182,45 @@ Eigen::MatrixXd predict_torque_streaming(const TorqueModel& model, const Recordi
 // Which of the two above a caller wants: the offline estimate or the live one.
 enum class PredictionMode { batch, streaming };
 Eigen::MatrixXd predict_torque(const TorqueModel& model, const Recording& recording, PredictionMode mode);
+
+// A whole-recording prediction over a recording given in chunks: add() the
+// samples in order, finish() at the end; the rows come out in order as soon
+// as they are final, equal bit for bit to predict_torque's (batch) or
+// predict_torque_streaming's rows. Memory holds what the model looks ahead
+// and behind: the samples of its output delay, or the linear model's
+// zero-phase window (a few seconds), never the recording.
+class TorqueSequencePredictor {
+ public:
+  virtual ~TorqueSequencePredictor() = default;
+  // Appends the rows now final to `out` (resized: rows x num_outputs; none is
+  // possible). Sizes as predict_torque checks them.
+  virtual void add(const Eigen::VectorXd& time, const Eigen::MatrixXd& position, const Eigen::MatrixXd& velocity,
+                   Eigen::MatrixXd& out) = 0;
+  // No more samples: the remaining rows into `out`.
+  virtual void finish(Eigen::MatrixXd& out) = 0;
+};
+std::unique_ptr<TorqueSequencePredictor> create_torque_predictor(const TorqueModel& model, PredictionMode mode);
+
+// The samples of a recording given in chunks with their torque: add() a
+// chunk, then get_samples() holds the samples whose torque is final (in
+// order, the ones before them already handed out) and get_torque() their
+// rows. What a command that streams a recording through a model uses.
+class RecordingTorqueStream {
+ public:
+  RecordingTorqueStream(const TorqueModel& model, PredictionMode mode);
+  // Throws InputError if the chunk has fewer joints than the model reads.
+  void add(const Recording& chunk);
+  void finish();
+  const Recording& get_samples() const { return ready_; }
+  const Eigen::MatrixXd& get_torque() const { return torque_; }
+
+ private:
+  void take_ready();
+  const TorqueModel& model_;
+  std::unique_ptr<TorqueSequencePredictor> predictor_;
+  Recording waiting_, ready_;
+  Eigen::MatrixXd rows_, torque_;
+};
 
 // Model files: one JSON document, "format": "rcm-torque-model/1"; weights as
 // base64 little-endian arrays so that save -> load is bit-exact.

@@ -53,16 +53,30 @@ struct JointTissueModel {
   // calibration; propagated into every trial's interval.
   Eigen::Matrix4d covariance = Eigen::Matrix4d::Zero();
   int bootstrap_replicates = 0;
-  // The offsets that the fitted model finds on the calibration itself, minus
-  // the known [0, 0, D*]: what model misspecification and free-space model bias
-  // do to an estimate where the truth is known. Neither the covariance nor a
-  // residual bootstrap sees such a bias, so every trial's interval includes it.
+  // The free-space model's torque error at the working configuration (N m,
+  // N m, N), identified on the calibration jointly with the tissue parameters
+  // (JointEstimatorOptions::fit_torque_offset; 0 otherwise): holding friction,
+  // a gravity or torque offset that the free-space recording did not teach the
+  // model. Every residual the estimators use, in trials and online, has it
+  // taken off. Its bootstrap covariance is propagated into every trial's interval.
+  Eigen::Vector3d torque_offset = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d torque_offset_covariance = Eigen::Matrix3d::Zero();
+  // The calibration self-check, on data the fit did not use: the models (tissue
+  // and torque offset) fitted on one half of the calibration in time re-estimate
+  // the offsets of the other half; per component, the RMS over the two halves of
+  // their departure from the known [0, 0, D*] ("held-out halves"; a calibration
+  // too short to halve is checked on itself, "in-sample"). What model
+  // misspecification and free-space model bias left do to an estimate where the
+  // truth is known. Neither the covariance nor a residual bootstrap sees such an
+  // error, so every trial's interval includes it.
   Eigen::Vector3d calibration_bias_m = Eigen::Vector3d::Zero();
+  std::string calibration_check = "held-out halves";
   double calibration_offset_m = 0.0;  // D*, the calibration's known coaxial offset
   double bootstrap_block_s = 0.0;  // block length the calibration bootstrap used
   // d(parameters)/dD* by refitting at D* + calibration_offset_sd_m: how the
   // uncertainty of the known offset moves every trial alike.
   Eigen::Vector4d dparameters_dD_star = Eigen::Vector4d::Zero();
+  Eigen::Vector3d dtorque_offset_dD_star = Eigen::Vector3d::Zero();
   double calibration_offset_sd_m = 0.0;
 };
 
@@ -89,6 +103,10 @@ struct JointEstimatorOptions {
   // trial's interval includes how far its estimate moves when its torque
   // residual is shifted by this much, joint by joint. 0: not known.
   Eigen::Vector3d torque_bias = Eigen::Vector3d::Zero();
+  // Identify the free-space model's torque offset on the calibration with the
+  // tissue parameters, and take it off every residual
+  // (JointTissueModel::torque_offset).
+  bool fit_torque_offset = true;
   unsigned seed = 1;
   int max_iterations = 100;
   void check() const;
@@ -96,9 +114,11 @@ struct JointEstimatorOptions {
 const OptionTable<JointEstimatorOptions>& get_option_table(OptionTag<JointEstimatorOptions>);
 
 // Step 2 in torque space: the tissue parameters on the calibration at the known
-// D* (radial offset 0). Both families are fitted; the stiffening one is chosen
-// only when its BIC is lower, counting one effective sample per second of data
-// (model errors are correlated over about that long).
+// D* (radial offset 0), with the free-space model's torque offset when
+// options.fit_torque_offset. Both families are fitted; the stiffening one is
+// chosen only when its BIC is lower, counting one effective sample per second of
+// data (model errors are correlated over about that long). Then the held-out
+// self-check (calibration_bias_m), the sensitivity to D* and the bootstrap.
 JointTissueModel fit_joint_tissue_model(const IncisionFrame& incision, const std::vector<JointSample>& calibration,
                                         double D_star, const JointEstimatorOptions& options);
 
@@ -111,7 +131,7 @@ struct JointEstimate {
   // with the free-space model's error measured off the trials (torque_bias).
   Eigen::Vector3d ci_low = Eigen::Vector3d::Zero(), ci_high = Eigen::Vector3d::Zero();
   Eigen::Vector3d sd_bootstrap = Eigen::Vector3d::Zero();  // half-width of the bootstrap interval / 1.96
-  Eigen::Vector3d sd_tissue = Eigen::Vector3d::Zero();
+  Eigen::Vector3d sd_tissue = Eigen::Vector3d::Zero();  // tissue parameters and torque offset
   Eigen::Vector3d sd_systematic = Eigen::Vector3d::Zero();  // |calibration_bias_m| of the tissue model
   // The calibration's error relative to D* (|calibration_bias_m| / D*) times
   // |estimate|: a free-space model that is off scales the force and with it

@@ -310,4 +310,34 @@ OnlineReplay replay_online(const OnlinePipeline& pipeline, const Recording& reco
                            const OnlineReplayOptions& options = {},
                            const std::function<void(const OnlineOutput&)>& on_sample = {});
 
+// The same over a recording given in chunks (io/recording_reader.hpp), in
+// memory that does not grow with its length: add() every chunk in order, then
+// finish() gives what replay_online() gives over the whole recording. The
+// settling time needs the whole run's trace: it goes to a temporary file (32
+// bytes per sample), read back only where the estimate left the band last.
+class OnlineReplayer {
+ public:
+  OnlineReplayer(const OnlinePipeline& pipeline, const OnlineReplayOptions& options = {},
+                 std::function<void(const OnlineOutput&)> on_sample = {});
+  ~OnlineReplayer();
+  OnlineReplayer(const OnlineReplayer&) = delete;
+  OnlineReplayer& operator=(const OnlineReplayer&) = delete;
+  // Throws InputError when the chunk has fewer joints than the model reads.
+  void add(const Recording& chunk);
+  OnlineReplay finish();
+
+ private:
+  struct Trace;
+  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const OnlinePipeline& pipeline_;
+  OnlineReplayOptions options_;
+  std::function<void(const OnlineOutput&)> on_sample_;
+  OnlinePipeline::Workspace ws_;
+  std::unique_ptr<Trace> trace_;
+  OnlineReplay out_;
+  RowMajor q_, qd_, effort_;
+  double total_s_ = 0.0;
+  std::uint64_t updates_ = 0;
+};
+
 }  // namespace rcm

@@ -51,7 +51,7 @@ struct SetupOptions {
   double max_force_error_n = 2.0;
   // The offset the identified models find on the calibration, against its
   // known [0, 0, D*].
-  double max_calibration_error_m = 0.002;
+  double max_calibration_error_m = 0.001;
   // Learning curve: the model refitted on these shares of the fitted data (in
   // time order, the last one 1); more data would still help when the error at
   // the whole is below (1 - curve_improvement) x that at the share before it.

@@ -13,9 +13,12 @@
 // that was killed is removed by the next write of the same name (its PID no
 // longer runs); rcm never reads names that start with '.'.
 //
-// rcm writes no file incrementally: results, models, reports, CSV, figures,
-// converted recordings and simulated sessions are all whole files written
-// once. The live nodes publish topics and write no files.
+// Results, models, reports, figures and simulated sessions are whole files
+// written once. What streams from a recording of any length (a converted
+// recording, a monitor trace, a force series) is written in parts with
+// AtomicFileWriter: into the temporary as it is produced, under its name only
+// on commit(), so that it too appears whole or not at all. The live nodes
+// publish topics and write no files.
 
 #include <filesystem>
 #include <string>
@@ -25,6 +28,28 @@ namespace rcm {
 
 // Writes `bytes` to `path` as described above.
 void write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
+
+// A file written in parts: append() as the bytes come (buffered, 1 MB at a
+// time), commit() syncs and renames. Destroyed uncommitted (an error on the
+// way), the temporary is removed and the final name is not touched. Throws
+// InputError naming the path when a write fails.
+class AtomicFileWriter {
+ public:
+  explicit AtomicFileWriter(std::filesystem::path path);
+  ~AtomicFileWriter();
+  AtomicFileWriter(const AtomicFileWriter&) = delete;
+  AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+  const std::filesystem::path& get_path() const { return path_; }
+  void append(std::string_view bytes);
+  void commit();
+
+ private:
+  static constexpr std::size_t kFlushBytes = std::size_t{1} << 20;
+  void flush();
+  std::filesystem::path path_, temp_;
+  int fd_ = -1;
+  std::string buffer_;
+};
 
 // A file that another program or library writes by name (gnuplot, LibTorch's
 // save): it writes get_temp_path(), then commit() syncs it and renames it to

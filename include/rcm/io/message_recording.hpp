@@ -1,20 +1,24 @@
 #pragma once
 // A recording assembled from messages: what every message-based reader (ROS 1
 // bags, rosbag2 SQLite and MCAP) shares once it has decoded a message, so that
-// all of them hold a JointState topic to the CSV reader's rules and word their
-// errors alike.
+// all of them hold a JointState topic to the CSV reader's rules, word their
+// errors alike, and stream (io/recording_reader.hpp).
 //
-// - JointStateRecordingBuilder takes the JointState messages of one topic in
-//   recording order, each with the time its reader chose (header stamp or
-//   receive time, integer ns): JointStateMap checks and orders every message;
-//   finish() makes the Recording (seconds from the first kept sample, exact to
-//   1 ns), counts repeated samples, drops them under --dedupe, and checks that
-//   time increases strictly.
-// - ForceSamples takes a geometry_msgs/WrenchStamped topic: force at the
-//   incision in the base frame (the session format's convention; frame_id is
-//   only reported), linearly interpolated at the joint samples' times. Joint
+// - A storage format gives its messages as a MessageSource: the JointState and
+//   WrenchStamped messages of the two topics in recording order, each with the
+//   time its reader chose (header stamp or receive time, integer ns).
+// - MessageRecordingReader turns them into chunks of samples. Each JointState
+//   message is held to JointStateMap's rules (JointStateSampler); time is in
+//   seconds from the first valid sample (exact to 1 ns); repeated samples are
+//   counted and dropped under --dedupe; time increases strictly.
+// - The force topic (geometry_msgs/WrenchStamped): force at the incision in
+//   the base frame (the session format's convention; frame_id is only
+//   reported), linearly interpolated at the joint samples' times. Joint
 //   samples up to one median force period outside the force topic's span take
-//   its end value; beyond that it is an error.
+//   its end value; beyond that it is an error. A joint sample waits until the
+//   force topic has passed its time: memory holds the samples between the two
+//   topics' positions in the file (milliseconds of data in a recorder's
+//   bag), never the recording.
 //
 // Errors name the file, the topic, the message index (0-based, in recording
 // order, on that topic), its time when known, and the field:
@@ -24,12 +28,13 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "rcm/io/joint_state_map.hpp"
-#include "rcm/io/recording.hpp"
+#include "rcm/io/recording_reader.hpp"
 
 namespace rcm {
 
@@ -64,56 +69,96 @@ TopicReadOptions with_session_topics(TopicReadOptions options, const RecordingRe
 std::string describe_message_place(const std::string& topic, std::size_t index, std::optional<std::int64_t> t_ns,
                                    std::int64_t origin_ns);
 
-// The force samples of a WrenchStamped topic, in recording order.
-class ForceSamples {
- public:
-  ForceSamples(std::string file, std::string topic, std::string time_label);
-  // Throws InputError for a non-finite component, a time outside [0, 2^62) ns
-  // or one that does not increase.
-  void add(std::size_t index, std::int64_t t_ns, const Eigen::Vector3d& force);
-  std::size_t size() const { return t_ns_.size(); }
-  const std::string& topic() const { return topic_; }
-
- private:
-  friend class JointStateRecordingBuilder;
-  std::string file_, topic_, time_label_;
-  std::vector<std::int64_t> t_ns_;
-  std::vector<Eigen::Vector3d> force_;
-};
-
-class JointStateRecordingBuilder {
+// The checks of one JointState topic, message by message.
+class JointStateSampler {
  public:
   // `time_label` names the clock in errors ("header.stamp", "bag time", "receive time").
-  JointStateRecordingBuilder(std::string file, std::string topic, const TopicReadOptions& options,
-                             std::string time_label);
+  JointStateSampler(std::string file, std::string topic, const TopicReadOptions& options, std::string time_label);
 
   // Message `index` of the topic at `t_ns`. Throws InputError for a time outside
-  // [0, 2^62) ns (1970 to 2116), a message the joint map rejects, or a first
-  // message with too few joints.
-  void add(std::size_t index, std::int64_t t_ns, const JointStateView& message);
+  // [0, 2^62) ns (1970 to 2116), a message the joint map rejects, a first
+  // message with too few joints, or a time that does not increase strictly
+  // over the last kept sample. Returns true when the message is a sample of
+  // the recording (false: a repeat dropped under --dedupe); its values are
+  // then get_values() and its time get_time_ns().
+  bool add(std::size_t index, std::int64_t t_ns, const JointStateView& message);
 
-  std::size_t size() const { return t_ns_.size(); }
+  int num_joints() const { return map_.num_joints(); }
   // The recording's joint order; empty when the messages carry no names.
   const std::vector<std::string>& joint_names() const { return map_.names(); }
-
-  // The recording (source = file, the given layout). Throws InputError when no
-  // message was added or time does not increase strictly.
-  Recording finish(RecordingLayout layout);
-  // Absolute time (ns) of sample 0 of the finished recording.
+  std::size_t messages() const { return messages_; }
+  std::size_t repeated() const { return repeated_; }
+  // Absolute time (ns) of sample 0: the first message added.
   std::int64_t time_origin_ns() const { return origin_ns_; }
-  // Fills `recording.force` from `force` at the finished recording's samples.
-  void attach_force(Recording& recording, const ForceSamples& force) const;
+  // The last message added: position, velocity, effort (num_joints() each).
+  const std::vector<double>& get_values() const { return values_; }
+  std::int64_t get_time_ns() const { return last_ns_; }
 
  private:
   std::string file_, topic_, time_label_;
   TopicReadOptions options_;
   JointStateMap map_;
   JointStateMap::Workspace ws_;
-  std::vector<std::int64_t> t_ns_;
-  std::vector<std::size_t> index_;
-  std::vector<double> values_;  // per message: position, velocity, effort (num_joints each)
-  std::vector<std::size_t> kept_;  // after finish(): the messages in the recording
-  std::int64_t origin_ns_ = 0;
+  std::vector<double> values_, previous_;
+  std::size_t messages_ = 0, repeated_ = 0;
+  std::int64_t origin_ns_ = 0, last_ns_ = 0;
+  // The last kept sample, for time order.
+  bool has_kept_ = false;
+  std::int64_t kept_ns_ = 0;
+  std::size_t kept_index_ = 0;
+};
+
+// One message of a recording as a storage format's reader gives it.
+struct RecordingMessage {
+  enum class Topic { joints, force } topic = Topic::joints;
+  std::size_t index = 0;      // on its topic, 0-based, in recording order
+  std::int64_t t_ns = 0;      // the time the reader chose
+  std::optional<JointStateView> joints;  // Topic::joints: valid until the next call
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();  // Topic::force
+};
+
+// The messages of the JointState topic and, when asked, the force topic of one
+// recording, in recording order (the order of the storage, which recorders
+// write by receive time).
+class MessageSource {
+ public:
+  virtual ~MessageSource() = default;
+  // The next message; false at the end. Messages a format skips (a zero
+  // header.stamp in rosbag2) are counted by the source, not returned.
+  virtual bool next(RecordingMessage& message) = 0;
+  // The clock of `topic` in errors ("header.stamp", "bag time", "receive
+  // time"), known once its first message has been returned.
+  virtual std::string get_time_label(RecordingMessage::Topic topic) const = 0;
+  // Called once next() has returned false: what only the end tells (a topic
+  // that is absent or has no valid message, two clocks that differ).
+  virtual void finish() {}
+  // A new source of the force topic alone, from the start, for a median
+  // force period that needs the periods again (stream_median.hpp).
+  virtual std::unique_ptr<MessageSource> reopen_force() const = 0;
+};
+
+// The chunks of a message recording. Throws InputError as the header says;
+// opening reads the first JointState message (joints and order known).
+class MessageRecordingReader : public RecordingReader {
+ public:
+  MessageRecordingReader(std::string file, const TopicReadOptions& options, RecordingLayout layout,
+                         std::unique_ptr<MessageSource> source, std::size_t chunk_rows);
+  ~MessageRecordingReader() override;
+
+  const std::vector<std::string>& joint_names() const;
+  std::int64_t time_origin_ns() const;
+  std::size_t force_samples() const;
+  MessageSource& get_source() { return *source_; }
+
+ protected:
+  std::size_t fill_chunk(Recording& chunk, std::size_t filled) override;
+
+ private:
+  struct State;
+  void pull();
+  void check_first_sample();
+  std::unique_ptr<MessageSource> source_;
+  std::unique_ptr<State> state_;
 };
 
 }  // namespace rcm

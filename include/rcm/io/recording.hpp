@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "rcm/common/options_fwd.hpp"
+#include "rcm/io/atomic_file.hpp"
 
 namespace rcm {
 
@@ -88,6 +89,27 @@ Recording parse_recording(const std::string& text, const std::string& source,
 // Writes the contract's CSV layout atomically (temporary file + rename), with
 // shortest round-trip number formatting so that reading it back is exact.
 void save_recording(const std::filesystem::path& path, const Recording& recording);
+
+// The same layout written a chunk at a time (io/recording_reader.hpp): into a
+// temporary as the chunks come, under `path` only on commit(), so that the
+// file appears whole or not at all. Each chunk is checked as
+// validate_recording() checks a recording, and time must increase across
+// chunks.
+class RecordingWriter {
+ public:
+  RecordingWriter(const std::filesystem::path& path, int joints, bool has_force);
+  void write(const Recording& chunk);
+  void commit();
+  std::size_t samples() const { return samples_; }
+
+ private:
+  AtomicFileWriter file_;
+  int joints_;
+  bool has_force_;
+  std::size_t samples_ = 0;
+  double last_time_ = 0.0;
+  std::string text_;
+};
 
 // Checks the invariants of an in-memory recording (sizes agree, time strictly
 // increasing, every value finite); throws InputError naming `recording.source`.

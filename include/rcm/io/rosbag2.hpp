@@ -22,6 +22,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -74,7 +75,29 @@ Rosbag2Contents list_rosbag2_contents(const std::filesystem::path& path);
 // ending in .db3 or .mcap.
 bool is_rosbag2_path(const std::filesystem::path& path);
 
-// Throws InputError as described above.
+// The recording as a stream of chunks (io/recording_reader.hpp): the bag's
+// files read in order, an MCAP chunk or an SQLite row at a time. Throws
+// InputError as described above; opening reads up to the first JointState
+// sample.
+class Rosbag2RecordingReader : public MessageRecordingReader {
+ public:
+  struct Opening;
+  ~Rosbag2RecordingReader() override;
+  // What was read so far; complete once read_chunk() has returned false.
+  const Rosbag2ReadInfo& info() const;
+
+ private:
+  friend std::unique_ptr<Rosbag2RecordingReader> open_rosbag2_recording(const std::filesystem::path&,
+                                                                        const TopicReadOptions&, std::size_t);
+  Rosbag2RecordingReader(const std::filesystem::path& path, const TopicReadOptions& options, std::size_t chunk_rows,
+                         std::unique_ptr<Opening> opening);
+  std::unique_ptr<Opening> opening_;
+};
+std::unique_ptr<Rosbag2RecordingReader> open_rosbag2_recording(const std::filesystem::path& path,
+                                                               const TopicReadOptions& options = {},
+                                                               std::size_t chunk_rows = kDefaultChunkRows);
+
+// The whole recording (every chunk). Throws InputError as described above.
 Recording load_rosbag2_recording(const std::filesystem::path& path, const TopicReadOptions& options = {},
                                  Rosbag2ReadInfo* info = nullptr);
 

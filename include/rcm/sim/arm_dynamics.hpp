@@ -46,18 +46,27 @@ double compute_kinetic_energy(const ArmDynamics& model, const Eigen::Vector3d& q
 // Gravity plus the insertion counterbalance spring (zero at q = 0).
 double compute_potential_energy(const ArmDynamics& model, const Eigen::Vector3d& q);
 
-// LuGre friction of the three joints. z is the bristle deflection (rad, rad, m).
+// The friction's memory on the three joints: the LuGre bristles' deflection
+// and each Maxwell-slip element's (rad, rad, m; column i: element i of
+// JointFrictionParams::slip_elements, unused columns stay 0).
+struct FrictionState {
+  Eigen::Vector3d bristles = Eigen::Vector3d::Zero();
+  Eigen::Matrix<double, 3, kMaxSlipElements> slip = Eigen::Matrix<double, 3, kMaxSlipElements>::Zero();
+};
+
 struct FrictionOutput {
   Eigen::Vector3d tau = Eigen::Vector3d::Zero();   // resisting torque/force, same sign as motion
-  Eigen::Vector3d zdot = Eigen::Vector3d::Zero();
+  Eigen::Vector3d zdot = Eigen::Vector3d::Zero();  // of the bristles
 };
-FrictionOutput compute_friction(const std::array<JointFrictionParams, 3>& params,
-                                const Eigen::Vector3d& z, const Eigen::Vector3d& qd);
-// Advances z over dt with qd held constant, using the exact exponential solution
-// of the (stiff) bristle equation: unconditionally stable at any dt.
-Eigen::Vector3d advance_friction_state(const std::array<JointFrictionParams, 3>& params,
-                                       const Eigen::Vector3d& z, const Eigen::Vector3d& qd,
-                                       double dt);
+// Friction of the three joints (JointFrictionParams: LuGre + Maxwell-slip +
+// viscous + offset) at joint velocity qd.
+FrictionOutput compute_friction(const std::array<JointFrictionParams, 3>& params, const FrictionState& state,
+                                const Eigen::Vector3d& qd);
+// Advances the state over dt with qd held constant: the bristles by the exact
+// exponential solution of their (stiff) equation, each slip element by its
+// travel clamped at its breakaway displacement, also exact. Stable at any dt.
+FrictionState advance_friction_state(const std::array<JointFrictionParams, 3>& params, const FrictionState& state,
+                                     const Eigen::Vector3d& qd, double dt);
 // One scalar LuGre element (shared with the shaft's axial friction in the incision).
 double compute_lugre_force(double coulomb_pos, double coulomb_neg, double stiction_ratio,
                            double stribeck_velocity, double sigma0, double sigma1, double z,

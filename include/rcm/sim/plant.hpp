@@ -36,11 +36,11 @@ struct Plant {
 struct PlantState {
   Eigen::Vector3d q = Eigen::Vector3d::Zero(), qd = Eigen::Vector3d::Zero();    // link
   Eigen::Vector3d qm = Eigen::Vector3d::Zero(), qmd = Eigen::Vector3d::Zero();  // motor (= link when rigid)
-  Eigen::Vector3d z_link = Eigen::Vector3d::Zero(), z_motor = Eigen::Vector3d::Zero();  // LuGre bristles
+  FrictionState friction_link, friction_motor;  // the friction's memory on each side of the cable
 };
 
 // At rest at link position q with the cables carrying gravity (and the
-// counterbalance), bristles relaxed: the state a long hold at q settles to
+// counterbalance), friction relaxed: the state a long hold at q settles to
 // without friction.
 PlantState make_plant_state_at_rest(const Plant& plant, const Eigen::Vector3d& q);
 
@@ -58,7 +58,7 @@ PlantAcceleration compute_plant_acceleration(const Plant& plant, const PlantStat
                                              const Eigen::Vector3d& tau, const Eigen::Vector3d& tau_ext);
 
 // One step of semi-implicit Euler (velocities first, positions with the new
-// velocities; a rigid joint's motor follows its link) and the bristles by
+// velocities; a rigid joint's motor follows its link) and the friction states by
 // their exact exponential update.
 void advance_plant_state(const Plant& plant, PlantState& state, const PlantAcceleration& acc, double dt);
 

@@ -65,9 +65,15 @@ struct ArmParams {
   std::array<JointTransmissionParams, 3> transmission{};  // yaw, pitch, insertion
 };
 
-// LuGre friction of one joint (Canudas de Wit et al. 1995), with direction-
-// dependent Coulomb and stiction levels. Units: N m and rad for revolute joints,
-// N and m for the prismatic one.
+// Most Maxwell-slip elements a joint's friction may have (a fixed bound, so
+// that the plant's state has a fixed size and a step never allocates).
+inline constexpr int kMaxSlipElements = 8;
+
+// Friction of one joint: a LuGre element (Canudas de Wit et al. 1995) with
+// direction-dependent Coulomb and stiction levels, plus Maxwell-slip elements
+// (the rate-independent generalized Maxwell-slip model, Al-Bender et al. 2005),
+// plus viscous friction and a constant offset; every part may be zero. Units:
+// N m and rad for revolute joints, N and m for the prismatic one.
 struct JointFrictionParams {
   double coulomb_pos = 0.0;   // Coulomb level when moving in +q
   double coulomb_neg = 0.0;   // Coulomb level when moving in -q (magnitude)
@@ -77,6 +83,15 @@ struct JointFrictionParams {
   double bristle_stiffness = 0.0;  // sigma_0
   double bristle_damping = 0.0;    // sigma_1
   double offset = 0.0;        // direction-independent bias (cable preload), added always
+  // Maxwell-slip elements, each [breakaway displacement, force]: a spring that
+  // carries force / displacement per unit deflection until it carries `force`,
+  // then slips. Elements of different breakaway displacements make the
+  // hysteresis loop's shape: after a reversal the friction changes by the sum of
+  // min(force, stiffness x travel) over the elements, twice over, whatever the speed.
+  std::vector<Eigen::Vector2d> slip_elements;
+  // Damping of the elements while they stick (sigma_1 of the sticking part):
+  // each element's share is its stiffness's share of their total.
+  double slip_damping = 0.0;
 };
 
 struct ControllerParams {
@@ -162,6 +177,11 @@ struct ProtocolParams {
   double calibration_offset_m = 0.030;
   double calibration_s = 60.0;
   double trial_s = 60.0;
+  // Which teleoperation each trial moves through: "own" (a draw of its own per
+  // trial, as a surgeon's motions differ from one trial to the next, so that the
+  // free-space model errs differently in each) or "shared" (the calibration's
+  // path in every trial: the trials then differ only by the misalignment).
+  std::string trial_paths = "own";
   double static_return_s = 3.0;
   double static_hold_s = 10.0;  // in all, shared by the holds
   // Holds at q0 in each static file, each approached from the side opposite to
@@ -212,7 +232,7 @@ struct SimConfig {
   std::string robot = "dvrk-psm-classic";
   int threads = 2;  // recordings are independent; results do not depend on this
   ArmParams arm;
-  std::string friction_preset = "hysteretic";  // the preset `friction` started from
+  std::string friction_preset = "real";  // the preset `friction` started from
   std::array<JointFrictionParams, 3> friction;
   ControllerParams controller;
   SensorParams sensors;

@@ -20,18 +20,30 @@ namespace {
 
 using namespace detail;
 
-class Reader {
- public:
-  Reader(const std::filesystem::path& path, const std::function<bool(const Channel&)>& wanted,
-         const std::function<void(const MessageRef&)>& on_message)
-      : path_(path.string()), wanted_(wanted), on_message_(on_message) {}
+}  // namespace
 
-  ReadResult run() {
+class Cursor::Reader {
+ public:
+  Reader(const std::filesystem::path& path, std::function<bool(const Channel&)> wanted)
+      : path_(path.string()), wanted_(std::move(wanted)) {
     open();
-    read_data_and_summary();
-    if (complete_) read_footer();
-    return std::move(result_);
   }
+
+  // The next message of a wanted channel, in file order; false at the end
+  // (then the summary and footer have been checked).
+  bool next(MessageRef& m) {
+    while (true) {
+      if (in_chunk_) {
+        if (next_in_chunk(m)) return true;
+        in_chunk_ = false;
+        ++result_.chunks;
+      }
+      if (done_) return false;
+      if (!step(m)) continue;
+      return true;
+    }
+  }
+  const ReadResult& result() const { return result_; }
 
  private:
   [[noreturn]] void fail(const std::string& where, const std::string& what) const {
@@ -118,77 +130,86 @@ class Reader {
                          " complete chunks and the records before byte " + std::to_string(record_start);
   }
 
-  void read_data_and_summary() {
-    bool seen_header = false, in_summary = false;
-    while (true) {
-      const std::uint64_t start = pos_;
-      const std::uint32_t crc_before = data_crc_;
-      if (complete_ && start == end_) break;
-      if (end_ - start < kPrefix) {
-        truncated_at(start, start == size_ ? "" : "a record header");
-        return;
-      }
-      std::uint8_t prefix[kPrefix];
-      read(prefix, kPrefix);
-      const std::uint8_t op = prefix[0];
-      const std::uint64_t len = le(prefix + 1, 8);
-      if (len > end_ - pos_) {
-        if (complete_)
-          fail(at_record(start, op), "record length " + std::to_string(len) + " runs past the Footer at byte " +
-                                         std::to_string(end_) + ": the file is corrupt");
-        truncated_at(start, "the " + record_name(op) + " record");
-        return;
-      }
-      if (!seen_header && op != kHeader) fail(at_record(start, op), "expected the Header record right after the magic");
-      switch (op) {
-        case kHeader: {
-          if (seen_header) fail(at_record(start, op), "second Header record");
-          seen_header = true;
-          Fields f(read_body(len, start, op), len);
-          result_.profile = f.str();
-          result_.library = f.str();
-          if (!f.ok()) fail(at_record(start, op), "record too short for its profile and library");
-          break;
-        }
-        case kSchema: declare_schema(read_body(len, start, op), len, at_record(start, op)); break;
-        case kChannel: declare_channel(read_body(len, start, op), len, at_record(start, op)); break;
-        case kMessage:
-        case kChunk:
-          if (in_summary) fail(at_record(start, op), "record after DataEnd, in the summary section");
-          if (op == kMessage)
-            read_file_message(start, len);
-          else
-            read_chunk(start, len);
-          break;
-        case kDataEnd: {
-          if (in_summary) fail(at_record(start, op), "second DataEnd record");
-          Fields f(read_body(len, start, op), len);
-          const auto expected = static_cast<std::uint32_t>(f.uint(4));
-          if (!f.ok()) fail(at_record(start, op), "record too short for data_section_crc");
-          // The reference writers start this CRC at the leading magic, not after the Header.
-          if (expected != 0 && expected != crc_before)
-            fail(at_record(start, op), "data section CRC mismatch: DataEnd says " + hex32(expected) + ", bytes 0.." +
-                                           std::to_string(start) + " give " + hex32(crc_before));
-          in_summary = true;
-          data_crc_on_ = false;
-          summary_begin_ = pos_;
-          break;
-        }
-        case kFooter:
-          if (complete_) fail(at_record(start, op), "Footer record before the end of the file");
-          skip(len);
-          result_.truncated = true;
-          result_.truncation = "the file ends at byte " + std::to_string(size_) +
-                               " without its trailing magic after the Footer at byte " + std::to_string(start) +
-                               "; all " + std::to_string(result_.messages) + " messages were read";
-          return;
-        default: skip(len);  // indexes, attachments, metadata, statistics, future opcodes
-      }
+  // One record of the data section (a message of a wanted channel: true, in
+  // `m`); at its end, the checks of the whole file, and done_.
+  bool step(MessageRef& m) {
+    const std::uint64_t start = pos_;
+    const std::uint32_t crc_before = data_crc_;
+    if (complete_ && start == end_) {
+      finish_data();
+      return false;
     }
-    if (!seen_header) fail(at(sizeof kMagic, "Header record"), "no Header record before the Footer");
+    if (end_ - start < kPrefix) {
+      truncated_at(start, start == size_ ? "" : "a record header");
+      done_ = true;
+      return false;
+    }
+    std::uint8_t prefix[kPrefix];
+    read(prefix, kPrefix);
+    const std::uint8_t op = prefix[0];
+    const std::uint64_t len = le(prefix + 1, 8);
+    if (len > end_ - pos_) {
+      if (complete_)
+        fail(at_record(start, op), "record length " + std::to_string(len) + " runs past the Footer at byte " +
+                                       std::to_string(end_) + ": the file is corrupt");
+      truncated_at(start, "the " + record_name(op) + " record");
+      done_ = true;
+      return false;
+    }
+    if (!seen_header_ && op != kHeader) fail(at_record(start, op), "expected the Header record right after the magic");
+    switch (op) {
+      case kHeader: {
+        if (seen_header_) fail(at_record(start, op), "second Header record");
+        seen_header_ = true;
+        Fields f(read_body(len, start, op), len);
+        result_.profile = f.str();
+        result_.library = f.str();
+        if (!f.ok()) fail(at_record(start, op), "record too short for its profile and library");
+        break;
+      }
+      case kSchema: declare_schema(read_body(len, start, op), len, at_record(start, op)); break;
+      case kChannel: declare_channel(read_body(len, start, op), len, at_record(start, op)); break;
+      case kMessage:
+      case kChunk:
+        if (in_summary_) fail(at_record(start, op), "record after DataEnd, in the summary section");
+        if (op == kMessage) return read_file_message(start, len, m);
+        read_chunk(start, len);
+        break;
+      case kDataEnd: {
+        if (in_summary_) fail(at_record(start, op), "second DataEnd record");
+        Fields f(read_body(len, start, op), len);
+        const auto expected = static_cast<std::uint32_t>(f.uint(4));
+        if (!f.ok()) fail(at_record(start, op), "record too short for data_section_crc");
+        // The reference writers start this CRC at the leading magic, not after the Header.
+        if (expected != 0 && expected != crc_before)
+          fail(at_record(start, op), "data section CRC mismatch: DataEnd says " + hex32(expected) + ", bytes 0.." +
+                                         std::to_string(start) + " give " + hex32(crc_before));
+        in_summary_ = true;
+        data_crc_on_ = false;
+        summary_begin_ = pos_;
+        break;
+      }
+      case kFooter:
+        if (complete_) fail(at_record(start, op), "Footer record before the end of the file");
+        skip(len);
+        result_.truncated = true;
+        result_.truncation = "the file ends at byte " + std::to_string(size_) +
+                             " without its trailing magic after the Footer at byte " + std::to_string(start) +
+                             "; all " + std::to_string(result_.messages) + " messages were read";
+        done_ = true;
+        return false;
+      default: skip(len);  // indexes, attachments, metadata, statistics, future opcodes
+    }
+    return false;
+  }
+
+  void finish_data() {
+    done_ = true;
+    if (!seen_header_) fail(at(sizeof kMagic, "Header record"), "no Header record before the Footer");
     // The spec ends every data section with DataEnd; without it a corrupt opcode
     // could hide the data-section CRC.
-    if (!in_summary) fail(at(end_, "Footer record"), "no DataEnd record before the Footer");
+    if (!in_summary_) fail(at(end_, "Footer record"), "no DataEnd record before the Footer");
+    read_footer();
   }
 
   void read_footer() {
@@ -271,9 +292,7 @@ class Reader {
   }
 
   void deliver(std::size_t channel, const std::uint8_t* fixed, const std::uint8_t* data, std::uint64_t size,
-               std::uint64_t record_offset, std::uint64_t chunk_offset) {
-    if (!on_message_) return;
-    MessageRef m;
+               std::uint64_t record_offset, std::uint64_t chunk_offset, MessageRef& m) {
     m.channel = &result_.channels[channel];
     m.sequence = static_cast<std::uint32_t>(le(fixed + 2, 4));
     m.log_time_ns = le(fixed + 6, 8);
@@ -282,19 +301,22 @@ class Reader {
     m.size = static_cast<std::size_t>(size);
     m.record_offset = record_offset;
     m.chunk_offset = chunk_offset;
-    on_message_(m);
   }
 
-  void read_file_message(std::uint64_t start, std::uint64_t len) {
+  bool read_file_message(std::uint64_t start, std::uint64_t len, MessageRef& m) {
     if (len < kMessageFixed) fail(at_record(start, kMessage), "record too short for its fields");
     std::uint8_t fixed[kMessageFixed];
     read(fixed, kMessageFixed);
     const std::size_t channel = channel_of(static_cast<std::uint16_t>(le(fixed, 2)), at_record(start, kMessage));
     ++result_.messages;
     const std::uint64_t size = len - kMessageFixed;
-    if (!wanted_flags_[channel] || !on_message_) return skip(size);
+    if (!wanted_flags_[channel]) {
+      skip(size);
+      return false;
+    }
     const std::uint8_t* data = read_body(size, start, kMessage);
-    deliver(channel, fixed, data, size, start, 0);
+    deliver(channel, fixed, data, size, start, 0, m);
+    return true;
   }
 
   void read_chunk(std::uint64_t start, std::uint64_t len) {
@@ -335,8 +357,10 @@ class Reader {
         fail(where, "chunk CRC mismatch: uncompressed_crc says " + hex32(expected_crc) +
                         ", the decompressed records give " + hex32(crc));
     }
-    read_chunk_records(start, uncompressed_size);
-    ++result_.chunks;
+    chunk_start_ = start;
+    chunk_size_ = uncompressed_size;
+    chunk_pos_ = 0;
+    in_chunk_ = true;
   }
 
   // Decompresses into records_, growing it only as output actually arrives, so
@@ -400,8 +424,11 @@ class Reader {
     return produced;
   }
 
-  void read_chunk_records(std::uint64_t chunk, std::uint64_t size) {
-    for (std::uint64_t p = 0; p < size;) {
+  // The chunk's records from chunk_pos_ up to its next message of a wanted channel.
+  bool next_in_chunk(MessageRef& m) {
+    const std::uint64_t size = chunk_size_, chunk = chunk_start_;
+    while (chunk_pos_ < size) {
+      const std::uint64_t p = chunk_pos_;
       const std::uint8_t op = records_[p];
       const Where where{p, op, true, chunk};
       if (size - p < kPrefix) fail(where, "record header cut by the end of the chunk");
@@ -409,6 +436,7 @@ class Reader {
       if (len > size - p - kPrefix)
         fail(where, "record length " + std::to_string(len) + " runs past the end of the chunk");
       const std::uint8_t* body = records_.data() + p + kPrefix;
+      chunk_pos_ = p + kPrefix + len;
       if (op == kSchema) {
         declare_schema(body, len, where);
       } else if (op == kChannel) {
@@ -417,15 +445,17 @@ class Reader {
         if (len < kMessageFixed) fail(where, "record too short for its fields");
         const std::size_t channel = channel_of(static_cast<std::uint16_t>(le(body, 2)), where);
         ++result_.messages;
-        if (wanted_flags_[channel]) deliver(channel, body, body + kMessageFixed, len - kMessageFixed, p, chunk);
+        if (wanted_flags_[channel]) {
+          deliver(channel, body, body + kMessageFixed, len - kMessageFixed, p, chunk, m);
+          return true;
+        }
       }
-      p += kPrefix + len;
     }
+    return false;
   }
 
   std::string path_;
-  const std::function<bool(const Channel&)>& wanted_;
-  const std::function<void(const MessageRef&)>& on_message_;
+  std::function<bool(const Channel&)> wanted_;
   std::ifstream in_;
   std::uint64_t size_ = 0, pos_ = 0;
   std::uint64_t end_ = 0;  // where records must end: the Footer, or the end of a cut file
@@ -433,6 +463,9 @@ class Reader {
   bool data_crc_on_ = true;
   std::uint32_t data_crc_ = 0;
   std::uint64_t summary_begin_ = 0;  // first byte after DataEnd
+  bool seen_header_ = false, in_summary_ = false, done_ = false, in_chunk_ = false;
+  // The decompressed chunk being read: its offset in the file, size, and the next record.
+  std::uint64_t chunk_start_ = 0, chunk_size_ = 0, chunk_pos_ = 0;
   ReadResult result_;
   std::unordered_map<std::uint16_t, std::pair<std::string, std::string>> schemas_;  // name, encoding
   std::unordered_map<std::uint16_t, std::size_t> channel_index_;
@@ -442,11 +475,20 @@ class Reader {
   std::unique_ptr<LZ4F_dctx, Lz4Free> lz4_;
 };
 
-}  // namespace
+Cursor::Cursor(const std::filesystem::path& path, std::function<bool(const Channel&)> wanted)
+    : reader_(std::make_unique<Reader>(path, std::move(wanted))) {}
+Cursor::~Cursor() = default;
+Cursor::Cursor(Cursor&&) noexcept = default;
+bool Cursor::next(MessageRef& message) { return reader_->next(message); }
+const ReadResult& Cursor::result() const { return reader_->result(); }
 
 ReadResult read_mcap(const std::filesystem::path& path, const std::function<bool(const Channel&)>& wanted,
                      const std::function<void(const MessageRef&)>& on_message) {
-  return Reader(path, wanted, on_message).run();
+  Cursor cursor(path, wanted);
+  MessageRef m;
+  while (cursor.next(m))
+    if (on_message) on_message(m);
+  return cursor.result();
 }
 
 }  // namespace rcm::mcap

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -73,6 +74,23 @@ inline constexpr std::uint64_t kMaxRecordBytes = std::uint64_t{1} << 30;
 // truncated/truncation are set, like `mcap recover`. Records of unknown opcode are
 // skipped, as the spec requires. Attachments, metadata, indexes and statistics are
 // parsed only as far as needed to skip or check them.
+// The same, pulled one message at a time: next() fills `message` (its data
+// valid until the next call) and returns false at the end, once the summary
+// and footer have been checked; result() then holds what read_mcap returns.
+// Holds one decompressed chunk at a time.
+class Cursor {
+ public:
+  Cursor(const std::filesystem::path& path, std::function<bool(const Channel&)> wanted);
+  ~Cursor();
+  Cursor(Cursor&&) noexcept;
+  bool next(MessageRef& message);
+  const ReadResult& result() const;
+
+ private:
+  class Reader;
+  std::unique_ptr<Reader> reader_;
+};
+
 ReadResult read_mcap(const std::filesystem::path& path,
                      const std::function<bool(const Channel&)>& wanted,
                      const std::function<void(const MessageRef&)>& on_message);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <map>
+#include <memory>
 #include <optional>
 
 #include "io/rosbag2/cdr.hpp"
@@ -127,49 +128,79 @@ struct TopicSeen {
   std::string type, encoding;
 };
 
-// Calls `on_message` for the messages of `topics` in every file, in order;
-// records every topic met (for "no such topic" errors).
-void for_each_message(const std::vector<std::filesystem::path>& files, const std::vector<std::string>& topics,
-                      Rosbag2ReadInfo& info, std::map<std::string, TopicSeen>& seen,
-                      const std::function<void(const std::filesystem::path&, const RawMessage&)>& on_message) {
-  auto is_wanted = [&](const std::string& name) { return std::find(topics.begin(), topics.end(), name) != topics.end(); };
-  for (const auto& path : files) {
+// The messages of the wanted topics in every file of a bag, in order, one
+// at a time; records every topic met (for "no such topic" errors).
+class BagCursor {
+ public:
+  BagCursor(std::vector<std::filesystem::path> files, std::vector<std::string> topics, Rosbag2ReadInfo& info)
+      : files_(std::move(files)), topics_(std::move(topics)), info_(info) {}
+
+  // The next message (its pointers valid until the next call); false after the last file.
+  bool next(RawMessage& raw) {
+    while (true) {
+      if (sqlite_) {
+        rosbag2::SqliteMessage m;
+        if (sqlite_->next(m)) {
+          raw = {&m.topic->name, &m.topic->type, &m.topic->serialization_format, m.receive_ns, m.data, m.size};
+          return true;
+        }
+        sqlite_.reset();
+        info_.files.push_back(files_[file_ - 1].string());
+      } else if (mcap_) {
+        mcap::MessageRef m;
+        if (mcap_->next(m)) {
+          raw = {&m.channel->topic, &m.channel->schema_name, &m.channel->message_encoding,
+                 static_cast<std::int64_t>(m.log_time_ns), m.data, m.size};
+          return true;
+        }
+        const mcap::ReadResult& r = mcap_->result();
+        if (r.truncated) info_.warnings.push_back(files_[file_ - 1].string() + ": " + r.truncation);
+        mcap_.reset();
+        info_.files.push_back(files_[file_ - 1].string());
+      }
+      if (file_ == files_.size()) return false;
+      open(files_[file_++]);
+    }
+  }
+  // The file of the last message.
+  const std::filesystem::path& file() const { return files_[file_ - 1]; }
+  const std::map<std::string, TopicSeen>& seen() const { return seen_; }
+
+ private:
+  bool is_wanted(const std::string& name) const {
+    return std::find(topics_.begin(), topics_.end(), name) != topics_.end();
+  }
+  void open(const std::filesystem::path& path) {
     const std::string ext = lower_extension(path);
     if (ext == ".db3") {
-      info.storage = "sqlite3";
-      const rosbag2::SqliteBagInfo db = rosbag2::read_sqlite_bag(
-          path,
-          [&](const rosbag2::SqliteTopic& t) {
-            seen[t.name] = {t.type, t.serialization_format};
-            return is_wanted(t.name);
-          },
-          [&](const rosbag2::SqliteMessage& m) {
-            on_message(path, {&m.topic->name, &m.topic->type, &m.topic->serialization_format, m.receive_ns, m.data,
-                              m.size});
-          });
-      info.sqlite_schema = db.schema_version;
-      if (!db.ros_distro.empty()) info.ros_distro = db.ros_distro;
+      info_.storage = "sqlite3";
+      sqlite_ = std::make_unique<rosbag2::SqliteCursor>(path, [&](const rosbag2::SqliteTopic& t) {
+        seen_[t.name] = {t.type, t.serialization_format};
+        return is_wanted(t.name);
+      });
+      info_.sqlite_schema = sqlite_->info().schema_version;
+      if (!sqlite_->info().ros_distro.empty()) info_.ros_distro = sqlite_->info().ros_distro;
     } else if (ext == ".mcap") {
-      info.storage = "mcap";
-      const mcap::ReadResult r = mcap::read_mcap(
-          path,
-          [&](const mcap::Channel& c) {
-            seen[c.topic] = {c.schema_name, c.message_encoding};
-            return is_wanted(c.topic);
-          },
-          [&](const mcap::MessageRef& m) {
-            on_message(path, {&m.channel->topic, &m.channel->schema_name, &m.channel->message_encoding,
-                              static_cast<std::int64_t>(m.log_time_ns), m.data, m.size});
-          });
-      if (r.truncated) info.warnings.push_back(path.string() + ": " + r.truncation);
+      info_.storage = "mcap";
+      mcap_ = std::make_unique<mcap::Cursor>(path, [this](const mcap::Channel& c) {
+        seen_[c.topic] = {c.schema_name, c.message_encoding};
+        return is_wanted(c.topic);
+      });
     } else {
       throw InputError(locate(path.string(), ""),
                        "storage file of unknown kind (" + (ext.empty() ? std::string("no extension") : ext) +
                            "); rosbag2 storage is .db3 (sqlite3) or .mcap");
     }
-    info.files.push_back(path.string());
   }
-}
+
+  std::vector<std::filesystem::path> files_;
+  std::vector<std::string> topics_;
+  Rosbag2ReadInfo& info_;
+  std::size_t file_ = 0;
+  std::map<std::string, TopicSeen> seen_;
+  std::unique_ptr<rosbag2::SqliteCursor> sqlite_;
+  std::unique_ptr<mcap::Cursor> mcap_;
+};
 
 std::string list_topics(const std::map<std::string, TopicSeen>& seen) {
   if (seen.empty()) return "the recording has no topics";
@@ -281,87 +312,182 @@ bool is_rosbag2_path(const std::filesystem::path& path) {
   return ext == ".db3" || ext == ".mcap";
 }
 
-Recording load_rosbag2_recording(const std::filesystem::path& path, const TopicReadOptions& options,
-                                 Rosbag2ReadInfo* info_out) {
+namespace {
+
+// A rosbag2 recording's messages for MessageRecordingReader: decoded, the zero
+// stamps of header time skipped and counted, every topic checked once per file.
+class Rosbag2Source final : public MessageSource {
+ public:
+  Rosbag2Source(std::filesystem::path path, std::vector<std::filesystem::path> files, const TopicReadOptions& options,
+                Rosbag2ReadInfo& info, bool force_only)
+      : path_(std::move(path)),
+        files_(files),
+        options_(options),
+        info_(info),
+        force_only_(force_only),
+        cursor_(std::move(files), wanted_topics(options, force_only), info) {}
+
+  bool next(RecordingMessage& m) override {
+    const bool header_time = options_.time == MessageTime::header;
+    RawMessage raw;
+    while (cursor_.next(raw)) {
+      const std::filesystem::path& file = cursor_.file();
+      if (file.native() != checked_file_) {
+        // Once per topic and file: every file of a bag declares its topics again.
+        checked_file_ = file.native();
+        joint_checked_ = force_checked_ = false;
+      }
+      if (!force_only_ && *raw.topic == options_.topic) {
+        if (!joint_checked_) check_topic(file.string(), cursor_.seen(), options_.topic, kJointStateType, "JointState");
+        joint_checked_ = true;
+        const std::size_t k = info_.messages++;
+        decode_or_throw(file, options_.topic, k, raw, js_);
+        if (header_time && js_.header.is_zero()) {
+          ++info_.zero_stamp_messages;
+          continue;
+        }
+        ++joint_valid_;
+        m.topic = RecordingMessage::Topic::joints;
+        m.index = k;
+        m.t_ns = header_time ? js_.header.get_stamp_ns() : raw.receive_ns;
+        m.joints.emplace(view_joint_state(js_));
+        return true;
+      }
+      if (!force_checked_) check_topic(file.string(), cursor_.seen(), options_.force_topic, kWrenchType, "force");
+      force_checked_ = true;
+      const std::size_t k = info_.force_messages++;
+      decode_or_throw(file, options_.force_topic, k, raw, wrench_);
+      if (header_time && wrench_.header.is_zero()) {
+        ++info_.force_zero_stamp_messages;
+        continue;
+      }
+      if (force_valid_++ == 0) info_.force_frame_id = wrench_.header.frame_id;
+      m.topic = RecordingMessage::Topic::force;
+      m.index = k;
+      m.t_ns = header_time ? wrench_.header.get_stamp_ns() : raw.receive_ns;
+      m.force = Eigen::Vector3d(wrench_.force[0], wrench_.force[1], wrench_.force[2]);
+      return true;
+    }
+    return false;
+  }
+
+  std::string get_time_label(RecordingMessage::Topic) const override {
+    return options_.time == MessageTime::header ? "header.stamp" : "receive time";
+  }
+
+  void finish() override {
+    const std::string source = path_.string();
+    check_topic(source, cursor_.seen(), options_.topic, kJointStateType, "JointState");
+    if (joint_valid_ == 0)
+      throw InputError(locate(source, options_.topic),
+                       std::to_string(info_.messages) +
+                           " messages, none valid: every header.stamp is zero (invalid data for the dVRK); "
+                           "--time receive uses the recorder's receive time instead");
+    if (options_.force_topic.empty()) return;
+    check_topic(source, cursor_.seen(), options_.force_topic, kWrenchType, "force");
+    if (force_valid_ == 0)
+      throw InputError(locate(source, options_.force_topic),
+                       std::to_string(info_.force_messages) +
+                           " messages, none valid: every header.stamp is zero; --time receive uses the recorder's "
+                           "receive time instead");
+  }
+
+  std::unique_ptr<MessageSource> reopen_force() const override;
+
+ private:
+  static std::vector<std::string> wanted_topics(const TopicReadOptions& options, bool force_only) {
+    std::vector<std::string> topics;
+    if (!force_only) topics.push_back(options.topic);
+    if (!options.force_topic.empty()) topics.push_back(options.force_topic);
+    return topics;
+  }
+
+  std::filesystem::path path_;
+  std::vector<std::filesystem::path> files_;
+  TopicReadOptions options_;
+  Rosbag2ReadInfo& info_;
+  bool force_only_;
+  BagCursor cursor_;
+  cdr::JointState js_;
+  cdr::WrenchStamped wrench_;
+  std::string checked_file_;
+  bool joint_checked_ = false, force_checked_ = false;
+  std::size_t joint_valid_ = 0, force_valid_ = 0;
+};
+
+// A force-only source that owns the info it fills (a second pass's counts are not reported).
+class OwningSource final : public MessageSource {
+ public:
+  OwningSource(const std::filesystem::path& path, const std::vector<std::filesystem::path>& files,
+               const TopicReadOptions& options)
+      : info_(std::make_unique<Rosbag2ReadInfo>()), source_(path, files, options, *info_, true) {}
+  bool next(RecordingMessage& m) override { return source_.next(m); }
+  std::string get_time_label(RecordingMessage::Topic t) const override { return source_.get_time_label(t); }
+  std::unique_ptr<MessageSource> reopen_force() const override { return source_.reopen_force(); }
+
+ private:
+  std::unique_ptr<Rosbag2ReadInfo> info_;
+  Rosbag2Source source_;
+};
+
+std::unique_ptr<MessageSource> Rosbag2Source::reopen_force() const {
+  return std::make_unique<OwningSource>(path_, files_, options_);
+}
+
+BagFiles find_bag_files(const std::filesystem::path& path, const TopicReadOptions& options) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) throw InputError(locate(path.string(), ""), "no such file or directory");
   if (options.topic.empty()) throw InputError(locate(path.string(), ""), "no JointState topic given");
+  if (std::filesystem::is_directory(path, ec)) return read_metadata(path);
+  BagFiles bag;
+  bag.files = {path};
+  return bag;
+}
+
+}  // namespace
+
+struct Rosbag2RecordingReader::Opening {
   Rosbag2ReadInfo info;
   BagFiles bag;
-  if (std::filesystem::is_directory(path, ec)) {
-    bag = read_metadata(path);
-  } else {
-    bag.files = {path};
-  }
-  info.metadata_version = bag.metadata_version;
-  info.warnings = bag.warnings;
+};
+
+Rosbag2RecordingReader::Rosbag2RecordingReader(const std::filesystem::path& path, const TopicReadOptions& options,
+                                               std::size_t chunk_rows, std::unique_ptr<Opening> opening)
+    : MessageRecordingReader(path.string(), options, RecordingLayout::rosbag2,
+                             std::make_unique<Rosbag2Source>(path, opening->bag.files, options, opening->info, false),
+                             chunk_rows),
+      opening_(std::move(opening)) {}
+
+Rosbag2RecordingReader::~Rosbag2RecordingReader() = default;
+
+const Rosbag2ReadInfo& Rosbag2RecordingReader::info() const {
+  Rosbag2ReadInfo& info = opening_->info;
+  info.joint_names = joint_names();
+  info.time_origin_ns = time_origin_ns();
+  return info;
+}
+
+std::unique_ptr<Rosbag2RecordingReader> open_rosbag2_recording(const std::filesystem::path& path,
+                                                               const TopicReadOptions& options,
+                                                               std::size_t chunk_rows) {
+  auto opening = std::make_unique<Rosbag2RecordingReader::Opening>();
+  opening->bag = find_bag_files(path, options);
+  Rosbag2ReadInfo& info = opening->info;
+  info.metadata_version = opening->bag.metadata_version;
+  info.warnings = opening->bag.warnings;
   info.topic = options.topic;
   info.force_topic = options.force_topic;
   info.receive_time = options.time == MessageTime::receive;
+  // The reader's constructor reads up to the first joint sample; `info` lives in `opening`, which it keeps.
+  return std::unique_ptr<Rosbag2RecordingReader>(
+      new Rosbag2RecordingReader(path, options, chunk_rows, std::move(opening)));
+}
 
-  const bool header_time = options.time == MessageTime::header;
-  const std::string source = path.string();
-  JointStateRecordingBuilder builder(source, options.topic, options, header_time ? "header.stamp" : "receive time");
-  std::optional<ForceSamples> force;
-  if (!options.force_topic.empty())
-    force.emplace(source, options.force_topic, header_time ? "header.stamp" : "receive time");
-
-  std::vector<std::string> topics = {options.topic};
-  if (force) topics.push_back(options.force_topic);
-  std::map<std::string, TopicSeen> seen;
-  cdr::JointState js;
-  cdr::WrenchStamped wrench;
-  // Once per topic and file: every file of a bag declares its topics again.
-  bool joint_topic_checked = false, force_topic_checked = false;
-  std::string checked_file;
-  for_each_message(bag.files, topics, info, seen, [&](const std::filesystem::path& file, const RawMessage& raw) {
-    if (file.native() != checked_file) {
-      checked_file = file.native();
-      joint_topic_checked = force_topic_checked = false;
-    }
-    if (*raw.topic == options.topic) {
-      if (!joint_topic_checked) check_topic(file.string(), seen, options.topic, kJointStateType, "JointState");
-      joint_topic_checked = true;
-      const std::size_t k = info.messages++;
-      decode_or_throw(file, options.topic, k, raw, js);
-      if (header_time && js.header.is_zero()) {
-        ++info.zero_stamp_messages;
-        return;
-      }
-      builder.add(k, header_time ? js.header.get_stamp_ns() : raw.receive_ns, view_joint_state(js));
-    } else {
-      if (!force_topic_checked) check_topic(file.string(), seen, options.force_topic, kWrenchType, "force");
-      force_topic_checked = true;
-      const std::size_t k = info.force_messages++;
-      decode_or_throw(file, options.force_topic, k, raw, wrench);
-      if (header_time && wrench.header.is_zero()) {
-        ++info.force_zero_stamp_messages;
-        return;
-      }
-      if (force->size() == 0) info.force_frame_id = wrench.header.frame_id;
-      force->add(k, header_time ? wrench.header.get_stamp_ns() : raw.receive_ns,
-                 Eigen::Vector3d(wrench.force[0], wrench.force[1], wrench.force[2]));
-    }
-  });
-  check_topic(source, seen, options.topic, kJointStateType, "JointState");
-  if (builder.size() == 0)
-    throw InputError(locate(source, options.topic),
-                     std::to_string(info.messages) +
-                         " messages, none valid: every header.stamp is zero (invalid data for the dVRK); "
-                         "--time receive uses the recorder's receive time instead");
-  Recording rec = builder.finish(RecordingLayout::rosbag2);
-  info.joint_names = builder.joint_names();
-  info.time_origin_ns = builder.time_origin_ns();
-  if (force) {
-    check_topic(source, seen, options.force_topic, kWrenchType, "force");
-    if (force->size() == 0)
-      throw InputError(locate(source, options.force_topic),
-                       std::to_string(info.force_messages) +
-                           " messages, none valid: every header.stamp is zero; --time receive uses the recorder's "
-                           "receive time instead");
-    builder.attach_force(rec, *force);
-  }
-  if (info_out) *info_out = std::move(info);
+Recording load_rosbag2_recording(const std::filesystem::path& path, const TopicReadOptions& options,
+                                 Rosbag2ReadInfo* info_out) {
+  const auto reader = open_rosbag2_recording(path, options);
+  Recording rec = read_whole_recording(*reader);
+  if (info_out) *info_out = reader->info();
   return rec;
 }
 

@@ -74,21 +74,30 @@ std::vector<SqliteTopicStats> count_sqlite_messages(const std::filesystem::path&
   return out;
 }
 
-SqliteBagInfo read_sqlite_bag(const std::filesystem::path& path, const std::function<bool(const SqliteTopic&)>& wanted,
-                              const std::function<void(const SqliteMessage&)>& on_message) {
-  const Database db = open_bag(path);
+struct SqliteCursor::Impl {
+  std::filesystem::path path;
+  Database db;
+  Statement messages;
   SqliteBagInfo info;
-  if (has_table(db.get(), path, "schema")) {
-    Statement s = prepare(db.get(), path, "SELECT schema_version, ros_distro FROM schema");
+  std::size_t row = 0;
+  bool done = false;
+};
+
+SqliteCursor::SqliteCursor(const std::filesystem::path& path, const std::function<bool(const SqliteTopic&)>& wanted)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& c = *impl_;
+  c.path = path;
+  c.db = open_bag(path);
+  SqliteBagInfo& info = c.info;
+  if (has_table(c.db.get(), path, "schema")) {
+    Statement s = prepare(c.db.get(), path, "SELECT schema_version, ros_distro FROM schema");
     if (sqlite3_step(s.get()) == SQLITE_ROW) {
       info.schema_version = sqlite3_column_int(s.get(), 0);
       info.ros_distro = column_text(s.get(), 1);
     }
   }
-
   {
-    Statement s = prepare(db.get(), path,
-                          "SELECT id, name, type, serialization_format FROM topics ORDER BY id");
+    Statement s = prepare(c.db.get(), path, "SELECT id, name, type, serialization_format FROM topics ORDER BY id");
     int step;
     while ((step = sqlite3_step(s.get())) == SQLITE_ROW) {
       SqliteTopic t;
@@ -98,38 +107,59 @@ SqliteBagInfo read_sqlite_bag(const std::filesystem::path& path, const std::func
       t.serialization_format = column_text(s.get(), 3);
       info.topics.push_back(std::move(t));
     }
-    if (step != SQLITE_DONE) fail(path, std::string("topics table: ") + sqlite3_errmsg(db.get()));
+    if (step != SQLITE_DONE) fail(path, std::string("topics table: ") + sqlite3_errmsg(c.db.get()));
   }
-
   std::string ids;
   for (const SqliteTopic& t : info.topics)
     if (wanted(t)) ids += (ids.empty() ? "" : ",") + std::to_string(t.id);
-  if (ids.empty()) return info;
-
-  Statement s = prepare(db.get(), path,
-                        "SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN (" + ids +
-                            ") ORDER BY timestamp, id");
-  int step;
-  std::size_t row = 0;
-  while ((step = sqlite3_step(s.get())) == SQLITE_ROW) {
-    const std::int64_t topic_id = sqlite3_column_int64(s.get(), 0);
-    SqliteMessage m;
-    for (const SqliteTopic& t : info.topics)
-      if (t.id == topic_id) m.topic = &t;
-    if (sqlite3_column_type(s.get(), 1) != SQLITE_INTEGER)
-      fail(path, "messages row " + std::to_string(row) + " of topic " + m.topic->name +
-                     ": timestamp is not an integer (ns)");
-    m.receive_ns = sqlite3_column_int64(s.get(), 1);
-    const int type = sqlite3_column_type(s.get(), 2);
-    if (type != SQLITE_BLOB && type != SQLITE_NULL)
-      fail(path, "messages row " + std::to_string(row) + " of topic " + m.topic->name + ": data is not a blob");
-    m.data = static_cast<const std::uint8_t*>(sqlite3_column_blob(s.get(), 2));
-    m.size = static_cast<std::size_t>(sqlite3_column_bytes(s.get(), 2));
-    on_message(m);
-    ++row;
+  if (ids.empty()) {
+    c.done = true;
+    return;
   }
-  if (step != SQLITE_DONE) fail(path, std::string("reading messages: ") + sqlite3_errmsg(db.get()));
-  return info;
+  // Stepped row by row: SQLite reads the pages as it goes (rosbag2's index
+  // on timestamp gives the order without a sort of the whole table).
+  c.messages = prepare(c.db.get(), path,
+                       "SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN (" + ids +
+                           ") ORDER BY timestamp, id");
+}
+
+SqliteCursor::~SqliteCursor() = default;
+SqliteCursor::SqliteCursor(SqliteCursor&&) noexcept = default;
+const SqliteBagInfo& SqliteCursor::info() const { return impl_->info; }
+
+bool SqliteCursor::next(SqliteMessage& m) {
+  Impl& c = *impl_;
+  if (c.done) return false;
+  sqlite3_stmt* s = c.messages.get();
+  const int step = sqlite3_step(s);
+  if (step != SQLITE_ROW) {
+    c.done = true;
+    if (step != SQLITE_DONE) fail(c.path, std::string("reading messages: ") + sqlite3_errmsg(c.db.get()));
+    return false;
+  }
+  const std::int64_t topic_id = sqlite3_column_int64(s, 0);
+  m = SqliteMessage();
+  for (const SqliteTopic& t : c.info.topics)
+    if (t.id == topic_id) m.topic = &t;
+  if (sqlite3_column_type(s, 1) != SQLITE_INTEGER)
+    fail(c.path, "messages row " + std::to_string(c.row) + " of topic " + m.topic->name +
+                     ": timestamp is not an integer (ns)");
+  m.receive_ns = sqlite3_column_int64(s, 1);
+  const int type = sqlite3_column_type(s, 2);
+  if (type != SQLITE_BLOB && type != SQLITE_NULL)
+    fail(c.path, "messages row " + std::to_string(c.row) + " of topic " + m.topic->name + ": data is not a blob");
+  m.data = static_cast<const std::uint8_t*>(sqlite3_column_blob(s, 2));
+  m.size = static_cast<std::size_t>(sqlite3_column_bytes(s, 2));
+  ++c.row;
+  return true;
+}
+
+SqliteBagInfo read_sqlite_bag(const std::filesystem::path& path, const std::function<bool(const SqliteTopic&)>& wanted,
+                              const std::function<void(const SqliteMessage&)>& on_message) {
+  SqliteCursor cursor(path, wanted);
+  SqliteMessage m;
+  while (cursor.next(m)) on_message(m);
+  return cursor.info();
 }
 
 }  // namespace rcm::rosbag2

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -38,6 +39,21 @@ struct SqliteBagInfo {
 // without rosbag2's tables, or a corrupt page met while reading.
 SqliteBagInfo read_sqlite_bag(const std::filesystem::path& path, const std::function<bool(const SqliteTopic&)>& wanted,
                               const std::function<void(const SqliteMessage&)>& on_message);
+
+// The same, pulled one message at a time (next() false at the end; a
+// message's data valid until the next call). info() is known on opening.
+class SqliteCursor {
+ public:
+  SqliteCursor(const std::filesystem::path& path, const std::function<bool(const SqliteTopic&)>& wanted);
+  ~SqliteCursor();
+  SqliteCursor(SqliteCursor&&) noexcept;
+  const SqliteBagInfo& info() const;
+  bool next(SqliteMessage& message);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 // Per topic (by id): message count and first and last receive time, in one
 // pass over the messages table.

@@ -1,7 +1,7 @@
 #pragma once
 // Rosbag recordings: the sensor_msgs/JointState topic of a bag (the dVRK's CRTK
 // /PSM1/measured_js) read into an rcm::Recording, held to the CSV reader's
-// rules by the builder that every message reader shares
+// rules by the reader that every message format shares
 // (io/message_recording.hpp), and optionally a geometry_msgs/WrenchStamped
 // topic as the evaluation-only force columns.
 //
@@ -24,6 +24,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -45,13 +46,40 @@ struct BagReadInfo {
   bool force_bag_time = false;
 };
 
-// Throws InputError as described above (also for a file that is not a bag, a
-// topic that is absent or of another type).
+// The bag as a stream of chunks (io/recording_reader.hpp), both topics read
+// in one pass in bag-time order. rosbag_storage itself holds the bag's index
+// in memory (an entry per message, tens of bytes each), which rcm cannot
+// avoid through that library; rcm's own memory does not grow with the bag.
+// Throws InputError as described below; opening checks the topics and reads
+// up to the first JointState message.
+class BagRecordingReader : public MessageRecordingReader {
+ public:
+  // What was read so far; complete once read_chunk() has returned false.
+  const BagReadInfo& info() const;
+
+ protected:
+  std::size_t fill_chunk(Recording& chunk, std::size_t filled) override;
+
+ private:
+  friend std::unique_ptr<BagRecordingReader> open_bag_recording(const std::filesystem::path&, const BagReadOptions&,
+                                                                std::size_t);
+  BagRecordingReader(const std::filesystem::path& path, const BagReadOptions& options, std::size_t chunk_rows,
+                     std::unique_ptr<BagReadInfo> info, std::unique_ptr<MessageSource> source);
+  std::unique_ptr<BagReadInfo> info_;
+  std::filesystem::path path_;
+};
+std::unique_ptr<BagRecordingReader> open_bag_recording(const std::filesystem::path& path,
+                                                       const BagReadOptions& options = {},
+                                                       std::size_t chunk_rows = kDefaultChunkRows);
+
+// The whole recording. Throws InputError as described above (also for a file
+// that is not a bag, a topic that is absent or of another type).
 Recording load_bag_recording(const std::filesystem::path& path, const BagReadOptions& options = {},
                              BagReadInfo* info = nullptr);
 
-// Makes load_recording() (and so every command, and sessions whose manifest
-// names .bag files) read files ending in ".bag" with these options; the
+// Makes load_recording() and open_recording() (and so every command, and
+// sessions whose manifest names .bag files) read files ending in ".bag" with
+// these options; the
 // RecordingReadOptions of each call replace `options.read`.
 void register_bag_recording_reader(const BagReadOptions& options = {});
 
