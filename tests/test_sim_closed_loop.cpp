@@ -183,7 +183,12 @@ TEST(ClosedLoopBench, TheCorrectorsFlagsApplyToEveryScenario) {
   EXPECT_EQ(run_cli("simulate --experiment session --correlation-time 0.5" + other, text), 2);
   EXPECT_EQ(run_cli("simulate --experiment closed-loop --correlation-time 0" + other, text), 2);
   EXPECT_EQ(run_cli("simulate --model linear" + other, text), 2);
+  EXPECT_EQ(run_cli("simulate --experiment closed-loop --loop-delay -0.1" + other, text), 2);
+  EXPECT_EQ(run_cli("simulate --experiment session --stream-rate 1500" + other, text), 2);
   EXPECT_FALSE(fs::exists(dir.path() / "other"));
+  // An unknown motion is named before the session is made.
+  EXPECT_EQ(run_cli("simulate --experiment closed-loop --motions step,nonsense" + other, text), 2);
+  EXPECT_FALSE(fs::exists(dir.path() / "other" / "session"));
 }
 
 // Safety: the correction never makes the force worse than leaving the RCM
