@@ -183,7 +183,7 @@ def main():
     load = saved.get("load", os.getloadavg()[0]) if args.from_json else os.getloadavg()[0]
     minutes = (time.monotonic() - started) / 60
     head = (f"Measured by `bench/live_procedure_report.py --seeds {','.join(map(str, seeds))} --full-seeds "
-            f"{','.join(map(str, full_seeds))} --rate {args.rate:g} --time-scale {args.time_scale:g}` on {stamp}, "
+            f"{','.join(map(str, full_seeds)) or chr(39) * 2} --rate {args.rate:g} --time-scale {args.time_scale:g}` on {stamp}, "
             f"{cpu_model()}, {os.cpu_count()} cores shared with other work (load average {load:.1f} at the end), "
             f"{minutes:.0f} min in all. Each run: `rcm_sim_psm_dds --rate {args.rate:g} --teleop --software-rcm` "
             f"(its clock {args.time_scale:g} times the wall's) and `rcm_procedure_dds --simulator --power "
@@ -257,8 +257,8 @@ def main():
             "figure is one run.", "",
             *whole[:-1],
             whole[-1] + f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
-            f"span at {rate:g} Hz differ by {lost} in all; the largest pacing error "
-            f"{100 * max(pacing) if pacing else float('nan'):.4f} % of a file's duration.",
+            f"span at {rate:g} Hz differ by {lost} in all"
+            + (f"; the largest pacing error {100 * max(pacing):.4f} % of a file's duration." if pacing else "."),
             "",
             "A `servo_jp` that misses the arm's period moves it in a step: on a machine this busy the excitation "
             "streamed over DDS moves in such steps, the free-space model fitted on it errs by a newton-metre, and "
