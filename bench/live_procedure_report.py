@@ -120,6 +120,21 @@ def step_cost(build):
     return {b["name"]: b for b in json.loads(p.stdout)["benchmarks"]}
 
 
+def earlier_whole_procedure():
+    """The whole procedure's section of the block in docs/validation.md, under the date it was measured on."""
+    text = open(VALIDATION).read() if os.path.exists(VALIDATION) else ""
+    block = text.split("<!-- live-procedure:begin -->", 1)[-1].split("<!-- live-procedure:end -->", 1)[0]
+    if "| seed | `rcm setup` |" not in block or " on 20" not in block:
+        return ["The whole procedure from the excitation on: not run in this measurement (`--full-seeds`).", "", ""]
+    # Its date: that of the block, or the one it already carries from a run before.
+    date = block.split("(measured on 20" if "(measured on 20" in block else " on 20", 1)[1][:14]
+    start = block.index("The whole procedure from the excitation on")
+    section = block[start:].split(":\n", 1)[1].split("`rcm setup` ready on", 1)
+    ready = "`rcm setup` ready on" + section[1].split(". ", 1)[0] + ". "
+    return [f"The whole procedure from the excitation on (measured on 20{date}, an earlier build; this run "
+            "measured the loop only):", "", *section[0].strip().splitlines(), "", ready]
+
+
 def fmt_s(v):
     return "never" if v is None else f"{v:.1f}"
 
@@ -168,7 +183,7 @@ def main():
     load = saved.get("load", os.getloadavg()[0]) if args.from_json else os.getloadavg()[0]
     minutes = (time.monotonic() - started) / 60
     head = (f"Measured by `bench/live_procedure_report.py --seeds {','.join(map(str, seeds))} --full-seeds "
-            f"{','.join(map(str, full_seeds))} --rate {args.rate:g} --time-scale {args.time_scale:g}` on {stamp}, "
+            f"{','.join(map(str, full_seeds)) or chr(39) * 2} --rate {args.rate:g} --time-scale {args.time_scale:g}` on {stamp}, "
             f"{cpu_model()}, {os.cpu_count()} cores shared with other work (load average {load:.1f} at the end), "
             f"{minutes:.0f} min in all. Each run: `rcm_sim_psm_dds --rate {args.rate:g} --teleop --software-rcm` "
             f"(its clock {args.time_scale:g} times the wall's) and `rcm_procedure_dds --simulator --power "
@@ -225,6 +240,12 @@ def main():
     lost = sum(abs(p["samples_recorded"] - (round(p["recorded_span_s"] * rate) + 1)) for p in phases
                if p["samples_recorded"])
     pacing = [abs(p["pacing_error"]) for p in phases if p.get("pacing_error") is not None]
+    whole = ["The whole procedure from the excitation on:", "", *full, "",
+             f"`rcm setup` ready on {len(ready)} of {len(full_seeds)} seeds. "]
+    if not full_seeds:
+        # A run of the loop alone (--full-seeds ''): the whole procedure's
+        # section of the block already written stays, under its own date.
+        whole = earlier_whole_procedure()
     text = [head, "",
             "The loop on the large step, on the in-process bench's own setup (its session and free-space model, "
             "`rcm_procedure_dds --session --model-file`), so that only the processes differ: the estimator reads "
@@ -234,11 +255,10 @@ def main():
             "Beside the processes, the two runs of a seed differ in the rate the estimator reads (1.5 kHz against "
             "200 Hz), the teleoperation's draw and the sensors' noise; this table does not tell these apart. Each "
             "figure is one run.", "",
-            "The whole procedure from the excitation on:", "", *full, "",
-            f"`rcm setup` ready on {len(ready)} of {len(full_seeds)} seeds. "
-            f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
-            f"span at {rate:g} Hz differ by {lost} in all; the largest pacing error "
-            f"{100 * max(pacing) if pacing else float('nan'):.4f} % of a file's duration.",
+            *whole[:-1],
+            whole[-1] + f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
+            f"span at {rate:g} Hz differ by {lost} in all"
+            + (f"; the largest pacing error {100 * max(pacing):.4f} % of a file's duration." if pacing else "."),
             "",
             "A `servo_jp` that misses the arm's period moves it in a step: on a machine this busy the excitation "
             "streamed over DDS moves in such steps, the free-space model fitted on it errs by a newton-metre, and "

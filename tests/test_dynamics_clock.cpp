@@ -1,5 +1,6 @@
-// The networks' time: an output delay in seconds, and the clock that steps a
-// network at its training period whatever the rate of the samples it is given.
+// The models' time: an output delay in seconds, the clock that steps a network
+// at its training period whatever the rate of the samples it is given, and the
+// one that steps the linear model's friction states at the rate it was fitted at.
 
 #include <gtest/gtest.h>
 
@@ -263,4 +264,82 @@ TEST(OutputDelay, TheDelayIsInSecondsAtAnotherRate) {
     delayed.compute_step(*ws, p.time(t), q.data(), qd.data(), tau.data());
     if (t >= 4) ASSERT_EQ((tau.transpose() - streamed.row(t - 4)).cwiseAbs().maxCoeff(), 0.0) << t;
   }
+}
+
+namespace {
+// Coulomb friction through the Dahl state alone: tau_j = 0.5 z_j.
+LinearTorqueModel make_dahl_only_model(double period_s) {
+  TorqueModelInfo info;
+  info.num_joints = 3;
+  info.num_outputs = 3;
+  info.sample_period_s = period_s;
+  LinearTorqueParameters p;
+  p.gravity = Eigen::VectorXd::Zero(LinearTorqueModel::kGravityTerms);
+  p.armature = Eigen::VectorXd::Zero(3);
+  p.viscous = Eigen::VectorXd::Zero(3);
+  p.coulomb = Eigen::VectorXd::Constant(3, 0.5);
+  p.offset = Eigen::VectorXd::Zero(3);
+  p.dahl_displacement = Eigen::VectorXd::Constant(3, 5e-5);
+  return LinearTorqueModel(info, p);
+}
+// Joints that move forward for 1 s, then stand while their encoder blips up a
+// count (2e-5) for a millisecond in every 5 ms, between the samples of a
+// 200 Hz stream: what a still PSM's encoders do under their controller,
+// sampled at `rate_hz` for 3 s.
+Path3 make_still_with_blipping_encoder(double rate_hz) {
+  const auto T = static_cast<Eigen::Index>(std::llround(3.0 * rate_hz)) + 1;
+  Path3 p;
+  p.time.resize(T);
+  p.position.resize(T, 3);
+  p.velocity = Eigen::MatrixXd::Zero(T, 3);
+  for (Eigen::Index k = 0; k < T; ++k) {
+    const double t = static_cast<double>(k) / rate_hz;
+    const double phase = std::fmod(t + 1e-9, 0.005);
+    const bool blip = t > 1.0 && phase >= 0.0005 && phase < 0.0015;
+    p.time(k) = t;
+    p.position.row(k).setConstant(0.01 * std::min(t, 1.0) + (blip ? 2e-5 : 0.0));
+    if (t < 1.0) p.velocity.row(k).setConstant(0.01);
+  }
+  return p;
+}
+}  // namespace
+
+TEST(DahlClock, TheFrictionStateStepsAtTheFittedRateWhateverTheStreamsRate) {
+  // A model fitted at 200 Hz, streamed at 200 Hz and at 1.5 kHz over the same
+  // motion: the holding torque after a forward move, on a still arm whose
+  // encoder blips between the 200 Hz samples. Stepped on every sample at
+  // 1.5 kHz, each blip would move the Dahl state up and back, and the blips
+  // would erase the friction's memory of the move; on the model's clock the
+  // holding torque is the 200 Hz one.
+  const LinearTorqueModel model = make_dahl_only_model(0.005);
+  const Path3 slow = make_still_with_blipping_encoder(200.0), fast = make_still_with_blipping_encoder(1500.0);
+  const Eigen::MatrixXd at_200 = predict_torque(model, slow.time, slow.position, slow.velocity);
+  const Eigen::MatrixXd at_1500 = predict_torque(model, fast.time, fast.position, fast.velocity);
+  const Eigen::MatrixXd per_sample =
+      predict_torque(make_dahl_only_model(1.0 / 1500.0), fast.time, fast.position, fast.velocity);
+  const Eigen::Index last_slow = at_200.rows() - 1, last_fast = at_1500.rows() - 1;
+  EXPECT_NEAR(at_200(last_slow, 0), 0.5, 1e-6);  // the move's memory: z = 1
+  EXPECT_NEAR(at_1500(last_fast, 0), at_200(last_slow, 0), 1e-6);
+  EXPECT_LT(per_sample(last_fast, 0), 0.0);  // stepped on every blip: the memory erased
+  // While it moves, the state is the same whatever the sampling (exact over any displacement).
+  for (Eigen::Index k = 20; k < 200; k += 2)
+    EXPECT_NEAR(at_1500(k * 15 / 2, 1), at_200(k, 1), 1e-9) << k;
+}
+
+TEST(DahlClock, StepsEverySampleAtTheFittedRateAndSlowerAndRestartsWhenTimeGoesBack) {
+  DahlClock clock(0.005);
+  EXPECT_TRUE(clock.tick(10.0));
+  EXPECT_TRUE(clock.tick(10.0052));  // jittered stamps at the fitted rate
+  EXPECT_TRUE(clock.tick(10.0099));
+  EXPECT_TRUE(clock.tick(10.020));   // slower
+  EXPECT_FALSE(clock.tick(10.021));  // faster: within half a period of the last step
+  EXPECT_FALSE(clock.tick(10.0224));
+  EXPECT_TRUE(clock.tick(10.0251));
+  EXPECT_TRUE(clock.tick(3.0));  // another stream
+  EXPECT_FALSE(clock.tick(3.001));
+  EXPECT_TRUE(clock.tick(3.006));
+  int steps = 0;
+  DahlClock fast(0.005);
+  for (int k = 0; k <= 1500; ++k) steps += fast.tick(k / 1500.0);
+  EXPECT_NEAR(steps, 201, 1);  // a second at 1.5 kHz steps at 200 Hz
 }

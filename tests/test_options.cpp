@@ -16,6 +16,7 @@
 #include "rcm/estimation/online.hpp"
 #include "rcm/estimation/study.hpp"
 #include "rcm/io/recording.hpp"
+#include "rcm/sim/closed_loop.hpp"
 #include "run_cli.hpp"
 #include "temp_dir.hpp"
 #include "test_dynamics_synthetic.hpp"
@@ -44,7 +45,8 @@ using OptionsTypes =
     ::testing::Types<rcm::StudyOptions, rcm::JointEstimatorOptions, rcm::dynamics::FitOptions, rcm::TissueFitOptions,
                      rcm::TissuePairOptions, rcm::JacobianCheckOptions, rcm::ThreeStepOptions,
                      rcm::CoaxialProblemOptions, rcm::RestDetectionOptions, rcm::RecordingReadOptions,
-                     rcm::OnlineEstimatorOptions, rcm::OnlineReplayOptions, rcm::CorrectionOptions>;
+                     rcm::OnlineEstimatorOptions, rcm::OnlineReplayOptions, rcm::CorrectionOptions,
+                     rcm::sim::ClosedLoopOptions>;
 TYPED_TEST_SUITE(EveryOptionsTable, OptionsTypes);
 
 TYPED_TEST(EveryOptionsTable, DefaultsAreValidAndRoundTrip) {

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <iostream>
 #include <memory>
@@ -44,11 +45,14 @@ struct SimulateOptions {
   rcm::cli::OptionFlags<rcm::StudyOptions> free_space;  // closed-loop: the estimator's free-space model
   rcm::cli::OptionFlags<rcm::CorrectionOptions> correction;  // closed-loop: the corrector's gates, every scenario
   rcm::cli::OptionFlags<rcm::OnlineEstimatorOptions> online;  // closed-loop: over the bench's estimator options
+  rcm::cli::OptionFlags<rcm::sim::ClosedLoopOptions> loop;    // closed-loop: the loop across processes, modelled
+  std::string motions;                                         // closed-loop: these motions only
 };
 
 // The flags that only the closed-loop bench reads.
 const char* const kClosedLoopFlags[] = {"--model",          "--model-file",     "--tolerance",
-                                        "--compensate-limit", "--max-shift-rate", "--correlation-time"};
+                                        "--compensate-limit", "--max-shift-rate", "--correlation-time",
+                                        "--stream-rate",      "--loop-delay",     "--teleop-stream", "--motions"};
 
 std::string config_help() {
   const rcm::sim::SimConfig defaults = rcm::sim::make_default_config();
@@ -68,6 +72,29 @@ nlohmann::json vec_json(const Eigen::Vector3d& v) { return {v[0], v[1], v[2]}; }
 void run_closed_loop(const SimulateOptions& o, const rcm::CorrectionOptions& correction,
                      const rcm::sim::SimConfig& config, const std::filesystem::path& out_dir) {
   using namespace rcm::sim;
+  // The loop's options and motions first: a bad one is told before the session is made.
+  ClosedLoopOptions options;
+  o.loop.apply(options);
+  std::vector<IncisionMotion> motions = make_default_incision_motions();
+  if (!o.motions.empty()) {
+    std::vector<IncisionMotion> chosen;
+    std::vector<std::string> names;
+    for (std::size_t from = 0; from <= o.motions.size();) {
+      const std::size_t end = std::min(o.motions.find(',', from), o.motions.size());
+      names.push_back(o.motions.substr(from, end - from));
+      from = end + 1;
+    }
+    for (const std::string& name : names) {
+      const auto it = std::find_if(motions.begin(), motions.end(), [&](const auto& m) { return m.name == name; });
+      if (it == motions.end()) {
+        rcm::InputLocation loc;
+        loc.file = "--motions";
+        throw rcm::InputError(loc, "unknown motion '" + name + "'; known: step, drift, breathing, large_step");
+      }
+      chosen.push_back(*it);
+    }
+    motions = chosen;
+  }
   const auto start = std::chrono::steady_clock::now();
   SimConfig session_config = config;
   session_config.protocol.coaxial_offsets_m = {config.protocol.calibration_offset_m};
@@ -90,9 +117,7 @@ void run_closed_loop(const SimulateOptions& o, const rcm::CorrectionOptions& cor
   const rcm::OnlinePipeline pipeline(setup.free_space.model,
                                      rcm::OnlineEstimator(setup.incision, setup.tissue, online));
 
-  ClosedLoopOptions options;
   options.correction = correction;
-  std::vector<IncisionMotion> motions = make_default_incision_motions();
   // A limit or a rate given on the command line is the arm's in every
   // scenario, the large step's own included.
   for (IncisionMotion& m : motions) {
@@ -273,7 +298,8 @@ void run_simulate(const SimulateOptions& o) {
 
   if (o.experiment != "closed-loop")
     for (const char* flag : kClosedLoopFlags)
-      if (o.free_space.given(flag) || o.correction.given(flag) || o.online.given(flag)) {
+      if (o.free_space.given(flag) || o.correction.given(flag) || o.online.given(flag) || o.loop.given(flag) ||
+          (std::string(flag) == "--motions" && !o.motions.empty())) {
         rcm::InputLocation loc;
         loc.file = flag;
         throw rcm::InputError(loc, "only --experiment closed-loop reads it");
@@ -426,6 +452,14 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   opts->correction.add(cmd, "--max-shift-rate", {"max_rate_m_per_s"},
                        "closed-loop: how fast the arm shifts its RCM, in every scenario (unset: the large step "
                        "shifts at 20 mm/s)");
+  opts->loop.add(cmd, "--stream-rate", {"stream_rate_hz"},
+                 "closed-loop: the rate the estimator reads the arm (0: sensors.log_rate_hz)");
+  opts->loop.add(cmd, "--loop-delay", {"loop_delay_s"},
+                 "closed-loop: from a sample to its RCM shift taking effect on the arm, as across processes");
+  opts->loop.add(cmd, "--teleop-stream", {"teleoperation_stream"},
+                 "closed-loop: the surgeon's motion's draw (teleop:n: the simulated PSM's n-th)");
+  cmd->add_option("--motions", opts->motions,
+                  "closed-loop: these motions only (step,drift,breathing,large_step; default all)");
   opts->online.add(cmd, "--correlation-time", {"correlation_time_s"},
                    "closed-loop: the free-space model error's correlation time the estimator assumes (the "
                    "measurement variance is sigma^2 times it per second; unset: the study's)");

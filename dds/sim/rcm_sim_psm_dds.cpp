@@ -12,7 +12,9 @@
 #include <fmt/format.h>
 #include <time.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <map>
 #include <csignal>
 #include <cstdio>
@@ -48,6 +50,36 @@ Eigen::Vector3d parse_vector(const std::string& text, const std::string& flag) {
                           "expected three numbers separated by commas, got '" + text + "'");
   return v;
 }
+
+// Delays in the arm's time (s), in bins of 0.1 ms up to 1 s (and one beyond):
+// what a summary line needs, without keeping every one.
+class LoopDelayHistogram {
+ public:
+  void add(double delay_s) {
+    const double bin = std::floor(delay_s / kBin);
+    const auto i = static_cast<std::size_t>(std::clamp(bin, 0.0, static_cast<double>(kBins - 1)));
+    ++bins_[i];
+    ++count_;
+    max_s_ = std::max(max_s_, delay_s);
+  }
+  std::uint64_t count() const { return count_; }
+  double max_s() const { return max_s_; }
+  // The upper edge of the bin holding the q-quantile.
+  double get_quantile_s(double q) const {
+    const auto target = static_cast<std::uint64_t>(std::ceil(q * static_cast<double>(count_)));
+    std::uint64_t seen = 0;
+    for (std::size_t i = 0; i < kBins; ++i)
+      if ((seen += bins_[i]) >= std::max<std::uint64_t>(target, 1)) return static_cast<double>(i + 1) * kBin;
+    return max_s_;
+  }
+
+ private:
+  static constexpr double kBin = 1e-4;
+  static constexpr std::size_t kBins = 10001;
+  std::vector<std::uint64_t> bins_ = std::vector<std::uint64_t>(kBins, 0);
+  std::uint64_t count_ = 0;
+  double max_s_ = 0.0;
+};
 
 struct Options {
   std::string arm = "PSM1";
@@ -188,6 +220,9 @@ int run(int argc, char** argv) {
     for (std::size_t i = 0; i < n; ++i) t += fmt::format("{}{:.4g}", i ? ", " : "", x[i]);
     return " [" + t + "]";
   };
+  // The stamps: the wall clock at the arm's time 0 plus the arm's time.
+  const std::int64_t stamp0 = get_wall_ns();
+  LoopDelayHistogram shift_delay;
   auto drain_commands = [&] {
     take_all(command_r, [&](const void* p) {
       const auto& m = *static_cast<const crtk_msgs_msg_dds__StringStamped_*>(p);
@@ -218,13 +253,16 @@ int run(int argc, char** argv) {
       take_all(rcm_shift_r, [&](const void* p) {
         const auto& m = *static_cast<const geometry_msgs_msg_dds__Vector3Stamped_*>(p);
         const Eigen::Vector3d v(m.vector.x, m.vector.y, m.vector.z);
-        report("rcm/shift", psm.apply_rcm_shift(s, v), describe(v.data(), 3));
+        const PsmCommandVerdict verdict = psm.apply_rcm_shift(s, v);
+        report("rcm/shift", verdict, describe(v.data(), 3));
+        // The monitor stamps a shift with the sample it answers: the loop's
+        // delay, in the arm's time, from that sample to the shift taken here.
+        if (verdict == PsmCommandVerdict::accepted) shift_delay.add(s.time - (get_stamp_ns(m.header) - stamp0) * 1e-9);
       });
   };
 
   std::int64_t steady0 = get_steady_ns();
   const std::int64_t wall_start = steady0;
-  const std::int64_t stamp0 = get_wall_ns();
   std::int64_t last_state_wall = 0;
   rcm::sim::PsmOperatingState last_state = s.state;
   bool last_homed = false, last_busy = false;
@@ -303,6 +341,18 @@ int run(int argc, char** argv) {
                static_cast<unsigned long long>(c.jump), static_cast<unsigned long long>(c.not_ready),
                static_cast<unsigned long long>(c.unknown_command), static_cast<unsigned long long>(c.refused),
                static_cast<unsigned long long>(c.faults));
+  std::fprintf(stderr,
+               "rcm: servo_jp against the arm's periods: %llu periods held between two (no new setpoint; the longest "
+               "run %llu), %llu replaced before a period used them\n",
+               static_cast<unsigned long long>(c.servo_held_periods),
+               static_cast<unsigned long long>(c.servo_longest_gap_periods),
+               static_cast<unsigned long long>(c.servo_superseded));
+  if (shift_delay.count() > 0)
+    std::fprintf(stderr,
+                 "rcm: rcm/shift: %llu taken; from the sample a shift answers to the shift taken here (the arm's "
+                 "time): median %.1f ms, 95th percentile %.1f ms, max %.1f ms\n",
+                 static_cast<unsigned long long>(shift_delay.count()), 1e3 * shift_delay.get_quantile_s(0.5),
+                 1e3 * shift_delay.get_quantile_s(0.95), 1e3 * shift_delay.max_s());
   std::fprintf(stderr,
                "rcm: clock: %.3f s of the arm's time in %.3f s of wall time (%.3f times the wall; asked %g); behind "
                "the wall %llu times, %.3f s of the arm's time slipped\n",

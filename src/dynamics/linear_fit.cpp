@@ -97,9 +97,12 @@ class JointCandidateStats {
     for (const auto& seg : segments) {
       const auto& rec = recs[seg.recording];
       // The states need the history from the recording's start; the estimators
-      // are compute_step's, so that fit and prediction agree.
+      // and the Dahl states' clock are compute_step's, so that fit and
+      // prediction agree.
       for (auto& e : estimators) e.reset();
       z.setZero();
+      DahlClock dahl_clock(sample_period_s);
+      Eigen::Index dahl_last = 0;  // the sample of the states' last step
       Eigen::Index n = 0;
       auto flush = [&]() {
         C_.noalias() += F.topRows(n).transpose() * F.topRows(n);
@@ -108,9 +111,12 @@ class JointCandidateStats {
         n = 0;
       };
       for (Eigen::Index t = 0; t < seg.end; ++t) {
-        if (t > 0)
-          for (int k = 0; k < K_; ++k)
-            z[k] = compute_dahl_state(z[k], rec.position(t, j) - rec.position(t - 1, j), x_c[k]);
+        if (dahl_clock.tick(rec.time(t))) {
+          if (t > 0)
+            for (int k = 0; k < K_; ++k)
+              z[k] = compute_dahl_state(z[k], rec.position(t, j) - rec.position(dahl_last, j), x_c[k]);
+          dahl_last = t;
+        }
         for (int a = 0; a < causal; ++a) estimators[a].update(rec.time(t), rec.velocity(t, j));
         if (t < seg.begin) continue;
         if (j < 3) {

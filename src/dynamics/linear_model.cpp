@@ -33,11 +33,12 @@ using detail::kDefaultAccelerationWindow;
 using detail::G;
 
 struct LinearWorkspace final : TorqueModelWorkspace {
-  Eigen::VectorXd prev_q, z, z_slow, acceleration;
+  Eigen::VectorXd prev_q, z, z_slow, acceleration;  // prev_q: at the Dahl states' last step
   // M x H, a joint's elements contiguous: the travel terms' Dahl states.
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> z_travel;
   Eigen::VectorXd travel_row;     // one joint's travel regressor
   std::vector<AccelerationEstimator> qdd;
+  DahlClock dahl_clock;
   bool has_previous = false;
   Eigen::Matrix<double, 3, G> Y;
   Eigen::Matrix<double, 3, kInertiaTerms> Y_inertia;
@@ -161,6 +162,7 @@ std::unique_ptr<TorqueModelWorkspace> LinearTorqueModel::create_workspace() cons
   ws->z_slow = Eigen::VectorXd::Zero(M);
   ws->z_travel = Eigen::MatrixXd::Zero(M, parameters_.travel_hysteresis_displacement.cols());
   ws->travel_row = Eigen::VectorXd::Zero(travel_coefficients_.cols());
+  ws->dahl_clock = DahlClock(info().sample_period_s);
   ws->qdd.reserve(M);
   for (int j = 0; j < M; ++j)
     ws->qdd.emplace_back(parameters_.acceleration_window_s[j], parameters_.acceleration_filter_s[j],
@@ -186,6 +188,7 @@ void LinearTorqueModel::reset_state(TorqueModelWorkspace& workspace) const {
   ws.z_slow.setZero();
   ws.z_travel.setZero();
   for (auto& e : ws.qdd) e.reset();
+  ws.dahl_clock.reset();
   ws.has_previous = false;
   ws.pushed = ws.done = 0;
   ws.back = 1;
@@ -216,7 +219,7 @@ void LinearTorqueModel::compute_step_with_acceleration(TorqueModelWorkspace& wor
     ws.acceleration[j] = ws.qdd[j].update(t, qd[j]);
     if (qdd_batch && parameters_.batch_acceleration_window_s[j] > 0) ws.acceleration[j] = qdd_batch[j];
   }
-  compute_torque(workspace, q, qd, tau);
+  compute_torque(workspace, t, q, qd, tau);
 }
 
 void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, double t, const double* q,
@@ -244,7 +247,7 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
             c, oldest, ws.pushed, [&](std::int64_t k) { return row(k)[0]; },
             [&](std::int64_t k) { return row(k)[1 + N + j]; });
       }
-      compute_torque(workspace, r + 1, r + 1 + N, ws.delayed_tau.data());
+      compute_torque(workspace, t_c, r + 1, r + 1 + N, ws.delayed_tau.data());
       ws.done = c + 1;
       if (ws.run_count < static_cast<int>(ws.run_time.size())) {
         ws.run_time[static_cast<std::size_t>(ws.run_count)] = t_c;
@@ -282,13 +285,14 @@ void LinearTorqueModel::compute_delayed_step(TorqueModelWorkspace& workspace, do
   std::copy(ws.delayed_tau.data(), ws.delayed_tau.data() + M, tau);
 }
 
-void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, const double* q, const double* qd,
+void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, double t, const double* q, const double* qd,
                                        double* tau) const {
   auto& ws = static_cast<LinearWorkspace&>(workspace);
   const auto& p = parameters_;
   compute_gravity_regressor(q, ws.Y);
+  const bool dahl_step = ws.dahl_clock.tick(t);
   for (int j = 0; j < num_outputs(); ++j) {
-    if (ws.has_previous) {
+    if (ws.has_previous && dahl_step) {
       ws.z[j] = compute_dahl_state(ws.z[j], q[j] - ws.prev_q[j], p.dahl_displacement[j]);
       if (has_extra_friction_)
         ws.z_slow[j] = compute_dahl_state(ws.z_slow[j], q[j] - ws.prev_q[j], p.dahl_displacement_slow[j]);
@@ -304,7 +308,7 @@ void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, const do
     if (p.stiffness.size()) value += p.stiffness[j] * q[j];
     if (!has_travel_.empty() && has_travel_[static_cast<std::size_t>(j)]) {
       const Eigen::Index H = p.travel_hysteresis_displacement.cols();
-      for (Eigen::Index h = 0; h < H && ws.has_previous; ++h)
+      for (Eigen::Index h = 0; h < H && ws.has_previous && dahl_step; ++h)
         ws.z_travel(j, h) =
             compute_dahl_state(ws.z_travel(j, h), q[j] - ws.prev_q[j], p.travel_hysteresis_displacement(j, h));
       compute_travel_regressor(q[j], p.travel_range(j, 0), p.travel_range(j, 1), ws.z_travel.row(j).data(),
@@ -314,7 +318,7 @@ void LinearTorqueModel::compute_torque(TorqueModelWorkspace& workspace, const do
       value += travel_coefficients_.row(j).dot(ws.travel_row.transpose());
     }
     tau[j] = value;
-    ws.prev_q[j] = q[j];
+    if (dahl_step) ws.prev_q[j] = q[j];
   }
   if (p.inertia.size() == kInertiaTerms) {
     compute_inertia_regressor(q, qd, ws.acceleration.data(), ws.Y_inertia);

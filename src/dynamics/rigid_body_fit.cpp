@@ -142,10 +142,13 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
     z.setZero();
     z_slow.setZero();
     z_travel.setZero();
+    DahlClock dahl_clock(sample_period_s);  // the model's (linear_model.hpp)
+    Eigen::Index dahl_last = 0;
     for (Eigen::Index t = 0; t < needed[r]; ++t) {
+      const bool dahl_step = dahl_clock.tick(rec.time(t));
       for (int j = 0; j < M; ++j) {
-        if (t > 0) {
-          const double dq = rec.position(t, j) - rec.position(t - 1, j);
+        if (t > 0 && dahl_step) {
+          const double dq = rec.position(t, j) - rec.position(dahl_last, j);
           z[j] = compute_dahl_state(z[j], dq, choices[j].dahl_displacement);
           z_slow[j] = compute_dahl_state(z_slow[j], dq, choices[j].slow_dahl_displacement);
           if (choices[j].travel)
@@ -154,6 +157,7 @@ std::vector<ModelStats> accumulate_rigid_body_stats(const std::vector<Recording>
         }
         estimators[j].update(rec.time(t), rec.velocity(t, j));
       }
+      if (dahl_step) dahl_last = t;
       const std::uint32_t in = member[r][static_cast<std::size_t>(t)];
       if (!in) continue;
       for (int j = 0; j < M; ++j) qdd[j] = batch[j].size() ? batch[j](t) : estimators[j].value();

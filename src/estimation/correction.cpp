@@ -105,6 +105,12 @@ bool starts_action(const MoveBounds& b, double tolerance) { return b.distance > 
 
 const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const OnlineOutput& estimate,
                                                          const Eigen::Vector3d& applied_base) const {
+  return compute_correction(ws, estimate, applied_base, applied_base);
+}
+
+const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const OnlineOutput& estimate,
+                                                         const Eigen::Vector3d& applied_base,
+                                                         const Eigen::Vector3d& in_effect_base) const {
   const CorrectionOptions& o = options_;
   CorrectionOutput& out = ws.output;
   const CorrectionAction previous_action = out.action;
@@ -121,7 +127,8 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
   out.time = estimate.time;
   out.step_base.setZero();
   out.applied_base = applied_base;
-  const Eigen::Vector3d& p = estimate.misalignment_m;
+  // The misalignment left once the shift on its way has been taken.
+  const Eigen::Vector3d p = estimate.misalignment_m - incision_.R_base_inc.transpose() * (applied_base - in_effect_base);
   const Eigen::Vector3d& sd = estimate.sd_m;
   const bool finite = p.allFinite() && estimate.covariance_m2.allFinite() && applied_base.allFinite();
   const MoveBounds b = finite ? compute_move_bounds(p, estimate.covariance_m2, o.confidence_z) : MoveBounds{};
@@ -188,13 +195,21 @@ void CorrectionLoop::reset(Workspace& ws) const {
 
 const CorrectionOutput& CorrectionLoop::compute_sample(Workspace& ws, double time, const double* q, const double* qd,
                                                        const double* effort, const Eigen::Vector3d& applied_base) const {
-  if (!applied_base.allFinite()) throw std::invalid_argument("CorrectionLoop: the applied shift must be finite");
-  if (applied_base != ws.known_shift_base) {
-    pipeline_.apply_rcm_shift(ws.pipeline, applied_base - ws.known_shift_base);
-    ws.known_shift_base = applied_base;
+  return compute_sample(ws, time, q, qd, effort, applied_base, applied_base);
+}
+
+const CorrectionOutput& CorrectionLoop::compute_sample(Workspace& ws, double time, const double* q, const double* qd,
+                                                       const double* effort, const Eigen::Vector3d& applied_base,
+                                                       const Eigen::Vector3d& in_effect_base) const {
+  if (!applied_base.allFinite() || !in_effect_base.allFinite())
+    throw std::invalid_argument("CorrectionLoop: the commanded shift and the one in effect must be finite");
+  // The estimator's offsets are relative to the RCM the arm had at the sample.
+  if (in_effect_base != ws.known_shift_base) {
+    pipeline_.apply_rcm_shift(ws.pipeline, in_effect_base - ws.known_shift_base);
+    ws.known_shift_base = in_effect_base;
   }
   const OnlineOutput& estimate = pipeline_.compute_sample(ws.pipeline, time, q, qd, effort);
-  return corrector_.compute_correction(ws.corrector, estimate, ws.known_shift_base);
+  return corrector_.compute_correction(ws.corrector, estimate, applied_base, in_effect_base);
 }
 
 namespace {

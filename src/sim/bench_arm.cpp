@@ -20,6 +20,10 @@ BenchArm::BenchArm(const SimConfig& config)
       dt(1.0 / config.controller.physics_rate_hz),
       velocity_filter_alpha(1.0 - std::exp(-2.0 * M_PI * config.controller.velocity_filter_hz * dt)) {}
 
+int get_physics_steps_per_period(const SimConfig& config, double rate_hz) {
+  return std::max(1, static_cast<int>(std::ceil(config.controller.physics_rate_hz / rate_hz - 1e-9)));
+}
+
 Eigen::Vector3d compute_measured_position(const SensorParams& sensors, const Eigen::Vector3d& qm) {
   if (!sensors.noise) return qm;
   Eigen::Vector3d m;

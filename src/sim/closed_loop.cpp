@@ -4,9 +4,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <stdexcept>
 
 #include "rcm/kinematics/incision.hpp"
 #include "rcm/sim/bench.hpp"
+#include "rcm/sim/bench_arm.hpp"
 #include "rcm/sim/tissue.hpp"
 
 namespace rcm::sim {
@@ -68,13 +71,24 @@ std::vector<IncisionMotion> make_default_incision_motions() {
 
 namespace {
 
-ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const IncisionMotion& motion,
+// The configuration with the loop's stream rate (stream_rate_hz) and a physics
+// rate that the stream's period divides.
+SimConfig get_stream_config(const SimConfig& config, double stream_rate_hz) {
+  if (!(stream_rate_hz > 0)) return config;
+  SimConfig c = config;
+  c.sensors.log_rate_hz = stream_rate_hz;
+  c.controller.physics_rate_hz = stream_rate_hz * get_physics_steps_per_period(config, stream_rate_hz);
+  return c;
+}
+
+ClosedLoopRun run_one(const SimConfig& base_config, const CorrectionLoop& loop, const IncisionMotion& motion,
                       const ClosedLoopOptions& o, bool closed) {
+  const SimConfig config = get_stream_config(base_config, o.stream_rate_hz);
   const Eigen::Vector3d& q0 = config.protocol.q0;
   const Eigen::Matrix3d R = loop.corrector().incision().R_base_inc;
   ReferenceTrajectory reference;
   if (o.teleoperation)
-    reference = make_teleop_reference(config, "closed-loop", o.duration_s);
+    reference = make_teleop_reference(config, o.teleoperation_stream, o.duration_s);
   else
     reference.add_hold(0.0, q0);
   // The tissue's own parameters; its anchor follows the hooks.
@@ -83,10 +97,24 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   ClosedLoopRun run;
   run.closed = closed;
   CorrectionLoop::Workspace ws = loop.create_workspace();
-  Eigen::Vector3d shift_base = Eigen::Vector3d::Zero();  // the RCM setpoint minus the docked RCM
-  // The setpoint jumps by each sample's step (the elastic force sees it at
-  // once); the damping sees that step's rate over the following sample period.
+  // The shift commanded, and the one in effect on the arm (the RCM setpoint
+  // minus the docked RCM), which the arm reports with each sample and the
+  // estimator takes. Without a loop delay the two are one.
+  Eigen::Vector3d commanded_base = Eigen::Vector3d::Zero(), shift_base = Eigen::Vector3d::Zero();
+  // The setpoint jumps by each step (the elastic force sees it at once); the
+  // damping sees that step's rate over the following sample period.
   Eigen::Vector3d shift_rate_base = Eigen::Vector3d::Zero();
+  double shift_rate_until = -1.0;
+  // Commands on their way to the arm (loop_delay_s > 0), oldest first: a ring
+  // as long as the delay holds samples.
+  struct PendingShift {
+    double effective_s = 0.0, sample_dt = 0.0;
+    Eigen::Vector3d shift_base, step_base;
+  };
+  const double sample_period = 1.0 / config.sensors.log_rate_hz;
+  std::vector<PendingShift> pending(
+      o.loop_delay_s > 0 ? static_cast<std::size_t>(std::ceil(o.loop_delay_s / sample_period)) + 2 : 0);
+  std::size_t pending_first = 0, pending_count = 0;
   double last_sample_t = 0.0;
   bool have_sample = false;
   const double series_dt = 1.0 / o.series_rate_hz;
@@ -97,27 +125,59 @@ ClosedLoopRun run_one(const SimConfig& config, const CorrectionLoop& loop, const
   CorrectionAction last_action = CorrectionAction::hold;
   HoldReason last_reason = HoldReason::no_onset;
 
+  // The commands due on the arm by time t take effect, each metered against
+  // the true misalignment left just before it. Both hooks call it: the order
+  // in which a step asks for the misalignment and its rate is not fixed.
+  auto take_due_shifts = [&](double t) {
+    while (pending_count > 0 && pending[pending_first].effective_s <= t) {
+      const PendingShift& p = pending[pending_first];
+      meter.add_move(p.step_base, R * (motion.get_misalignment(t) - R.transpose() * shift_base));
+      shift_base = p.shift_base;
+      shift_rate_base = p.step_base / p.sample_dt;
+      shift_rate_until = t + p.sample_dt;
+      pending_first = (pending_first + 1) % pending.size();
+      --pending_count;
+    }
+  };
   RunHooks hooks;
   hooks.get_misalignment = [&](double t) -> Eigen::Vector3d {
+    take_due_shifts(t);
     return motion.get_misalignment(t) - R.transpose() * shift_base;
   };
   hooks.get_misalignment_rate = [&](double t) -> Eigen::Vector3d {
-    return motion.get_misalignment_rate(t) - R.transpose() * shift_rate_base;
+    take_due_shifts(t);
+    const Eigen::Vector3d rate = t < shift_rate_until ? shift_rate_base : Eigen::Vector3d::Zero();
+    return motion.get_misalignment_rate(t) - R.transpose() * rate;
   };
   hooks.on_sample = [&](double t, const Eigen::Vector3d& q, const Eigen::Vector3d& qd, const Eigen::Vector3d& effort,
                         const Eigen::Vector3d& f_true) {
     const Eigen::Vector3d remaining_inc = motion.get_misalignment(t) - R.transpose() * shift_base;
     const CorrectionOutput& c =
-        loop.compute_sample(ws, t, q.data(), qd.data(), effort.data(), closed ? shift_base : Eigen::Vector3d::Zero());
+        loop.compute_sample(ws, t, q.data(), qd.data(), effort.data(), commanded_base, shift_base);
     const double sample_dt = have_sample ? t - last_sample_t : 0.0;
     have_sample = true;
     last_sample_t = t;
-    shift_rate_base.setZero();
+    if (pending.empty()) shift_rate_until = -1.0;
     if (!c.step_base.isZero()) {
-      meter.add_move(c.step_base, R * remaining_inc);
-      if (closed) {  // the setpoint moves
-        shift_base = c.applied_base;
-        if (sample_dt > 0) shift_rate_base = c.step_base / sample_dt;
+      if (pending.empty()) {
+        meter.add_move(c.step_base, R * remaining_inc);
+        if (closed) {  // the setpoint moves
+          commanded_base = shift_base = c.applied_base;
+          if (sample_dt > 0) {
+            shift_rate_base = c.step_base / sample_dt;
+            shift_rate_until = std::numeric_limits<double>::infinity();  // until the next sample
+          }
+        }
+      } else if (closed) {  // the command leaves; the arm takes it loop_delay_s later
+        commanded_base = c.applied_base;
+        if (pending_count == pending.size())
+          throw std::logic_error("closed loop: more shifts on their way than the delay holds samples");
+        pending[(pending_first + pending_count) % pending.size()] = {t + o.loop_delay_s,
+                                                                      sample_dt > 0 ? sample_dt : sample_period,
+                                                                      c.applied_base, c.step_base};
+        ++pending_count;
+      } else {
+        meter.add_move(c.step_base, R * remaining_inc);
       }
     }
     if (c.action != last_action || c.reason != last_reason || run.advice.empty()) {
@@ -194,6 +254,47 @@ void ClosedLoopMeter::get_figures(ClosedLoopRun& run) const {
   run.wrong_direction_moves = wrong_;
 }
 
+void ClosedLoopOptions::check() const {
+  auto fail = [](const char* what) { throw std::invalid_argument(std::string("ClosedLoopOptions: ") + what); };
+  if (!(duration_s > 20.0)) fail("duration_s must be > 20");
+  if (!(settled_after_s >= 0)) fail("settled_after_s must be >= 0");
+  if (!(force_threshold_n > 0)) fail("force_threshold_n must be > 0");
+  if (!(series_rate_hz > 0)) fail("series_rate_hz must be > 0");
+  if (!(stream_rate_hz == 0 || (stream_rate_hz >= 10 && stream_rate_hz <= 5000)))
+    fail("stream_rate_hz must be 0 (the configuration's) or in [10, 5000] Hz");
+  if (!(loop_delay_s >= 0 && loop_delay_s <= 10)) fail("loop_delay_s must be in [0, 10] s");
+  if (teleoperation_stream.empty()) fail("teleoperation_stream must not be empty");
+  correction.check();
+}
+
+const OptionTable<ClosedLoopOptions>& get_option_table(OptionTag<ClosedLoopOptions>) {
+  static const auto table =
+      OptionTable<ClosedLoopOptions>("ClosedLoopOptions")
+          .add("duration_s", &ClosedLoopOptions::duration_s, "each run's length; the motions start at 20 s", "s",
+               OptionLimits::above(20))
+          .add("settled_after_s", &ClosedLoopOptions::settled_after_s,
+               "the RMS force after settling is over the run from the motion's onset plus this", "s",
+               OptionLimits::at_least(0))
+          .add("force_threshold_n", &ClosedLoopOptions::force_threshold_n,
+               "time to below: from the onset until the true force stays below this", "N", OptionLimits::above(0))
+          .add("series_rate_hz", &ClosedLoopOptions::series_rate_hz, "rate of the time series kept for the figures",
+               "Hz", OptionLimits::above(0))
+          .add("teleoperation", &ClosedLoopOptions::teleoperation,
+               "the surgeon's motion about the RCM (false: the arm holds at q0)", "")
+          .add("stream_rate_hz", &ClosedLoopOptions::stream_rate_hz,
+               "the rate the estimator reads the arm (0: the configuration's sensors.log_rate_hz; the physics rate "
+               "becomes a whole multiple of it)",
+               "Hz", OptionLimits::at_least(0))
+          .add("loop_delay_s", &ClosedLoopOptions::loop_delay_s,
+               "the arm's time from a sample to the RCM shift it leads to being in effect on the arm (a loop across "
+               "processes); the estimator takes the shift the arm reports with each sample",
+               "s", OptionLimits::within(0, 10))
+          .add("teleoperation_stream", &ClosedLoopOptions::teleoperation_stream,
+               "the draw of the surgeon's motion (the simulated PSM's n-th spell of teleoperation: teleop:n)", "")
+          .add_check([](const ClosedLoopOptions& o) { o.check(); });
+  return table;
+}
+
 OnlineEstimatorOptions make_closed_loop_online_options(const JointEstimatorOptions& joint) {
   OnlineEstimatorOptions o = make_online_options(joint);
   o.jump_threshold = 4.0;
@@ -203,8 +304,7 @@ OnlineEstimatorOptions make_closed_loop_online_options(const JointEstimatorOptio
 std::vector<ClosedLoopScenario> run_closed_loop_experiment(const SimConfig& config, const OnlinePipeline& pipeline,
                                                            const std::vector<IncisionMotion>& motions,
                                                            const ClosedLoopOptions& options) {
-  if (!(options.duration_s > 20.0)) throw std::invalid_argument("ClosedLoopOptions: duration_s must be > 20");
-  if (!(options.series_rate_hz > 0)) throw std::invalid_argument("ClosedLoopOptions: series_rate_hz must be > 0");
+  options.check();
   std::vector<ClosedLoopScenario> out;
   for (const IncisionMotion& m : motions) {
     const CorrectionLoop loop(pipeline,
@@ -249,6 +349,9 @@ nlohmann::json to_json(const std::vector<ClosedLoopScenario>& scenarios, const C
   j["duration_s"] = o.duration_s;
   j["settled_after_s"] = o.settled_after_s;
   j["force_threshold_n"] = o.force_threshold_n;
+  j["stream_rate_hz"] = o.stream_rate_hz;
+  j["loop_delay_s"] = o.loop_delay_s;
+  j["teleoperation_stream"] = o.teleoperation_stream;
   j["correction"] = {{"tolerance_m", o.correction.tolerance_m},
                      {"compensate_limit_m", o.correction.compensate_limit_m},
                      {"max_rate_m_per_s", o.correction.max_rate_m_per_s}};

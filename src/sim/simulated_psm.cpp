@@ -82,12 +82,6 @@ void SimulatedPsmOptions::check(const std::function<InputLocation(const std::str
 
 namespace {
 
-// Physics steps per publishing period: a physics rate that is a whole
-// multiple of the publishing rate, at least the bench's own.
-int get_substeps(const SimConfig& config, double rate_hz) {
-  return std::max(1, static_cast<int>(std::ceil(config.controller.physics_rate_hz / rate_hz - 1e-9)));
-}
-
 SimConfig with_physics_rate(SimConfig config, double physics_rate_hz) {
   config.controller.physics_rate_hz = physics_rate_hz;
   return config;
@@ -97,7 +91,7 @@ SimConfig with_physics_rate(SimConfig config, double physics_rate_hz) {
 
 SimulatedPsm::SimulatedPsm(const SimConfig& config, const SimulatedPsmOptions& options)
     : options_(options),
-      substeps_(get_substeps(config, options.rate_hz)),
+      substeps_(get_physics_steps_per_period(config, options.rate_hz)),
       config_(with_physics_rate(config, options.rate_hz * substeps_)),
       arm_(config_),
       motions_(make_default_incision_motions()) {
@@ -239,6 +233,13 @@ void SimulatedPsm::fill_sample(SimulatedPsmState& s) const {
 }
 
 void SimulatedPsm::compute_step(SimulatedPsmState& s) const {
+  if (s.motion == PsmMotion::servo) {
+    if (s.servo_this_period == 0) ++s.servo_gap;
+    else s.counters.servo_superseded += static_cast<std::uint64_t>(s.servo_this_period - 1);
+  } else {
+    s.servo_gap = 0;
+  }
+  s.servo_this_period = 0;
   for (int i = 0; i < substeps_; ++i) {
     const double t = static_cast<double>(s.periods * static_cast<std::uint64_t>(substeps_) +
                                          static_cast<std::uint64_t>(i)) * arm_.dt;
@@ -332,6 +333,12 @@ PsmCommandVerdict SimulatedPsm::apply_servo_jp(SimulatedPsmState& s, const doubl
     s.setpoint[j] = p[j];
     s.setpoint_velocity[j] = nv ? v[j] : 0.0;
   }
+  if (s.motion == PsmMotion::servo && s.servo_gap > 0) {
+    s.counters.servo_held_periods += s.servo_gap;
+    s.counters.servo_longest_gap_periods = std::max(s.counters.servo_longest_gap_periods, s.servo_gap);
+  }
+  s.servo_gap = 0;
+  ++s.servo_this_period;
   s.motion = PsmMotion::servo;
   s.servo_time = s.time;
   s.last_command_time = s.time;

@@ -104,10 +104,18 @@ class RcmCorrector {
   RcmCorrector(const IncisionFrame& incision, const CorrectionOptions& options);
   Workspace create_workspace() const;
   void reset(Workspace& workspace) const;
-  // The action after one estimate, given the software shift of the RCM in
-  // effect (base frame; zero when nothing shifts it). No allocation.
+  // The action after one estimate, given the software shift of the RCM
+  // commanded so far (base frame; zero when nothing shifts it). No
+  // allocation. Across processes the arm takes a shift a while after it is
+  // commanded: `in_effect_base` is the shift the arm reports in effect at the
+  // estimate's sample (the estimate is relative to that RCM; default: the
+  // commanded one). The part still on its way counts as made, so that a delay
+  // slows the correction down but never makes it overshoot.
   const CorrectionOutput& compute_correction(Workspace& workspace, const OnlineOutput& estimate,
                                              const Eigen::Vector3d& applied_base = Eigen::Vector3d::Zero()) const;
+  const CorrectionOutput& compute_correction(Workspace& workspace, const OnlineOutput& estimate,
+                                             const Eigen::Vector3d& applied_base,
+                                             const Eigen::Vector3d& in_effect_base) const;
   const IncisionFrame& incision() const { return incision_; }
   const CorrectionOptions& options() const { return options_; }
 
@@ -133,9 +141,14 @@ class CorrectionLoop {
   Workspace create_workspace() const;
   void reset(Workspace& workspace) const;
   // As OnlinePipeline::compute_sample; returns the correction, whose estimate
-  // is get_online_output(workspace.pipeline.estimator).
+  // is get_online_output(workspace.pipeline.estimator). `applied_base`: the
+  // shift commanded so far; `in_effect_base`: the one the arm had at this
+  // sample (RcmCorrector::compute_correction; default: the commanded one).
   const CorrectionOutput& compute_sample(Workspace& workspace, double time, const double* q, const double* qd,
                                          const double* effort, const Eigen::Vector3d& applied_base) const;
+  const CorrectionOutput& compute_sample(Workspace& workspace, double time, const double* q, const double* qd,
+                                         const double* effort, const Eigen::Vector3d& applied_base,
+                                         const Eigen::Vector3d& in_effect_base) const;
   const OnlinePipeline& pipeline() const { return pipeline_; }
   const RcmCorrector& corrector() const { return corrector_; }
 

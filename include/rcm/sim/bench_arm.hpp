@@ -38,6 +38,11 @@ struct BenchArmState {
   Eigen::Vector3d velocity_filtered = Eigen::Vector3d::Zero();
 };
 
+// Physics steps per period of a stream at `rate_hz`: the smallest whole number
+// that steps at least as fast as the configuration's physics rate (a physics
+// rate that the stream's period divides).
+int get_physics_steps_per_period(const SimConfig& config, double rate_hz);
+
 // At rest at link position q (make_plant_state_at_rest), the encoders read.
 BenchArmState make_bench_arm_state(const BenchArm& arm, const Eigen::Vector3d& q);
 

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "rcm/common/options.hpp"
 #include "rcm/estimation/correction.hpp"
 #include "rcm/estimation/online.hpp"
 #include "rcm/io/plot.hpp"
@@ -65,8 +66,29 @@ struct ClosedLoopOptions {
   double force_threshold_n = 2.0;  // time_to_below: from onset until |f| stays below this
   double series_rate_hz = 20.0;    // of the time series kept for the figures
   bool teleoperation = true;       // false: the arm holds at q0 (no motion, no information)
+  // The loop as it runs across processes (the simulated PSM, the monitor and
+  // the procedure over DDS), one difference at a time:
+  // - stream_rate_hz: the rate the estimator reads the arm (0: the
+  //   configuration's sensors.log_rate_hz); the physics then runs at the
+  //   smallest whole multiple of it at or above the configuration's rate, as
+  //   the simulated PSM's does;
+  // - loop_delay_s: the arm's time from a sample to the RCM shift it leads to
+  //   being in effect on the arm (the sample's way to the estimator, the
+  //   estimate, the command's way back). The estimator takes the shift the arm
+  //   reports with each sample, and the corrector counts the part on its way
+  //   as made (RcmCorrector::compute_correction), as the monitor does; the
+  //   moves are metered when they take effect, as across processes;
+  // - teleoperation_stream: the draw of the surgeon's motion
+  //   (derive_seed(seed, "path:" + stream)); the simulated PSM's n-th spell of
+  //   teleoperation is "teleop:n".
+  double stream_rate_hz = 0.0;
+  double loop_delay_s = 0.0;
+  std::string teleoperation_stream = "closed-loop";
   CorrectionOptions correction;
+  // Throws std::invalid_argument for a value out of range.
+  void check() const;
 };
+const OptionTable<ClosedLoopOptions>& get_option_table(OptionTag<ClosedLoopOptions>);
 
 struct ClosedLoopRun {
   bool closed = false;

@@ -107,6 +107,11 @@ struct PsmCounters {
   std::uint64_t wrong_joint_count = 0, not_finite = 0, beyond_limits = 0, jump = 0, not_ready = 0,
                 unknown_command = 0, refused = 0;
   std::uint64_t faults = 0;  // times the arm went to FAULT
+  // How a servo_jp stream met the arm's periods (a setpoint is taken as it
+  // comes): periods between two servo_jp that began without a new one (the
+  // setpoint held), servo_jp replaced by a later one before any period used
+  // them (rows skipped), and the most periods in a row without one.
+  std::uint64_t servo_held_periods = 0, servo_superseded = 0, servo_longest_gap_periods = 0;
   std::uint64_t get_rejected() const {
     return wrong_joint_count + not_finite + beyond_limits + jump + not_ready + unknown_command + refused;
   }
@@ -125,6 +130,8 @@ struct SimulatedPsmState {
   // The setpoint of every joint (setpoint_js); joints 1-3 are the controller's reference.
   PsmVector setpoint = PsmVector::Zero(), setpoint_velocity = PsmVector::Zero();
   double servo_time = 0.0;  // of the last servo_jp: its velocity holds for two periods
+  int servo_this_period = 0;       // servo_jp taken since the last period began
+  std::uint64_t servo_gap = 0;     // periods in a row without one, in servo motion
   // move_jp and home: joints 1-3 a quintic, the wrist along the same profile.
   QuinticMove move;
   PsmVector move_from = PsmVector::Zero(), move_to = PsmVector::Zero();
