@@ -104,9 +104,8 @@ const bool registered = rcm::cli::register_command({"batch", 65, [](CLI::App& ap
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "batch",
-      "Many sessions as `rcm run` runs one, side by side on Dask (a local cluster or a scheduler): writes "
-      "OUT/<session folder>/ per session and summary.csv/.md/.json/.png across them; exit 0 when every session "
-      "was estimated, 2 when some failed on bad input, 1 on another failure (the failed sessions are listed)");
+      "Many sessions as `rcm run` runs one, side by side on Dask: OUT/<session folder>/ each, and a summary "
+      "across them; exit 2 when some failed on bad input, 1 on another failure (each one listed)");
   cmd->add_option("SESSIONS", o->sessions,
                   "rcm-session/1 manifests; each one's results go to OUT/<the folder holding it>/, so those folders' "
                   "names must differ")
@@ -132,11 +131,8 @@ const bool registered = rcm::cli::register_command({"batch", 65, [](CLI::App& ap
   o->study.add(cmd, "--D0", {"three_step.D_initial"}, "initial guess of D (unset: the middle of its bounds)");
   rcm::cli::add_options_file_flag(cmd, o->options_file);
   cmd->add_flag("--json", o->json, "print summary.json on stdout instead of summary.md");
-  cmd->footer(std::string("Python: RCM_PYTHON, else the interpreter rcm was built for (Debian's /usr/bin/python3), "
-                          "with python3-dask and python3-distributed; the package rcm installed beside this program "
-                          "or in its build tree, else on the interpreter's own path. Sessions are read by the workers "
-                          "at their absolute paths (on a cluster, a file system every machine sees); the results come "
-                          "back here.\n") +
+  cmd->footer(std::string("Python: RCM_PYTHON, else the one rcm was built for, with python3-dask and "
+                          "python3-distributed. Workers read the sessions at their absolute paths.\n") +
               cmd->get_footer());
   cmd->callback([o] { run(*o); });
 }});

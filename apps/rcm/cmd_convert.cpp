@@ -243,9 +243,8 @@ const bool registered = rcm::cli::register_command({"convert", 15, [](CLI::App& 
   cmd->add_option("IN", o->in, "input: rosbag2 directory, .db3 or .mcap file, ROS 1 .bag, or (to a bag) a CSV recording")
       ->required();
   cmd->add_option("OUT", o->out,
-                  "output: an rcm CSV recording, or a rosbag2 storage file (.mcap: MCAP, zstd chunks; .db3: SQLite, "
-                  "Humble's layout) with the JointState topic --topic and, when the input has force, a WrenchStamped "
-                  "topic (--force-topic, default /PSM1/body/measured_cf)")
+                  "output: an rcm CSV recording, or a rosbag2 file (.mcap, .db3) with the JointState topic --topic "
+                  "and the force's WrenchStamped topic (--force-topic, default /PSM1/body/measured_cf)")
       ->required();
   cmd->add_option("--time-origin-ns", o->time_origin_ns,
                   "to a bag: header.stamp of time 0, ns (a zero stamp is invalid on ROS 2; default: a bag input's own "

@@ -339,28 +339,23 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
                   "lstm, hybrid: extra inputs, the difference of consecutive qdot low-passed with each time "
                   "constant (s) of this comma-separated list, or 'none' (default: 0.03 for lstm, none for hybrid)");
   fit->add_option("--dahl-features", args->dahl_features,
-                  "lstm, hybrid: extra inputs, Dahl friction states of each joint with characteristic "
-                  "displacement f x its range of motion for each f of this comma-separated list, or 'none' "
-                  "(default: 3e-5,3e-4,3e-3 for lstm, none for hybrid)");
+                  "lstm, hybrid: Dahl friction inputs of displacement f x the joint's range, per f of this "
+                  "list, or 'none' (default: 3e-5,3e-4,3e-3 for lstm, none for hybrid)");
   fit->add_option("--loss-balance", args->loss_balance,
-                  "lstm, hybrid: p in [0, 1]; each joint's error in the training loss is divided by its running "
-                  "mean to the power p (0: plain mean over joints, 1: equal weight to every joint's relative "
-                  "improvement; default: 0.5 for lstm, 0 for hybrid)");
+                  "lstm, hybrid: p in [0, 1]; each joint's loss divided by its running mean to the power p "
+                  "(default: 0.5 for lstm, 0 for hybrid)");
   fit->add_option("--output-delay", args->output_delay,
-                  "lstm: seconds by which the network's torque trails its input, so that it sees what follows "
-                  "the sample it predicts (rounded to samples; 0: causal; default 0.04); the live pipeline "
-                  "pairs it with the effort of as long before");
+                  "lstm: how far the torque trails the input, so that the network sees what follows (s; 0: "
+                  "causal; default 0.04)");
   args->fit.add(fit, "--threads", {"threads"});
   args->fit.add(fit, "--max-epochs", {"max_epochs"});
 #if defined(RCM_HAVE_TORCH)
   fit->add_option("--torchscript", args->torchscript_out, "also export the LSTM as TorchScript to this file");
 #endif
   fit->add_flag("--generic-structure", args->generic_structure,
-                "linear, hybrid: a free 17-term potential and a constant armature per joint instead of the rigid-body "
-                "structure (configuration-dependent inertia, velocity products, rigid links under one gravity direction)");
+                "linear, hybrid: a free 17-term potential and constant armatures instead of the rigid-body structure");
   fit->add_flag("--free-inertia", args->free_inertia,
-                "linear, hybrid: the rigid-body structure's 19 inertia coefficients free instead of tied by the bodies "
-                "of a remote-centre arm (links turning about the RCM, a body sliding along the instrument axis)");
+                "linear, hybrid: the 19 inertia coefficients free, not tied by the bodies of a remote-centre arm");
   fit->add_flag("--constant-coulomb", args->constant_coulomb,
                 "linear, hybrid: one Coulomb level per joint instead of a level that varies along the joint's travel "
                 "(kept when it predicts better)");
@@ -379,9 +374,7 @@ const bool registered = rcm::cli::register_command({"dynamics", 30, [](CLI::App&
   ev->add_option("recordings", args->recordings, "recordings (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   ev->add_option("--predictions", args->predictions, "also write the predicted torque of every sample to this CSV");
   ev->add_flag("--streaming", args->streaming,
-               "run the model one sample at a time, causally, as the live robot does (default: the offline "
-               "estimate, where linear and hybrid may take qddot from later samples; an lstm with an output "
-               "delay gives the same torque either way, the live robot gets it that much later)");
+               "one sample at a time, causally, as live (default: offline, qddot may use later samples)");
   ev->add_flag("--dedupe", args->dedupe, "drop rows that repeat the previous row's joint data");
   ev->add_flag("--json", args->json, "print {\"joints\": [{\"index\", \"rmse\", \"nrmse_percent\"}]}");
   ev->callback([args] { run_eval(*args); });

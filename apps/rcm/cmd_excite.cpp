@@ -94,9 +94,8 @@ const bool registered = rcm::cli::register_command({"excite", 25, [](CLI::App& a
   auto args = std::make_shared<ExciteArgs>();
   auto* cmd = app.add_subcommand(
       "excite",
-      "Design an excitation trajectory for free-space data collection: a Fourier series per joint from rest at "
-      "q0 to rest at q0, within the joint limits, optimised for the linear model's regressor; writes "
-      "time,position_1..3,velocity_1..3");
+      "Design a free-space excitation: a Fourier path per joint from rest at q0 to rest, within the limits, "
+      "optimised for the linear model; writes time,position_1..3,velocity_1..3");
   cmd->add_option("--out", args->out, "output CSV file")->required();
   args->options.add(cmd, "--duration", {"duration_s"},
                     "required here (the default is ExcitationOptions'): the whole trajectory, from rest at q0 to rest at q0");

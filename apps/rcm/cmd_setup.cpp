@@ -50,9 +50,8 @@ const bool registered = rcm::cli::register_command({"setup", 55, [](CLI::App& ap
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "setup",
-      "Is the arm ready to estimate? Checks the session's free space (duration, range, speeds, reversals) and "
-      "calibration (duration, pivot, regime, self-check), fits the free-space model and its learning curve, writes "
-      "free_space_model.json and setup.json; exit 3 when not ready, with what is missing");
+      "Is the arm ready to estimate? Checks the free space and the calibration, fits the free-space model, "
+      "writes free_space_model.json and setup.json; exit 3 when not ready, with what is missing");
   cmd->add_option("SESSION", o->session, "rcm-session/1 manifest (free space, q0, calibration)")->required();
   cmd->add_option("--out", o->out, "output folder (default rcm-setup)");
   rcm::cli::add_free_space_flags(cmd, o->study);

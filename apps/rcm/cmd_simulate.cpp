@@ -436,11 +436,9 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   cmd->add_option("--seed", opts->seed, "random seed (default 1, or the config's)")
       ->each([opts](const std::string&) { opts->seed_given = true; });
   cmd->add_option("--experiment", opts->experiment,
-                  "session (default) | force-angle | closed-loop (the correction in the loop against a moving "
-                  "incision, and the same runs open loop) | speed (fast.csv, slow.csv, speed.json: one "
-                  "periodic excitation path in free space at full speed, logged at sensors.log_rate_hz, and "
-                  "slowed down by speed.slowdown, logged one row per command at log_rate_hz / slowdown; the "
-                  "cable arm unless --arm or the config say otherwise)");
+                  "session (default) | force-angle | closed-loop (the correction against a moving incision, "
+                  "closed and open loop) | speed (fast.csv, slow.csv: one free-space path at full speed and "
+                  "slowed down by speed.slowdown)");
   opts->free_space.add(cmd, "--model", {"model_kind"},
                        "closed-loop: the estimator's free-space model, fitted on the session's free space (unset: "
                        "as rcm monitor)");
