@@ -83,7 +83,7 @@ live-demo: build
 
 # Every Google Benchmark program, the rosbag2 anchors (sqlite3, zstd), the live
 # nodes' end-to-end tests (their per-sample timings), PyTorch beside LibTorch and
-# the scipy cross-check; writes their tables into docs/validation-speed.md.
+# the scipy cross-check; writes their tables into docs/benchmarks.md.
 bench: build
 	$(PYTHON) bench/run_benchmarks.py --build $(BUILD)
 
@@ -115,13 +115,13 @@ learning-curve: build
 
 # `rcm batch` on 8 simulated sessions with 1 and 2 workers against `rcm run` one
 # after another, results compared (about 30 minutes on 2 cores); writes its
-# table into docs/validation-speed.md.
+# table into docs/benchmarks.md.
 batch-speed: build
 	$(PYTHON) bench/batch_speed.py --build $(BUILD)
 
 # The accuracy figures of docs/validation.md, from runs on this machine, with the
 # date and machine: the worst-case tables (make coverage), the demo's table with
-# their worst seed (and its wall times, docs/validation-speed.md) and the
+# their worst seed (and its wall times, docs/benchmarks.md) and the
 # closed-loop bench.
 docs-figures: coverage
 	$(PYTHON) bench/demo_table.py --build $(BUILD) --coverage-summary $(COVERAGE_WORK)/summary.json

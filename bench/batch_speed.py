@@ -6,7 +6,7 @@ bench, teleoperation and noise) are estimated three ways: `rcm run` on each, one
 after another; `rcm batch --workers 1`; `rcm batch --workers W` (a LocalCluster
 on this machine). Every session's results.json must be the same in the three,
 wall-clock times aside. The table goes between the batch-speed markers of
-docs/validation-speed.md, with the date, the machine and its load.
+docs/benchmarks.md, with the date, the machine and its load.
 
     /usr/bin/python3 bench/batch_speed.py --build build [--sessions 8] [--workers 2] [--no-doc]
 """
@@ -23,7 +23,7 @@ import time
 from doc_tables import cpu_model, publish_block, run
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "validation-speed.md")
+DOC = os.path.join(ROOT, "docs", "benchmarks.md")
 BEGIN, END = "<!-- batch-speed:begin -->", "<!-- batch-speed:end -->"
 TARGET = 1.7  # speed-up of 2 workers on 2 cores over one session after another
 
@@ -55,7 +55,7 @@ def main():
     ap.add_argument("--build", default=os.path.join(ROOT, "build"))
     ap.add_argument("--sessions", type=int, default=8)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--no-doc", action="store_true", help="print the table without writing docs/validation-speed.md")
+    ap.add_argument("--no-doc", action="store_true", help="print the table without writing docs/benchmarks.md")
     a = ap.parse_args()
     rcm = os.path.abspath(os.path.join(a.build, "bin", "rcm"))
     work = tempfile.mkdtemp(prefix="rcm_batch_speed_")

@@ -1,6 +1,6 @@
 // Tissue-law symbolic regression: the whole fit_tissue_law (enumeration,
 // constant fitting, selection) on calibration-sized data. Target: 10^4 pairs
-// in <= 1 s (docs/validation-speed.md).
+// in <= 1 s (docs/benchmarks.md).
 
 #include <benchmark/benchmark.h>
 

@@ -1,12 +1,12 @@
 #!/usr/bin/python3
 """`make docs-figures` (with bench/interval_coverage.py): the demo's figures in
-docs/validation.md and docs/validation-speed.md, from a run.
+docs/validation.md and docs/benchmarks.md, from a run.
 
 Runs `rcm demo` (the default bench, seed 1) and `rcm demo --quick` into a
 temporary folder, checks that the demo printed no line twice, and writes
 - the table "paper vs rcm" of docs/validation.md (Table II-IV figures of the demo's
   results.json) between the demo-table markers,
-- the wall time of both runs in docs/validation-speed.md between the demo-time markers,
+- the wall time of both runs in docs/benchmarks.md between the demo-time markers,
 with the date, machine and commands.
 
 Run with Debian's Python: /usr/bin/python3 bench/demo_table.py --build build
@@ -25,7 +25,7 @@ from doc_tables import cpu_model, run, write_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ACCURACY = os.path.join(ROOT, "docs", "validation.md")
-SPEED = os.path.join(ROOT, "docs", "validation-speed.md")
+SPEED = os.path.join(ROOT, "docs", "benchmarks.md")
 TABLE = ("<!-- demo-table:begin -->", "<!-- demo-table:end -->")
 TIMES = ("<!-- demo-time:begin -->", "<!-- demo-time:end -->")
 

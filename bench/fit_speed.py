@@ -27,7 +27,7 @@ independent recording, the free space of seed --eval-seed.
   /usr/bin/python3 bench/fit_speed.py BUILD (--write | --no-doc) [--seeds 1,2,3]
       [--budgets 0.02,0.04,0.08] [--eval-seed 99] [--json FILE] [--keep DIR]
 
---write puts the table between the fit-speed markers of docs/validation-speed.md.
+--write puts the table between the fit-speed markers of docs/benchmarks.md.
 (`--pytorch-fit REC SEED BUDGET PREFIX` is the process of one PyTorch fit.)
 """
 import argparse
@@ -50,7 +50,7 @@ from recording_arrays import load
 from torch_compare import TorqueLstm
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "validation-speed.md")
+DOC = os.path.join(ROOT, "docs", "benchmarks.md")
 BEGIN, END = "<!-- fit-speed:begin -->", "<!-- fit-speed:end -->"
 RCM_PLAIN = ["--direction-features", "none", "--acceleration-features", "none", "--dahl-features", "none",
              "--output-delay", "0", "--threads", "2"]
@@ -364,7 +364,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("build")
     mode = ap.add_mutually_exclusive_group(required=True)
-    mode.add_argument("--write", action="store_true", help="write the table into docs/validation-speed.md")
+    mode.add_argument("--write", action="store_true", help="write the table into docs/benchmarks.md")
     mode.add_argument("--no-doc", action="store_true", help="print the table only")
     ap.add_argument("--seeds", default="1,2,3")
     ap.add_argument("--budgets", default="0.02,0.04,0.08", help="lstm wall-clock budgets, minutes")

@@ -16,7 +16,7 @@ echo ("[ node log ] ..."):
     rcm: publishing (own thread): X us mean, Y us max per estimate (4 writes); queue depth max N of M, K outputs dropped
 
 and writes a table of them, with the date, machine and load average, between
-the live-nodes markers of docs/validation-speed.md. A node whose test is not built
+the live-nodes markers of docs/benchmarks.md. A node whose test is not built
 (no ROS 1 or no Cyclone DDS) gets a row saying so; a failing test stops the
 script before anything is written. `make bench` runs it after the benchmarks
 (bench/run_benchmarks.py).
@@ -33,7 +33,7 @@ import sys
 from doc_tables import cpu_model, publish_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "validation-speed.md")
+DOC = os.path.join(ROOT, "docs", "benchmarks.md")
 MARKERS = ("<!-- live-nodes:begin -->", "<!-- live-nodes:end -->")
 SAMPLE_PERIOD_US = 1e6 / 1500.0  # the dVRK's fastest joint-state rate
 

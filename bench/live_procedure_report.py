@@ -8,7 +8,7 @@ it, the in-process closed-loop bench on the same seed (`rcm simulate
 BM_SimulatedPsmStep) and the CPU the program takes at 1.5 kHz in real time.
 
 Writes the block `live-procedure` of docs/validation.md and `simulated-psm` of
-docs/validation-speed.md, with the date and machine:
+docs/benchmarks.md, with the date and machine:
 
     /usr/bin/python3 bench/live_procedure_report.py --build build [--seeds 1,2,3,4,5,6,7,8]
         [--rate 1500] [--time-scale 2] [--keep DIR] [--no-doc]
@@ -29,7 +29,7 @@ from doc_tables import cpu_model, write_block  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 VALIDATION = os.path.join(ROOT, "docs", "validation.md")
-BENCHMARKS = os.path.join(ROOT, "docs", "validation-speed.md")
+BENCHMARKS = os.path.join(ROOT, "docs", "benchmarks.md")
 
 
 def env_for(domain):

@@ -13,7 +13,7 @@ calls this on the SQLite file, jazzy.db3:
 
 Each is timed REPEAT times (wall clock, median). A tool that is not installed
 (Debian: sqlite3, zstd) gets a row saying so. The table goes between the
-rosbag2-anchors markers of docs/validation-speed.md.
+rosbag2-anchors markers of docs/benchmarks.md.
 
 Run with Debian's Python: /usr/bin/python3 bench/rosbag2_anchors.py --dir DIR [--no-doc]
 """
@@ -30,7 +30,7 @@ import time
 from doc_tables import cpu_model, publish_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "validation-speed.md")
+DOC = os.path.join(ROOT, "docs", "benchmarks.md")
 MARKERS = ("<!-- rosbag2-anchors:begin -->", "<!-- rosbag2-anchors:end -->")
 QUERY = "SELECT count(*), sum(length(data)) FROM (SELECT data FROM messages ORDER BY timestamp, id);"
 

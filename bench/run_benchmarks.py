@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""`make bench`: run every benchmark and record the results in docs/validation-speed.md.
+"""`make bench`: run every benchmark and record the results in docs/benchmarks.md.
 
 1. every bench/bench_* program (Google Benchmark, JSON output) -> the table
    between the gbench markers, and from the same run the online path's share
@@ -28,7 +28,7 @@ import sys
 from doc_tables import cpu_model
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "validation-speed.md")
+DOC = os.path.join(ROOT, "docs", "benchmarks.md")
 BEGIN, END = "<!-- gbench:begin -->", "<!-- gbench:end -->"
 ONLINE = ("<!-- online-share:begin -->", "<!-- online-share:end -->")
 SAMPLE_PERIOD_US = 1e6 / 1500.0  # the dVRK's fastest joint-state rate

@@ -10,7 +10,7 @@ scipy, and compares:
     below 1e-6), median of 21 runs, against Ceres' median from the export.
 
 Run with Debian's Python (python3-scipy, python3-sympy):
-    /usr/bin/python3 bench/scipy_crosscheck.py PROBLEM_DIR [--write docs/validation-speed.md]
+    /usr/bin/python3 bench/scipy_crosscheck.py PROBLEM_DIR [--write docs/benchmarks.md]
 """
 import glob
 import json

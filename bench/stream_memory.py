@@ -19,7 +19,7 @@ earlier version) up to --before-max-rows.
     /usr/bin/python3 bench/stream_memory.py --build build [--recording FILE]
         [--rows 100000,1000000,10000000] [--before OTHER/bin/rcm] [--write]
 
-With --write, the table goes into docs/validation-speed.md between the
+With --write, the table goes into docs/benchmarks.md between the
 stream-memory markers, and the chunked-read benchmark (bench_recording_read)
 into the same page between the recording-read markers.
 """
@@ -36,7 +36,7 @@ import time
 from doc_tables import cpu_model, publish_block, run
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DOC = os.path.join(ROOT, "docs", "validation-speed.md")
+DOC = os.path.join(ROOT, "docs", "benchmarks.md")
 MARKERS = ("<!-- stream-memory:begin -->", "<!-- stream-memory:end -->")
 READ_MARKERS = ("<!-- recording-read:begin -->", "<!-- recording-read:end -->")
 

@@ -2,7 +2,7 @@
 """Side-by-side LSTM comparison: PyTorch (Debian python3-torch) vs rcm's LibTorch
 training and Eigen streaming kernel, in one run. Run with /usr/bin/python3:
 
-    /usr/bin/python3 bench/torch_compare.py BUILD_DIR [--write docs/validation-speed.md]
+    /usr/bin/python3 bench/torch_compare.py BUILD_DIR [--write docs/benchmarks.md]
 
 Same shapes as bench/bench_torch_lstm.cpp: 12 inputs (6 joints), 1 x 128 (the
 default) and 2 x 128 LSTM, head 64 (tanh), 6 outputs; streaming = one sample with
