@@ -65,9 +65,11 @@ def table(d):
                      f"{vals} |")
     s, loop = d["setup"], d["closed_loop"]
     lines += ["",
-              f"rcm setup: {'READY' if s['ready'] else 'NOT READY'}"
-              + (f" (the model's force error {s['force_error_n']:.2f} N)" if s.get("force_error_n") else "")
-              + ("" if s["ready"] else "; missing: " + "; ".join(s.get("missing") or [])),
+              ("rcm setup: not run (the procedure stopped before it)" if s.get("ready") is None and
+               not s.get("missing") else
+               f"rcm setup: {'READY' if s['ready'] else 'NOT READY'}"
+               + (f" (the model's force error {s['force_error_n']:.2f} N)" if s.get("force_error_n") else "")
+               + ("" if s["ready"] else "; missing: " + "; ".join(s.get("missing") or []))),
               f"live estimate against the simulator's truth: error {fmt(d['estimate_error_m'], 2, 1e3)} mm"
               + (f" (estimate {', '.join(f'{1e3 * v:.1f}' for v in d['estimate_m'])} mm, truth "
                  f"{', '.join(f'{1e3 * v:.1f}' for v in d['truth_m'])} mm)" if d.get("estimate_m") else ""),
