@@ -13,8 +13,6 @@
 #include <CLI/CLI.hpp>
 #include <dds/dds.h>
 
-#include <atomic>
-#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -24,14 +22,12 @@
 #include "dds_sink.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/live/monitor_node.hpp"
+#include "support/program_main.hpp"
 #include "ros2_msgs.h"
 
 namespace {
 
 using namespace rcm::dds_node;
-
-std::atomic<bool> g_stop{false};
-extern "C" void on_signal(int) { g_stop = true; }
 
 int run(int argc, char** argv) {
   rcm::MonitorNodeParameters p;
@@ -117,7 +113,7 @@ int run(int argc, char** argv) {
   dds_sample_info_t infos[kBatch];
   JointStateBuffer buffer;
   const rcm::JointStateView view = buffer.view();
-  while (!g_stop) {
+  while (!rcm::dds_node::is_stop_requested()) {
     const dds_return_t woke = dds_waitset_wait(waitset, nullptr, 0, DDS_MSECS(100));
     if (woke < 0) dds_fail("wait", woke);
     std::uint32_t status = 0;
@@ -155,20 +151,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // log lines appear as they come when redirected to a file
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
-  try {
-    return run(argc, argv);
-  } catch (const rcm::InputError& e) {
-    std::fprintf(stderr, "rcm_monitor_dds: error: %s\n", e.what());
-    return 2;
-  } catch (const std::invalid_argument& e) {  // e.g. fewer joint names than the model reads
-    std::fprintf(stderr, "rcm_monitor_dds: error: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "rcm_monitor_dds: error: %s\n", e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return rcm::dds_node::run_program("rcm_monitor_dds", argc, argv, run); }

@@ -16,12 +16,11 @@
 #include <dds/dds.h>
 #include <fmt/format.h>
 
-#include <atomic>
-#include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <string>
 
+#include "support/program_main.hpp"
 #include "support/crtk_client.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/joint_trajectory.hpp"
@@ -32,9 +31,6 @@
 namespace {
 
 using namespace rcm::dds_node;
-
-std::atomic<bool> g_stop{false};
-extern "C" void on_signal(int) { g_stop = true; }
 
 rcm::InputLocation flag(const std::string& name) { return rcm::InputLocation::plain("command line", name); }
 
@@ -122,7 +118,7 @@ int run(int argc, char** argv) {
       check(dds_create_participant(static_cast<dds_domainid_t>(d), nullptr, nullptr), "create participant");
   CrtkClient client(participant, arm);
   std::string why;
-  const auto interrupted = [] { return g_stop.load(); };
+  const auto interrupted = [] { return rcm::dds_node::is_stop_requested(); };
   if (!wait_for_arm(client, power, o.start_timeout_s + (power ? 30.0 : 0.0), interrupted, why)) {
     std::fprintf(stderr, "rcm_play_dds: refused: %s\n", why.c_str());
     dds_delete(participant);
@@ -139,7 +135,7 @@ int run(int argc, char** argv) {
   dds_delete(participant);
 
   const rcm::PlayerSummary& s = player->summary();
-  const std::string message = g_stop && !player->finished() ? "interrupted" : s.message;
+  const std::string message = rcm::dds_node::is_stop_requested() && !player->finished() ? "interrupted" : s.message;
   if (s.samples_recorded > 0) rcm::save_recording(out, player->get_recording(out));
   std::cout << format_player_summary(s, player->joint_names());
   if (s.samples_recorded > 0) std::cout << "  wrote " << out << "\n";
@@ -162,17 +158,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  std::setvbuf(stdout, nullptr, _IOLBF, 0);
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
-  try {
-    return run(argc, argv);
-  } catch (const rcm::InputError& e) {
-    std::fprintf(stderr, "rcm_play_dds: error: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "rcm_play_dds: error: %s\n", e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return rcm::dds_node::run_program("rcm_play_dds", argc, argv, run); }

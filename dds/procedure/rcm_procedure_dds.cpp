@@ -23,14 +23,13 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
-#include <atomic>
-#include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <optional>
 #include <string>
 #include <thread>
 
+#include "support/program_main.hpp"
 #include "support/child_process.hpp"
 #include "support/crtk_client.hpp"
 #include "live_observer.hpp"
@@ -39,9 +38,6 @@
 #include "rcm/io/json_file.hpp"
 
 namespace {
-
-std::atomic<bool> g_stop{false};
-extern "C" void on_signal(int) { g_stop = true; }
 
 rcm::InputLocation flag(const std::string& name) { return rcm::InputLocation::plain("command line", name); }
 
@@ -130,23 +126,10 @@ int run(int argc, char** argv) {
   o.check(flag);
   o.domain = rcm::dds_node::get_domain(o.domain, "command line");
 
-  rcm::dds_node::Procedure procedure(o, [] { return g_stop.load(); });
+  rcm::dds_node::Procedure procedure(o, [] { return rcm::dds_node::is_stop_requested(); });
   return procedure.run();
 }
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  std::setvbuf(stdout, nullptr, _IOLBF, 0);
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
-  try {
-    return run(argc, argv);
-  } catch (const rcm::InputError& e) {
-    std::fprintf(stderr, "rcm_procedure_dds: error: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "rcm_procedure_dds: error: %s\n", e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return rcm::dds_node::run_program("rcm_procedure_dds", argc, argv, run); }

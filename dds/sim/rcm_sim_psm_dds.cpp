@@ -13,14 +13,13 @@
 #include <time.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <map>
-#include <csignal>
 #include <cstdio>
 #include <string>
 #include <vector>
 
+#include "support/program_main.hpp"
 #include "support/dds_io.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
@@ -31,9 +30,6 @@ namespace {
 
 using namespace rcm::dds_node;
 using rcm::sim::PsmCommandVerdict;
-
-std::atomic<bool> g_stop{false};
-extern "C" void on_signal(int) { g_stop = true; }
 
 void log(const char* level, const std::string& text) {
   std::fprintf(std::string(level) == "INFO" ? stdout : stderr, "[%s] [%.6f] [rcm_sim_psm_dds]: %s\n", level,
@@ -269,7 +265,7 @@ int run(int argc, char** argv) {
   double slipped_s = 0.0;
   std::uint64_t slips = 0;
   const double period = psm.period_s();
-  while (!g_stop) {
+  while (!rcm::dds_node::is_stop_requested()) {
     double due = static_cast<double>(get_steady_ns() - steady0) * 1e-9 * o.time_scale;
     // Behind the wall (a busy machine): the clock slips rather than catching
     // up in a burst of periods that no command could answer. The stamps stay
@@ -281,7 +277,7 @@ int run(int argc, char** argv) {
       slipped_s += slip;
       ++slips;
     }
-    while (s.time <= due && !g_stop) {
+    while (s.time <= due && !rcm::dds_node::is_stop_requested()) {
       drain_commands();
       psm.compute_step(s);
       const rcm::sim::PsmSample& x = s.sample;
@@ -365,17 +361,4 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  std::setvbuf(stdout, nullptr, _IOLBF, 0);
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
-  try {
-    return run(argc, argv);
-  } catch (const rcm::InputError& e) {
-    std::fprintf(stderr, "rcm_sim_psm_dds: error: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "rcm_sim_psm_dds: error: %s\n", e.what());
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return rcm::dds_node::run_program("rcm_sim_psm_dds", argc, argv, run); }
