@@ -71,14 +71,24 @@ def write_json(path, value):
     os.replace(path + ".tmp", path)
 
 
-def free_space_task(rcm, work, seed, row):
-    """The row's free-space recording for this seed, and its fitted linear model."""
-    folder = os.path.join(work, f"free_space_{row}_seed{seed}")
+def open_task(folder):
+    """The task's result when its folder holds one (a kept --work resumes);
+    else None, the folder made."""
     done = os.path.join(folder, "task.json")
     if os.path.exists(done):
         with open(done) as f:
             return json.load(f)
     os.makedirs(folder, exist_ok=True)
+    return None
+
+
+def free_space_task(rcm, work, seed, row):
+    """The row's free-space recording for this seed, and its fitted linear model."""
+    folder = os.path.join(work, f"free_space_{row}_seed{seed}")
+    done = os.path.join(folder, "task.json")
+    finished = open_task(folder)
+    if finished is not None:
+        return finished
     log = os.path.join(folder, "log.txt")
     path, minutes = ROWS[row]
     # Only the free space is wanted: the rest of the protocol as short as it may be.
@@ -107,10 +117,9 @@ def session_task(rcm, work, seed, law):
     """Calibration, baseline and trials of one seed and tissue law (a token free space)."""
     folder = os.path.join(work, f"session_{law}_seed{seed}")
     done = os.path.join(folder, "task.json")
-    if os.path.exists(done):
-        with open(done) as f:
-            return json.load(f)
-    os.makedirs(folder, exist_ok=True)
+    finished = open_task(folder)
+    if finished is not None:
+        return finished
     config = os.path.join(folder, "config.json")
     write_json(config, {"protocol": GRID})
     call([rcm, "simulate", "--out", os.path.join(folder, "sim"), "--seed", str(seed), "--tissue", law,
@@ -140,10 +149,9 @@ def study_task(rcm, work, seed, law, row, free_space, session):
     """`rcm run` on the session with the row's free space and model: with and without the bias correction."""
     folder = os.path.join(work, f"study_{row}_{law}_seed{seed}")
     done = os.path.join(folder, "task.json")
-    if os.path.exists(done):
-        with open(done) as f:
-            return json.load(f)
-    os.makedirs(folder, exist_ok=True)
+    finished = open_task(folder)
+    if finished is not None:
+        return finished
     log = os.path.join(folder, "log.txt")
     with open(session["manifest"]) as f:
         manifest = json.load(f)
