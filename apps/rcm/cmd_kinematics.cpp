@@ -68,7 +68,7 @@ void run(const Options& o) {
   std::cout << fmt::format("condition  {:.6g}  ({})\n", cond.condition, rcm::to_string(cond.status));
 }
 
-const bool registered = rcm::cli::register_command({"kinematics", 15, [](CLI::App& app) {
+const bool registered = rcm::cli::register_command({"kinematics", 17, [](CLI::App& app) {
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "kinematics", "Frame 3, insertion axis z3, pivot angle theta, and the incision-port Jacobian J_D (3x3) with its condition number");

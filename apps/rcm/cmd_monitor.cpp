@@ -232,7 +232,7 @@ void run(const Options& o) {
                            mean_us, 1e6 * replay.max_update_s);
 }
 
-const bool registered = rcm::cli::register_command({"monitor", 65, [](CLI::App& app) {
+const bool registered = rcm::cli::register_command({"monitor", 70, [](CLI::App& app) {
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "monitor", "Replay a recording as a stream through the online estimator: running estimate of all three offsets, "

@@ -17,7 +17,7 @@ namespace rcm::cli {
 
 struct CommandRegistration {
   std::string name;
-  int order = 100;  // position in `rcm --help`
+  int order = 100;  // position in `rcm --help`; each command its own (ties fall back to the name)
   std::function<void(CLI::App& root)> add;
 };
 

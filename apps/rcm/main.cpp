@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <csignal>
 #include <iostream>
+#include <tuple>
 
 #include "cli_util.hpp"
 #include "command_registry.hpp"
@@ -25,8 +26,11 @@ int main(int argc, char** argv) {
   app.fallthrough(false);
 
   std::vector<rcm::cli::CommandRegistration> commands = rcm::cli::get_registered_commands();
-  std::stable_sort(commands.begin(), commands.end(),
-                   [](const auto& a, const auto& b) { return a.order < b.order; });
+  // Static initialization runs in a different order in a unity build: the name
+  // breaks ties so `rcm --help` and the generated reference never depend on it.
+  std::sort(commands.begin(), commands.end(), [](const auto& a, const auto& b) {
+    return std::tie(a.order, a.name) < std::tie(b.order, b.name);
+  });
   for (const auto& command : commands) command.add(app);
 
   // The interrupted command's message says what it saved and what it did not.
