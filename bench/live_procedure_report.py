@@ -79,11 +79,12 @@ def one_procedure(bindir, seed, work, args, setup=None):
     return j
 
 
-def one_bench(rcm, seed, work):
-    """The in-process bench on `seed`: its large step, closed, and the session and model it prepared."""
+def one_bench(rcm, seed, work, rate):
+    """The in-process bench on `seed`, its estimator reading the arm at `rate` as the processes do: its large
+    step, closed, and the session and model it prepared."""
     out = os.path.join(work, f"bench{seed}")
     p = subprocess.run([rcm, "simulate", "--experiment", "closed-loop", "--seed", str(seed), "--out", out, "--json",
-                        "--no-plot"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, check=True)
+                        "--no-plot", "--stream-rate", f"{rate:g}"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, check=True)
     j = json.loads(p.stdout)
     return j["scenarios"]["large_step"]["closed"], (j["session"], j["free_space_model_file"])
 
@@ -169,7 +170,7 @@ def main():
     else:
         bench, live, runs = {}, {}, {}
         for s in seeds:
-            bench[s], setup = one_bench(os.path.join(bindir, "rcm"), s, work)
+            bench[s], setup = one_bench(os.path.join(bindir, "rcm"), s, work, args.rate)
             live[s] = one_procedure(bindir, s, work, args, setup)
         for s in full_seeds:
             runs[s] = one_procedure(bindir, s, work, args)
@@ -249,12 +250,11 @@ def main():
     text = [head, "",
             "The loop on the large step, on the in-process bench's own setup (its session and free-space model, "
             "`rcm_procedure_dds --session --model-file`), so that only the processes differ: the estimator reads "
-            f"measured_js at {rate:g} Hz over DDS (the bench: 200 Hz in one process), commands the shift on "
+            f"measured_js at {rate:g} Hz over DDS (the bench: at {rate:g} Hz in one process), commands the shift on "
             "`/PSM1/rcm/shift`, and the simulator moves its RCM.", "", *rows, "",
             summary(loops, "Across processes"), summary(benches, "In process (the bench)"),
-            "Beside the processes, the two runs of a seed differ in the rate the estimator reads (1.5 kHz against "
-            "200 Hz), the teleoperation's draw and the sensors' noise; this table does not tell these apart. Each "
-            "figure is one run.", "",
+            "Beside the processes, the two runs of a seed differ in the teleoperation's draw and the sensors' noise, "
+            "and across processes the shift reaches the arm a few samples late. Each figure is one run.", "",
             *whole[:-1],
             whole[-1] + f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
             f"span at {rate:g} Hz differ by {lost} in all"

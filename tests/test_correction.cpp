@@ -25,6 +25,14 @@ using rcm::RcmCorrector;
 
 rcm::IncisionFrame make_frame() { return rcm::make_incision_frame(Eigen::Vector3d(0.2, -0.3, 0.12)); }
 
+// The gates alone: an action starts at the first sample that calls for it
+// (the confirmation time has a test of its own).
+CorrectionOptions make_immediate_options() {
+  CorrectionOptions o;
+  o.confirm_s = 0.0;
+  return o;
+}
+
 OnlineOutput make_estimate(double time, const Eigen::Vector3d& p, double sd, bool onset = true) {
   OnlineOutput e;
   e.time = time;
@@ -49,6 +57,7 @@ TEST(Correction, OptionsAreChecked) {
   rejects([](CorrectionOptions& o) { o.confidence_z = std::nan(""); });
   rejects([](CorrectionOptions& o) { o.release_fraction = 1.5; });
   rejects([](CorrectionOptions& o) { o.max_step_dt_s = 0; });
+  rejects([](CorrectionOptions& o) { o.confirm_s = -0.1; });
   EXPECT_NO_THROW(RcmCorrector(frame, CorrectionOptions{}));
 }
 
@@ -76,7 +85,7 @@ TEST(Correction, HoldsWithoutOnsetWhileUnsureAndWithinTolerance) {
 }
 
 TEST(Correction, HoldsWhileTheModelDoesNotExplainTheTorques) {
-  const RcmCorrector corrector(make_frame(), {});
+  const RcmCorrector corrector(make_frame(), make_immediate_options());
   auto ws = corrector.create_workspace();
   OnlineOutput e = make_estimate(0.0, Eigen::Vector3d(0.004, 0.0, 0.008), 0.0003);
   e.fit_cost = 15.0;  // e.g. a payload the free-space model never saw
@@ -92,7 +101,7 @@ TEST(Correction, HoldsWhileTheModelDoesNotExplainTheTorques) {
 
 TEST(Correction, CompensatesAtTheRateTowardTheIncisionAndNeverBeyondTheLowerBound) {
   const auto frame = make_frame();
-  CorrectionOptions o;
+  CorrectionOptions o = make_immediate_options();
   const RcmCorrector corrector(frame, o);
   auto ws = corrector.create_workspace();
   const Eigen::Vector3d p(0.003, 0.002, -0.004);
@@ -167,7 +176,7 @@ TEST(Correction, ClosesTheLoopOnANoisyEstimateWithoutOvershoot) {
 
 TEST(Correction, RepositionsBeyondTheLimitAndCountsTheShiftInEffect) {
   const auto frame = make_frame();
-  const RcmCorrector corrector(frame, {});
+  const RcmCorrector corrector(frame, make_immediate_options());
   auto ws = corrector.create_workspace();
   const Eigen::Vector3d far(0.0, 0.0, 0.023);
   auto c = corrector.compute_correction(ws, make_estimate(0.0, far, 0.001));
@@ -195,7 +204,7 @@ TEST(Correction, RepositionsBeyondTheLimitAndCountsTheShiftInEffect) {
 }
 
 TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
-  const RcmCorrector corrector(make_frame(), {});
+  const RcmCorrector corrector(make_frame(), make_immediate_options());
   // An estimate that flickers across the 1.5 mm tolerance changes the advice at
   // most once: a wide interval (1.6 mm +- 2.0 mm, wider than the move) holds
   // throughout; a narrow one (+- 0.2 mm) acts from the first 1.6 mm on and
@@ -215,7 +224,7 @@ TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
   // Out of tolerance, the lower bound under it, the interval narrower than the
   // move (2.0 mm, 1.0 to 3.0 mm): a shift, by no more than the lower bound.
   {
-    CorrectionOptions fast;
+    CorrectionOptions fast = make_immediate_options();
     fast.max_rate_m_per_s = 1.0;  // the rate limit out of the way
     const RcmCorrector quick(make_frame(), fast);
     auto ws = quick.create_workspace();
@@ -272,8 +281,49 @@ TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
 // The spread along the move is u^T C u: axes whose errors are correlated
 // (as D and the radial offset are) can be sure of a diagonal move that their
 // per-axis spreads alone leave in doubt, and the other way round.
-TEST(Correction, ReadsTheSpreadAlongTheMoveFromTheFullCovariance) {
+TEST(Correction, AnActionStartsOnceCalledForWithoutABreakForTheConfirmationTime) {
   const RcmCorrector corrector(make_frame(), {});
+  const double confirm = corrector.options().confirm_s;
+  ASSERT_GT(confirm, 0.0);
+  const Eigen::Vector3d sure_move(0.004, 0, 0);  // 4 mm, +- 0.4 mm
+  // The same stream at 200 Hz and at 1.5 kHz: the first shift comes at the
+  // same time, not after the same number of samples.
+  for (const double rate : {200.0, 1500.0}) {
+    auto ws = corrector.create_workspace();
+    double first_shift = -1.0;
+    for (int k = 0; k <= static_cast<int>(2.0 * rate); ++k) {
+      const double t = k / rate;
+      const auto& c = corrector.compute_correction(ws, make_estimate(t, sure_move, 0.0002));
+      if (c.action == CorrectionAction::hold) EXPECT_EQ(c.reason, HoldReason::not_confident) << t;
+      if (first_shift < 0 && !c.step_base.isZero()) first_shift = t;
+    }
+    EXPECT_NEAR(first_shift, confirm, 1.5 / rate) << rate << " Hz";
+  }
+  // A sure estimate that breaks off before the confirmation time (a restarted
+  // bank sure of a wrong move for a few tenths of a second) never moves the
+  // RCM, and a break starts the count over.
+  auto ws = corrector.create_workspace();
+  const double dt = 1.0 / 1500.0;
+  double t = 0.0;
+  for (int spell = 0; spell < 5; ++spell) {
+    for (; t < (spell + 0.8) * confirm; t += dt)
+      EXPECT_TRUE(corrector.compute_correction(ws, make_estimate(t, sure_move, 0.0002)).step_base.isZero()) << t;
+    for (; t < (spell + 1.0) * confirm; t += dt)  // unsure: the interval wider than the move
+      EXPECT_TRUE(corrector.compute_correction(ws, make_estimate(t, sure_move, 0.003)).step_base.isZero()) << t;
+  }
+  // A restart starts it over too.
+  auto ws2 = corrector.create_workspace();
+  OnlineOutput e = make_estimate(0.0, sure_move, 0.0002);
+  for (; e.time < 0.8 * confirm; e.time += dt) corrector.compute_correction(ws2, e);
+  e.jumps = 1;
+  for (; e.time < 1.6 * confirm; e.time += dt)
+    EXPECT_TRUE(corrector.compute_correction(ws2, e).step_base.isZero()) << e.time;
+  for (; e.time < 2.2 * confirm; e.time += dt) corrector.compute_correction(ws2, e);
+  EXPECT_EQ(corrector.compute_correction(ws2, e).action, CorrectionAction::compensate);
+}
+
+TEST(Correction, ReadsTheSpreadAlongTheMoveFromTheFullCovariance) {
+  const RcmCorrector corrector(make_frame(), make_immediate_options());
   const double sd = 0.001;
   // 2.8 mm along (1, 0, 1) / sqrt 2; per axis 1 mm, so 1 mm along the move
   // without the correlation: 95 % interval 0.9 to 4.8 mm, wider than the move.

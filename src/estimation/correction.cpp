@@ -21,6 +21,7 @@ void CorrectionOptions::check() const {
   if (!(release_fraction > 0 && release_fraction <= 1)) fail("release_fraction must be in (0, 1]");
   if (!(max_step_dt_s > 0)) fail("max_step_dt_s must be > 0");
   if (!(max_fit_cost > 0)) fail("max_fit_cost must be > 0");
+  if (!(confirm_s >= 0)) fail("confirm_s must be >= 0");
 }
 
 const char* to_string(CorrectionAction action) {
@@ -58,6 +59,7 @@ void RcmCorrector::reset(Workspace& ws) const {
   ws.started = false;
   ws.last_time = 0.0;
   ws.jumps = 0;
+  ws.sure_since = -1.0;
   ws.output = CorrectionOutput{};
 }
 
@@ -142,6 +144,11 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
   out.distance_high_m = b.high;
   out.fit_cost = estimate.fit_cost;
 
+  // Since when the estimate has called for an action without a break.
+  const bool calls_for_action = finite && estimate.onset && starts_action(b, o.tolerance_m);
+  if (!calls_for_action || restarted) ws.sure_since = -1.0;
+  if (calls_for_action && ws.sure_since < 0) ws.sure_since = estimate.time;
+
   auto hold = [&](HoldReason reason) {
     out.action = CorrectionAction::hold;
     out.reason = reason;
@@ -159,6 +166,8 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
     hold(HoldReason::model_mismatch);
   } else if (previous == CorrectionAction::hold && !starts_action(b, o.tolerance_m)) {
     hold(settled);
+  } else if (previous == CorrectionAction::hold && estimate.time - ws.sure_since < o.confirm_s) {
+    hold(HoldReason::not_confident);  // sure, not yet for long enough
   } else if (previous != CorrectionAction::hold && b.low <= 0.0) {
     hold(HoldReason::not_confident);  // the interval outgrew the move
   } else if (previous != CorrectionAction::hold && b.distance < o.release_fraction * o.tolerance_m) {
@@ -311,6 +320,9 @@ const OptionTable<CorrectionOptions>& get_option_table(OptionTag<CorrectionOptio
                "", OptionLimits::above(0))
           .add("release_fraction", &CorrectionOptions::release_fraction,
                "back to hold below this fraction of the tolerance", "", OptionLimits::above_up_to(0, 1))
+          .add("confirm_s", &CorrectionOptions::confirm_s,
+               "an action starts once the estimate has called for it this long without a break", "s",
+               OptionLimits::at_least(0))
           .add("max_step_dt_s", &CorrectionOptions::max_step_dt_s,
                "a sample after a gap moves the RCM by at most this long at max_rate", "s", OptionLimits::above(0))
           .add_check([](const CorrectionOptions& o) { o.check(); });

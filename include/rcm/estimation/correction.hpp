@@ -59,6 +59,11 @@ struct CorrectionOptions {
   // A sample after a gap in the stream moves the RCM by at most this much time
   // at max_rate: a silence is not a licence to jump.
   double max_step_dt_s = 0.1;
+  // An action starts once the estimate has called for it this long without a
+  // break. A bank of filters restarted from the prior can be sure of a wrong
+  // move for a few tenths of a second, and at 1.5 kHz that is hundreds of
+  // steps; a real misalignment stays.
+  double confirm_s = 0.5;
   void check() const;  // throws std::invalid_argument
 };
 const OptionTable<CorrectionOptions>& get_option_table(OptionTag<CorrectionOptions>);
@@ -99,6 +104,7 @@ class RcmCorrector {
     bool started = false;
     double last_time = 0.0;
     int jumps = 0;  // the estimate's restarts seen (OnlineOutput::jumps)
+    double sure_since = -1.0;  // when the start condition began to hold (< 0: it does not)
     CorrectionOutput output;
   };
   RcmCorrector(const IncisionFrame& incision, const CorrectionOptions& options);
