@@ -180,7 +180,9 @@ def main():
             json.dump({"runs": runs, "live": live, "bench": bench, "sim_cpu_share": cpu, "steps": steps,
                        "minutes": (time.monotonic() - started) / 60, "load": os.getloadavg()[0]}, f, indent=2)
 
-    stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    # The run's own time: an earlier run's report.json was written when it ended.
+    ended = os.path.getmtime(args.from_json) if args.from_json else time.time()
+    stamp = datetime.datetime.fromtimestamp(ended).strftime("%Y-%m-%d %H:%M")
     load = saved.get("load", os.getloadavg()[0]) if args.from_json else os.getloadavg()[0]
     minutes = (time.monotonic() - started) / 60
     head = (f"Measured by `bench/live_procedure_report.py --seeds {','.join(map(str, seeds))} --full-seeds "
