@@ -17,6 +17,7 @@ import argparse
 import datetime
 import json
 import os
+import re
 import signal
 import statistics
 import subprocess
@@ -73,6 +74,14 @@ def one_procedure(bindir, seed, work, args, setup=None):
     with open(os.path.join(out, "procedure.json")) as f:
         j = json.load(f)
     j["exit"] = code
+    # The simulator's own count of the servo stream against its periods.
+    with open(os.path.join(out, "sim.log")) as f:
+        log = f.read()
+    held = re.search(r"(\d+) periods held between two \(no new setpoint; the longest run (\d+)\), (\d+) replaced", log)
+    taken = re.search(r"servo_jp (\d+),", log)
+    if held and taken:
+        j["servo_stream"] = {"servo_jp": int(taken.group(1)), "held": int(held.group(1)),
+                             "longest_held": int(held.group(2)), "replaced": int(held.group(3))}
     j["report_wall_s"] = time.monotonic() - start
     print(f"seed {seed}{' (live phase)' if setup else ''}: procedure exited {code} in {j['report_wall_s']:.0f} s",
           file=sys.stderr, flush=True)
@@ -224,7 +233,8 @@ def main():
                 f"{statistics.median(r['rms_force_after_settle_n'] for r in rs):.2f} N.")
 
     full = ["| seed | `rcm setup` | what it found missing | excitation: samples recorded / rows sent, pacing, RMS "
-            "tracking error of yaw (mrad) |", "|---|---|---|---|"]
+            "tracking error of yaw (mrad) | the arm's periods without a new servo_jp (longest run) |",
+            "|---|---|---|---|---|"]
     for s_ in full_seeds:
         j = runs[s_]
         ex = (j.get("phases") or [{}])[0]
@@ -236,7 +246,9 @@ def main():
                     f"(force error {setup.get('force_error_n') or float('nan'):.1f} N) | {missing} | "
                     f"{ex.get('samples_recorded', '-')} / {ex.get('rows_sent', '-')}, "
                     f"{'-' if pacing is None else f'{100 * pacing:+.3f} %'}, "
-                    f"{'-' if rms is None else f'{1e3 * rms:.2f}'} |")
+                    f"{'-' if rms is None else f'{1e3 * rms:.2f}'} | "
+                    + (f"{100 * j['servo_stream']['held'] / max(1, j['servo_stream']['servo_jp']):.1f} % "
+                       f"({j['servo_stream']['longest_held']}) |" if j.get("servo_stream") else "- |"))
     ready = [s_ for s_ in full_seeds if (runs[s_].get("setup") or {}).get("ready")]
     phases = [p for j in list(runs.values()) + list(live.values()) for p in j.get("phases", [])]
     rate = args.rate
@@ -262,9 +274,11 @@ def main():
             f"span at {rate:g} Hz differ by {lost} in all"
             + (f"; the largest pacing error {100 * max(pacing):.4f} % of a file's duration." if pacing else "."),
             "",
-            "A `servo_jp` that misses the arm's period moves it in a step: on a machine this busy the excitation "
-            "streamed over DDS moves in such steps, the free-space model fitted on it errs by a newton-metre, and "
-            "`rcm setup` says why it is not ready. Stream on a quiet machine, and read `rcm setup`'s force error."]
+            "A `servo_jp` that misses the arm's period holds the setpoint for that period and moves it two steps at "
+            "the next, as the dVRK takes it: the player sends each row when the arm's sample says it is due, and a "
+            "round trip over DDS longer than a period leaves a step. The free-space model fitted on an excitation "
+            "streamed so explains the torques worse than one fitted in process, and `rcm setup` says so (its force "
+            "error above)."]
     block = "\n".join(text)
     print(block)
     bench_lines = []
