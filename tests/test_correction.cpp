@@ -278,9 +278,6 @@ TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
   EXPECT_EQ(done.reason, HoldReason::within_tolerance);
 }
 
-// The spread along the move is u^T C u: axes whose errors are correlated
-// (as D and the radial offset are) can be sure of a diagonal move that their
-// per-axis spreads alone leave in doubt, and the other way round.
 TEST(Correction, AnActionStartsOnceCalledForWithoutABreakForTheConfirmationTime) {
   const RcmCorrector corrector(make_frame(), {});
   const double confirm = corrector.options().confirm_s;
@@ -322,6 +319,9 @@ TEST(Correction, AnActionStartsOnceCalledForWithoutABreakForTheConfirmationTime)
   EXPECT_EQ(corrector.compute_correction(ws2, e).action, CorrectionAction::compensate);
 }
 
+// The spread along the move is u^T C u: axes whose errors are correlated
+// (as D and the radial offset are) can be sure of a diagonal move that their
+// per-axis spreads alone leave in doubt, and the other way round.
 TEST(Correction, ReadsTheSpreadAlongTheMoveFromTheFullCovariance) {
   const RcmCorrector corrector(make_frame(), make_immediate_options());
   const double sd = 0.001;
