@@ -228,7 +228,7 @@ def main():
         return (f"{what}: force below 2 N for good within 5 s of the step on {sum(meets(r) for r in rs)} of "
                 f"{len(rs)} seeds, RMS force after settling below 1 N on "
                 f"{sum(r['rms_force_after_settle_n'] < 1.0 for r in rs)}, "
-                f"{sum(r['wrong_direction_moves'] for r in rs)} wrong-direction moves in all; median onset to below "
+                f"{sum(r['wrong_direction_moves'] for r in rs)} wrong-direction moves in all. Median onset to below "
                 f"2 N {statistics.median(t) if t else float('nan'):.1f} s, median RMS after settling "
                 f"{statistics.median(r['rms_force_after_settle_n'] for r in rs):.2f} N.")
 
@@ -262,10 +262,10 @@ def main():
         # section of the block already written stays, under its own date.
         whole = earlier_whole_procedure()
     text = [head, "",
-            "The loop on the large step, on the in-process bench's own setup (its session and free-space model, "
-            "`rcm_procedure_dds --session --model-file`), so that only the processes differ: the estimator reads "
-            f"measured_js at {rate:g} Hz over DDS (the bench: at {rate:g} Hz in one process), commands the shift on "
-            "`/PSM1/rcm/shift`, and the simulator moves its RCM.", "", *rows, "",
+            "The loop on the large step runs on the in-process bench's own setup (its session and free-space model, "
+            "`rcm_procedure_dds --session --model-file`), so that only the processes differ. "
+            f"The estimator reads measured_js at {rate:g} Hz over DDS (the bench: at {rate:g} Hz in one process) and "
+            "commands the shift on `/PSM1/rcm/shift`; the simulator moves its RCM.", "", *rows, "",
             summary(loops, "Across processes"), summary(benches, "In process (the bench)"),
             "Beside the processes, the two runs of a seed differ in the teleoperation's draw and the sensors' noise, "
             "and across processes the shift reaches the arm a few samples late. Each figure is one run.", "",
@@ -275,9 +275,9 @@ def main():
             + (f"; the largest pacing error {100 * max(pacing):.4f} % of a file's duration." if pacing else "."),
             "",
             "A `servo_jp` that misses the arm's period holds the setpoint for that period and moves it two steps at "
-            "the next, as the dVRK takes it: the player sends each row when the arm's sample says it is due, and a "
+            "the next, as the dVRK takes it. The player sends each row when the arm's sample says it is due; a "
             "round trip over DDS longer than a period leaves a step. The free-space model fitted on an excitation "
-            "streamed so explains the torques worse than one fitted in process, and `rcm setup` says so (its force "
+            "streamed so explains the torques worse than one fitted in process. `rcm setup` says so (its force "
             "error above)."]
     block = "\n".join(text)
     print(block)
