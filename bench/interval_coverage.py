@@ -82,10 +82,15 @@ def open_task(folder):
     return None
 
 
+def finish_task(folder, out):
+    """Keeps the task's result in its folder, for open_task; returns it."""
+    write_json(os.path.join(folder, "task.json"), out)
+    return out
+
+
 def free_space_task(rcm, work, seed, row):
     """The row's free-space recording for this seed, and its fitted linear model."""
     folder = os.path.join(work, f"free_space_{row}_seed{seed}")
-    done = os.path.join(folder, "task.json")
     finished = open_task(folder)
     if finished is not None:
         return finished
@@ -108,15 +113,12 @@ def free_space_task(rcm, work, seed, row):
         recordings = [os.path.join(folder, "sim", p) for p in json.load(f)["free_space"]]
     model = os.path.join(folder, "free_space_model.json")
     call([rcm, "dynamics", "fit", "--model", "linear", "--seed", str(seed), "--out", model] + recordings, log)
-    out = {"free_space": recordings, "model": model}
-    write_json(done, out)
-    return out
+    return finish_task(folder, {"free_space": recordings, "model": model})
 
 
 def session_task(rcm, work, seed, law):
     """Calibration, baseline and trials of one seed and tissue law (a token free space)."""
     folder = os.path.join(work, f"session_{law}_seed{seed}")
-    done = os.path.join(folder, "task.json")
     finished = open_task(folder)
     if finished is not None:
         return finished
@@ -124,9 +126,7 @@ def session_task(rcm, work, seed, law):
     write_json(config, {"protocol": GRID})
     call([rcm, "simulate", "--out", os.path.join(folder, "sim"), "--seed", str(seed), "--tissue", law,
           "--config", config, "--free-space-s", "5", "--no-truth"], os.path.join(folder, "log.txt"))
-    out = {"manifest": os.path.join(folder, "sim", "session.json")}
-    write_json(done, out)
-    return out
+    return finish_task(folder, {"manifest": os.path.join(folder, "sim", "session.json")})
 
 
 def trial_summary(results, side_of):
@@ -148,7 +148,6 @@ def prepare_task(rcm, work, kind, seed, name):
 def study_task(rcm, work, seed, law, row, free_space, session):
     """`rcm run` on the session with the row's free space and model: with and without the bias correction."""
     folder = os.path.join(work, f"study_{row}_{law}_seed{seed}")
-    done = os.path.join(folder, "task.json")
     finished = open_task(folder)
     if finished is not None:
         return finished
@@ -184,8 +183,7 @@ def study_task(rcm, work, seed, law, row, free_space, session):
         out[name] = {"trials": trial_summary(r, far), "self_check_m": math.sqrt(sum(x * x for x in
                                                                                     tissue["calibration_bias_m"])),
                      "torque_offset": tissue.get("torque_offset"), "family": tissue["family"]}
-    write_json(done, out)
-    return out
+    return finish_task(folder, out)
 
 
 # ----------------------------------------------------------------------------- tables
