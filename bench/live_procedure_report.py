@@ -233,7 +233,7 @@ def main():
                 f"{statistics.median(r['rms_force_after_settle_n'] for r in rs):.2f} N.")
 
     full = ["| seed | `rcm setup` | what it found missing | excitation: samples recorded / rows sent, pacing, RMS "
-            "tracking error of yaw (mrad) | the arm's periods without a new servo_jp (longest run) |",
+            "tracking error of yaw (mrad) | servo_jp a later one replaced before the arm's period used it |",
             "|---|---|---|---|---|"]
     for s_ in full_seeds:
         j = runs[s_]
@@ -247,8 +247,8 @@ def main():
                     f"{ex.get('samples_recorded', '-')} / {ex.get('rows_sent', '-')}, "
                     f"{'-' if pacing is None else f'{100 * pacing:+.3f} %'}, "
                     f"{'-' if rms is None else f'{1e3 * rms:.2f}'} | "
-                    + (f"{100 * j['servo_stream']['held'] / max(1, j['servo_stream']['servo_jp']):.1f} % "
-                       f"({j['servo_stream']['longest_held']}) |" if j.get("servo_stream") else "- |"))
+                    + (f"{j['servo_stream']['replaced']} of {j['servo_stream']['servo_jp']} |"
+                       if j.get("servo_stream") else "- |"))
     ready = [s_ for s_ in full_seeds if (runs[s_].get("setup") or {}).get("ready")]
     phases = [p for j in list(runs.values()) + list(live.values()) for p in j.get("phases", [])]
     rate = args.rate
@@ -274,11 +274,10 @@ def main():
             f"span at {rate:g} Hz differ by {lost} in all"
             + (f"; the largest pacing error {100 * max(pacing):.4f} % of a file's duration." if pacing else "."),
             "",
-            "A `servo_jp` that misses the arm's period holds the setpoint for that period and moves it two steps at "
-            "the next, as the dVRK takes it. The player sends each row when the arm's sample says it is due; a "
-            "round trip over DDS longer than a period leaves a step. The free-space model fitted on an excitation "
-            "streamed so explains the torques worse than one fitted in process. `rcm setup` says so (its force "
-            "error above)."]
+            "A `servo_jp` that misses the arm's period holds the setpoint for that period, and a later period takes "
+            "two (the last column), as the dVRK takes them. The simulated arm keeps a servo_jp's velocity as its "
+            "reference until the next one (at most 20 ms), so a late row costs the effort the stiffness times one "
+            "step."]
     block = "\n".join(text)
     print(block)
     bench_lines = []

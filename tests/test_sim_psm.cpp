@@ -144,6 +144,58 @@ TEST(SimulatedPsm, ServoJpIsTrackedDirectly) {
   EXPECT_EQ(s.counters.servo_accepted, 3000u);
 }
 
+
+// Over a network a servo_jp now and then comes a period or two late and a
+// later period takes several. The setpoint then lags, as on the dVRK; its
+// velocity stays the controller's reference, so the effort moves by the
+// stiffness times the lag, not by the damping times the whole velocity.
+TEST(SimulatedPsm, AServoJpPeriodsLateKeepsItsVelocityAndAStoppedStreamComesToRest) {
+  const double rate_hz = 1500.0;
+  const SimulatedPsm psm(rcm::sim::make_default_config(), make_options(rate_hz));
+  const auto largest_effort_step = [&](int late_every, int late_periods) {
+    SimulatedPsmState s = make_ready(psm);
+    const PsmVector q0 = s.setpoint;
+    const double w = 2 * M_PI * 0.5;
+    const auto row = [&](int k, PsmVector& q, PsmVector& qd) {
+      const double t = k * psm.period_s();
+      q = q0;
+      qd = PsmVector::Zero();
+      q[0] += 0.3 * std::sin(w * t);  // up to 0.94 rad/s
+      qd[0] = 0.3 * w * std::cos(w * t);
+    };
+    double largest = 0.0, last = 0.0;
+    PsmVector q, qd;
+    for (int k = 0; k < 3000; ++k) {
+      // Rows k with k % late_every < late_periods come with the next on time.
+      if (late_every == 0 || k % late_every >= late_periods) {
+        for (int i = late_every > 0 && k % late_every == late_periods ? k - late_periods : k; i <= k; ++i) {
+          row(i, q, qd);
+          EXPECT_EQ(psm.apply_servo_jp(s, q.data(), 6, qd.data(), 6), PsmCommandVerdict::accepted);
+        }
+      }
+      psm.compute_step(s);
+      if (k > 300) largest = std::max(largest, std::abs(s.sample.effort[0] - last));
+      last = s.sample.effort[0];
+    }
+    return largest;
+  };
+  const double smooth = largest_effort_step(0, 0);
+  // A step of 0.94 rad/s at 1.5 kHz is 0.63 mrad: 0.25 N m at the yaw's 400
+  // N m/rad. Losing the velocity would cost 6 N m s/rad times 0.94 rad/s.
+  for (int late_periods : {1, 2, 3})
+    EXPECT_LT(largest_effort_step(97, late_periods), smooth + 0.3 * late_periods + 0.3)
+        << late_periods << " periods late; smooth stream: " << smooth;
+
+  // A stream that stops: the setpoint's velocity is zero within servo_velocity_hold_s.
+  SimulatedPsmState s = make_ready(psm);
+  PsmVector q = s.setpoint, qd = PsmVector::Zero();
+  qd[0] = 0.5;
+  ASSERT_EQ(psm.apply_servo_jp(s, q.data(), 6, qd.data(), 6), PsmCommandVerdict::accepted);
+  psm.compute_step(s);
+  EXPECT_DOUBLE_EQ(s.sample.setpoint_velocity[0], 0.5);
+  run(psm, s, SimulatedPsmOptions{}.servo_velocity_hold_s + 2 * psm.period_s());
+  EXPECT_EQ(s.sample.setpoint_velocity[0], 0.0);
+}
 TEST(SimulatedPsm, TeleoperatesWhenIdleAndYieldsToACommand) {
   SimulatedPsmOptions o = make_options(500.0);
   o.teleop = true;

@@ -76,6 +76,8 @@ void SimulatedPsmOptions::check(const std::function<InputLocation(const std::str
     throw InputError(where("move_acceleration_max"), "must be > 0 on every joint");
   if (!((max_servo_step.array() > 0).all() && max_servo_step.allFinite()))
     throw InputError(where("max_servo_step"), "must be > 0 on every joint");
+  if (!(servo_velocity_hold_s > 0 && std::isfinite(servo_velocity_hold_s)))
+    throw InputError(where("servo_velocity_hold_s"), "must be > 0");
   if (!((wrist_limit_rad.array() > 0).all() && wrist_limit_rad.allFinite()))
     throw InputError(where("wrist_limit_rad"), "must be > 0 on every joint");
 }
@@ -128,9 +130,7 @@ ReferenceSample SimulatedPsm::get_reference(const SimulatedPsmState& s, double t
       break;
     case PsmMotion::servo:
       r.q = setpoint.head<3>();
-      // A servo_jp's velocity is a feedforward for its own period: a stream
-      // that stops leaves a setpoint at rest.
-      if (t - s.servo_time < 2.0 * period_s()) r.qd = s.setpoint_velocity.head<3>();
+      if (t - s.servo_time < options_.servo_velocity_hold_s) r.qd = s.setpoint_velocity.head<3>();
       break;
     case PsmMotion::move:
     case PsmMotion::home: {
@@ -263,7 +263,7 @@ void SimulatedPsm::compute_step(SimulatedPsmState& s) const {
         s.setpoint_velocity.tail<3>() =
             (s.move_to.tail<3>() - s.move_from.tail<3>()) * (quintic_rate(x) / s.move.duration);
       }
-    } else if (s.motion == PsmMotion::servo && t - s.servo_time >= 2.0 * period_s()) {
+    } else if (s.motion == PsmMotion::servo && t - s.servo_time >= options_.servo_velocity_hold_s) {
       s.setpoint_velocity.setZero();
     }
     update_incision(s, t);

@@ -80,6 +80,11 @@ struct SimulatedPsmOptions {
   Eigen::Vector3d move_velocity_max = Eigen::Vector3d(1.0, 1.0, 0.1);      // move_jp, home: rad/s, rad/s, m/s
   Eigen::Vector3d move_acceleration_max = Eigen::Vector3d(4.0, 4.0, 0.4);  // rad/s^2, rad/s^2, m/s^2
   Eigen::Vector3d max_servo_step = Eigen::Vector3d(0.1, 0.1, 0.01);       // rad, rad, m (the wrist: the first)
+  // A servo_jp's velocity feeds the controller forward until the next
+  // servo_jp, or until this much of the arm's time passes without one (the
+  // stream stopped: the setpoint comes to rest). Far longer than a period, so
+  // that a setpoint a period late over the network moves the arm as it should.
+  double servo_velocity_hold_s = 0.02;
   Eigen::Vector3d wrist_limit_rad = Eigen::Vector3d(4.5, 1.5, 1.5);        // |q| of joints 4-6
   // Throws InputError at `where(name)` for a value out of range.
   void check(const std::function<InputLocation(const std::string&)>& where) const;
@@ -129,7 +134,7 @@ struct SimulatedPsmState {
   PsmMotion motion = PsmMotion::hold;
   // The setpoint of every joint (setpoint_js); joints 1-3 are the controller's reference.
   PsmVector setpoint = PsmVector::Zero(), setpoint_velocity = PsmVector::Zero();
-  double servo_time = 0.0;  // of the last servo_jp: its velocity holds for two periods
+  double servo_time = 0.0;  // of the last servo_jp: its velocity holds for servo_velocity_hold_s
   int servo_this_period = 0;       // servo_jp taken since the last period began
   std::uint64_t servo_gap = 0;     // periods in a row without one, in servo motion
   // move_jp and home: joints 1-3 a quintic, the wrist along the same profile.
