@@ -233,8 +233,9 @@ def main():
                 f"{statistics.median(r['rms_force_after_settle_n'] for r in rs):.2f} N.")
 
     full = ["| seed | `rcm setup` | what it found missing | excitation: samples recorded / rows sent, pacing, RMS "
-            "tracking error of yaw (mrad) | servo_jp a later one replaced before the arm's period used it |",
-            "|---|---|---|---|---|"]
+            "tracking error of yaw (mrad) | servo_jp a later one replaced before the arm's period used it | the loop "
+            "on the procedure's own setup: below 2 N (s) / RMS after settling (N) / wrong-direction moves |",
+            "|---|---|---|---|---|---|"]
     for s_ in full_seeds:
         j = runs[s_]
         ex = (j.get("phases") or [{}])[0]
@@ -248,7 +249,10 @@ def main():
                     f"{'-' if pacing is None else f'{100 * pacing:+.3f} %'}, "
                     f"{'-' if rms is None else f'{1e3 * rms:.2f}'} | "
                     + (f"{j['servo_stream']['replaced']} of {j['servo_stream']['servo_jp']} |"
-                       if j.get("servo_stream") else "- |"))
+                       if j.get("servo_stream") else "- |")
+                    + (f" {fmt_s(j['closed_loop'].get('time_to_below_2n_s'))} / "
+                       f"{j['closed_loop']['rms_force_after_settle_n']:.2f} / {j['closed_loop']['wrong_direction_moves']} |"
+                       if j.get("closed_loop") else " - |"))
     ready = [s_ for s_ in full_seeds if (runs[s_].get("setup") or {}).get("ready")]
     phases = [p for j in list(runs.values()) + list(live.values()) for p in j.get("phases", [])]
     rate = args.rate

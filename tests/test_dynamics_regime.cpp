@@ -182,9 +182,14 @@ TEST(TrainingRegime, TravelsWithTheModelFile) {
   nlohmann::json old = doc;
   old.erase("regime");
   EXPECT_TRUE(rcm::dynamics::torque_model_from_json(old, "m.json")->info().regime.empty());
-  // A regime of the wrong width is a located error.
+  // The regime covers the first joints, those the model reads: fewer than
+  // the model's joints load; more are a located error.
+  nlohmann::json narrow = doc;
+  narrow["regime"] = rcm::dynamics::regime_to_json(rcm::dynamics::compute_training_regime({make_path(1.0, 200.0, 1.0)}, 2));
+  EXPECT_EQ(rcm::dynamics::torque_model_from_json(narrow, "m.json")->info().regime.num_joints(), 2);
   nlohmann::json wide = doc;
-  wide["regime"] = rcm::dynamics::regime_to_json(rcm::dynamics::compute_training_regime({make_path(1.0, 200.0, 1.0)}, 2));
+  for (const char* key : {"position_min", "position_max", "velocity_min", "velocity_max", "acceleration_abs_max"})
+    wide["regime"][key].push_back(0.0);
   EXPECT_THROW(rcm::dynamics::torque_model_from_json(wide, "m.json"), rcm::InputError);
 }
 
@@ -199,6 +204,20 @@ TEST(TrainingRegime, FitsRecordWhatTheySaw) {
   ASSERT_FALSE(r.empty());
   EXPECT_EQ(r.samples, rec.num_samples());
   EXPECT_EQ(r.velocity_max[2], rec.velocity.col(2).maxCoeff());
+
+  // A dVRK's six joints, the wrist still in free space: the linear model
+  // reads joints 1-3, and its regime covers those alone, so a wrist that
+  // turns later is not out of it.
+  rcm::Recording six = rec;
+  six.position.conservativeResize(Eigen::NoChange, 6);
+  six.velocity.conservativeResize(Eigen::NoChange, 6);
+  six.effort.conservativeResize(Eigen::NoChange, 6);
+  six.position.rightCols(3).setZero();
+  six.velocity.rightCols(3).setZero();
+  six.effort.rightCols(3).setZero();
+  const auto fit6 = rcm::dynamics::fit_linear_torque_model({six}, options);
+  EXPECT_EQ(fit6.model->info().num_joints, 6);
+  EXPECT_EQ(fit6.model->info().regime.num_joints(), 3);
 }
 
 rcm::JointTissueModel linear_tissue() {

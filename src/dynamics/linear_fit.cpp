@@ -556,7 +556,9 @@ FitResult fit_linear_torque_model(const std::vector<Recording>& recordings, cons
   info.num_joints = N;
   info.num_outputs = M;
   info.sample_period_s = sample_period;
-  info.regime = compute_training_regime(recordings, N);
+  // The regime of the joints the regressors read (1-3): a wrist that never
+  // moved in free space is no reason to doubt the model when it turns.
+  info.regime = compute_training_regime(recordings, 3);
   p.live_zero_phase = options.live_zero_phase;
   auto model_for_test = std::make_unique<LinearTorqueModel>(info, p);
   summary.output_delay_samples = model_for_test->output_delay();

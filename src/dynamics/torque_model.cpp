@@ -506,8 +506,9 @@ std::unique_ptr<TorqueModel> torque_model_from_json(const nlohmann::json& docume
   if (document.contains("training")) info.training = document.at("training");
   if (document.contains("regime")) {
     info.regime = regime_from_json(document.at("regime"), source);
-    if (!info.regime.empty() && info.regime.num_joints() != info.num_joints)
-      fail(source, "regime.position_min", fmt::format("expected {} joints (num_joints)", info.num_joints));
+    // The first joints, those the model reads (the linear model: 1-3).
+    if (!info.regime.empty() && info.regime.num_joints() > info.num_joints)
+      fail(source, "regime.position_min", fmt::format("expected at most {} joints (num_joints)", info.num_joints));
   }
   const auto& p = detail::require(document, "parameters", source, "");
   if (kind == TorqueModelKind::linear) return detail::load_linear_parameters(std::move(info), p, source);

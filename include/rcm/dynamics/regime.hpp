@@ -27,7 +27,8 @@
 namespace rcm::dynamics {
 
 struct TrainingRegime {
-  // Per joint read by the model (joints 1..N); all empty: unknown (a model file
+  // Per joint read by the model (its first joints: the linear model's 1-3, a
+  // network's every joint); all empty: unknown (a model file
   // written without it, or an imported network), and nothing is checked.
   Eigen::VectorXd position_min, position_max;  // rad, m
   Eigen::VectorXd velocity_min, velocity_max;  // rad/s, m/s
