@@ -159,6 +159,9 @@ def main():
     ap.add_argument("--keep", help="keep every run's folder here")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--from-json", help="write the tables from the report.json of an earlier run (its --keep folder)")
+    ap.add_argument("--add-full-seeds", action="store_true",
+                    help="with --from-json: run the whole procedure on the --full-seeds it lacks and keep them with it "
+                         "(a new report.json in --keep)")
     args = ap.parse_args()
     bindir = os.path.join(args.build, "bin")
     work = args.keep or tempfile.mkdtemp(prefix="rcm_live_procedure_")
@@ -174,8 +177,18 @@ def main():
         bench = {int(k): v for k, v in saved["bench"].items()}
         cpu, steps = saved["sim_cpu_share"], saved.get("steps") or step_cost(args.build)
         seeds = [s for s in seeds if s in live]
-        full_seeds = [s for s in full_seeds if s in runs]
         started -= saved.get("minutes", 0) * 60
+        # With --add-full-seeds, the whole procedure on seeds the earlier run
+        # did not cover, kept with its runs (the report's time is then both).
+        added = [s for s in full_seeds if s not in runs] if args.add_full_seeds else []
+        for s in added:
+            runs[s] = one_procedure(bindir, s, work, args)
+        full_seeds = [s for s in full_seeds if s in runs]
+        if added:
+            saved.update(runs=runs, minutes=(time.monotonic() - started) / 60, load=os.getloadavg()[0])
+            args.from_json = os.path.join(work, "report.json")
+            with open(args.from_json, "w") as f:
+                json.dump(saved, f, indent=2)
     else:
         bench, live, runs = {}, {}, {}
         for s in seeds:
@@ -232,27 +245,28 @@ def main():
                 f"2 N {statistics.median(t) if t else float('nan'):.1f} s, median RMS after settling "
                 f"{statistics.median(r['rms_force_after_settle_n'] for r in rs):.2f} N.")
 
-    full = ["| seed | `rcm setup` | what it found missing | excitation: samples recorded / rows sent, pacing, RMS "
-            "tracking error of yaw (mrad) | servo_jp a later one replaced before the arm's period used it | the loop "
-            "on the procedure's own setup: below 2 N (s) / RMS after settling (N) / wrong-direction moves |",
-            "|---|---|---|---|---|---|"]
+    full = ["| seed | `rcm setup` (the model's force error) | excitation: samples recorded / rows sent, pacing, RMS "
+            "tracking error of yaw (mrad) | servo_jp replaced before a period used it | on its own setup: live "
+            "estimate error (mm); loop: below 2 N (s) / RMS (N) / wrong moves |",
+            "|---|---|---|---|---|"]
     for s_ in full_seeds:
         j = runs[s_]
         ex = (j.get("phases") or [{}])[0]
         setup = j.get("setup") or {}
         pacing = ex.get("pacing_error")
         rms = (ex.get("rms_tracking_error") or {}).get("outer_yaw")
-        missing = "; ".join(m.split(":")[0] for m in setup.get("missing") or []) or "-"
-        full.append(f"| {s_} | {'ready' if setup.get('ready') else 'not ready' if setup else '-'} "
-                    f"(force error {setup.get('force_error_n') or float('nan'):.1f} N) | {missing} | "
+        missing = ", ".join(m.split(":")[0] for m in setup.get("missing") or [])
+        verdict = "ready" if setup.get("ready") else f"not ready: {missing}" if setup else "-"
+        full.append(f"| {s_} | {verdict} ({setup.get('force_error_n') or float('nan'):.1f} N) | "
                     f"{ex.get('samples_recorded', '-')} / {ex.get('rows_sent', '-')}, "
                     f"{'-' if pacing is None else f'{100 * pacing:+.3f} %'}, "
                     f"{'-' if rms is None else f'{1e3 * rms:.2f}'} | "
                     + (f"{j['servo_stream']['replaced']} of {j['servo_stream']['servo_jp']} |"
                        if j.get("servo_stream") else "- |")
-                    + (f" {fmt_s(j['closed_loop'].get('time_to_below_2n_s'))} / "
+                    + (f" {1e3 * j['estimate_error_m']:.2f}; " if j.get("estimate_error_m") is not None else " -; ")
+                    + (f"{fmt_s(j['closed_loop'].get('time_to_below_2n_s'))} / "
                        f"{j['closed_loop']['rms_force_after_settle_n']:.2f} / {j['closed_loop']['wrong_direction_moves']} |"
-                       if j.get("closed_loop") else " - |"))
+                       if j.get("closed_loop") else "- |"))
     ready = [s_ for s_ in full_seeds if (runs[s_].get("setup") or {}).get("ready")]
     phases = [p for j in list(runs.values()) + list(live.values()) for p in j.get("phases", [])]
     rate = args.rate
@@ -271,17 +285,15 @@ def main():
             f"The estimator reads measured_js at {rate:g} Hz over DDS (the bench: at {rate:g} Hz in one process) and "
             "commands the shift on `/PSM1/rcm/shift`; the simulator moves its RCM.", "", *rows, "",
             summary(loops, "Across processes"), summary(benches, "In process (the bench)"),
-            "Beside the processes, the two runs of a seed differ in the teleoperation's draw and the sensors' noise, "
-            "and across processes the shift reaches the arm a few samples late. Each figure is one run.", "",
+            "The two runs of a seed also differ in the teleoperation's draw and the sensors' noise. Each figure is "
+            "one run.", "",
             *whole[:-1],
             whole[-1] + f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
             f"span at {rate:g} Hz differ by {lost} in all"
             + (f"; the largest pacing error {100 * max(pacing):.4f} % of a file's duration." if pacing else "."),
             "",
-            "A `servo_jp` that misses the arm's period holds the setpoint for that period, and a later period takes "
-            "two (the last column), as the dVRK takes them. The simulated arm keeps a servo_jp's velocity as its "
-            "reference until the next one (at most 20 ms), so a late row costs the effort the stiffness times one "
-            "step."]
+            "A late `servo_jp` holds the setpoint for a period, and a later period takes two (fourth column), as "
+            "on a dVRK. The simulated arm keeps its velocity as the reference until the next one (at most 20 ms)."]
     block = "\n".join(text)
     print(block)
     bench_lines = []
