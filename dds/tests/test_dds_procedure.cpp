@@ -292,9 +292,12 @@ TEST(DdsProcedure, PlayerStopsOnTrackingError) {
 // times the wall clock: every phase recorded, rcm setup on what was recorded,
 // the check's live estimate, and the loop closed across three processes
 // (simulator, monitor, procedure) on the large step. Short phases, so that it
-// runs in seconds: a 40 s excitation of few iterations, which rcm setup finds
-// short (its thresholds are relaxed here). At 4 times the wall on a machine
-// running other tests, DDS's delays count 4 times in the arm's time: the
+// runs in a minute and a half: a 120 s excitation of few design iterations, a
+// 20 s calibration (rcm setup's thresholds are relaxed here) and a 60 s loop.
+// With a shorter excitation and loop, a busy machine's weaker model can
+// restart the filters just before the step and hold past the loop's end.
+// At 4 times the wall on a machine running other tests, DDS's delays count 4
+// times in the arm's time: the
 // tracking-error stop is wide (the stops have their own tests above), and the
 // servo stream's steps spoil the free-space model by as much as the machine is
 // busy, so neither the model's force error nor the calibration self-check it
@@ -305,11 +308,11 @@ TEST(DdsProcedure, ProcedureFromExcitationToTheLoopClosedAcrossProcesses) {
   const fs::path dir = make_dir("procedure");
   auto sim = start_sim(dir, peer, {"--rate", "500", "--time-scale", "4", "--teleop", "--software-rcm", "--seed", "2"});
   ChildProcess p({RCM_DDS_PROCEDURE_PATH, "--simulator", "--power", "--out", (dir / "out").string(), "--excite-duration",
-                  "40", "--excite-args=--max-iterations 40",
+                  "120", "--excite-args=--max-iterations 40",
                   "--setup-args=--min-free-space 30 --min-reversals 4 --max-force-error 1000 --max-outside-regime 0.9 "
                   "--max-calibration-error 0.05",
                   "--calibration-s", "20", "--check-s", "10", "--software-rcm", "--incision-motion", "large_step",
-                  "--loop-s", "30", "--max-tracking-error", "0.5,0.5,0.05,0.5", "--seed", "2"},
+                  "--loop-s", "60", "--max-tracking-error", "0.5,0.5,0.05,0.5", "--seed", "2"},
                  dir / "procedure.log");
   const int code = p.wait(600s);
   const std::string log = p.log();
