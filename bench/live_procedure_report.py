@@ -298,11 +298,11 @@ def main():
     print(block)
     bench_lines = []
     if steps:
-        bench_lines = [f"Measured by `bench/live_procedure_report.py` on {stamp}, {cpu_model()}: `bench_sim "
-                       "--benchmark_filter=SimulatedPsm` (one publishing period: a servo_jp taken, the physics "
-                       "steps of the period with the tissue engaged, the sample filled) and `rcm_sim_psm_dds --rate "
-                       "1500` in real time while `rcm_play_dds` holds and records it (CPU time over wall time, "
-                       "from /proc).", "",
+        bench_lines = [f"Measured by `bench/live_procedure_report.py` on {stamp}, {cpu_model()}. "
+                       "`bench_sim --benchmark_filter=SimulatedPsm` times one publishing period: a servo_jp taken, "
+                       "the period's physics steps with the tissue engaged, the sample filled. `rcm_sim_psm_dds "
+                       "--rate 1500` then runs in real time while `rcm_play_dds` holds and records it (CPU time "
+                       "over wall time, from /proc).", "",
                        "| rate | physics steps per period | time per period | share of the period |",
                        "|---|---|---|---|"]
         scale = {"ns": 1e-9, "us": 1e-6, "ms": 1e-3, "s": 1.0}
