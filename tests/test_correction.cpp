@@ -308,15 +308,34 @@ TEST(Correction, AnActionStartsOnceCalledForWithoutABreakForTheConfirmationTime)
     for (; t < (spell + 1.0) * confirm; t += dt)  // unsure: the interval wider than the move
       EXPECT_TRUE(corrector.compute_correction(ws, make_estimate(t, sure_move, 0.003)).step_base.isZero()) << t;
   }
-  // A restart starts it over too.
+  // A restart starts it over too, and its first action waits the longer
+  // restart_confirm_s (a restarted filter can follow a transient for a
+  // second); the actions after it, confirm_s again.
+  const double after_restart = corrector.options().restart_confirm_s;
+  ASSERT_GT(after_restart, 2.0 * confirm);
   auto ws2 = corrector.create_workspace();
   OnlineOutput e = make_estimate(0.0, sure_move, 0.0002);
   for (; e.time < 0.8 * confirm; e.time += dt) corrector.compute_correction(ws2, e);
+  const double restart = e.time;
   e.jumps = 1;
-  for (; e.time < 1.6 * confirm; e.time += dt)
+  for (; e.time < restart + after_restart - 2 * dt; e.time += dt)
     EXPECT_TRUE(corrector.compute_correction(ws2, e).step_base.isZero()) << e.time;
-  for (; e.time < 2.2 * confirm; e.time += dt) corrector.compute_correction(ws2, e);
+  for (; e.time < restart + after_restart + 2 * dt; e.time += dt) corrector.compute_correction(ws2, e);
   EXPECT_EQ(corrector.compute_correction(ws2, e).action, CorrectionAction::compensate);
+  // Unsure for a while (back to hold), then sure again: confirm_s.
+  auto after_jump = [](double t, double sd) {
+    OnlineOutput o = make_estimate(t, Eigen::Vector3d(0.004, 0, 0), sd);
+    o.jumps = 1;
+    return o;
+  };
+  for (const double until = e.time + 0.1; e.time < until; e.time += dt)
+    EXPECT_TRUE(corrector.compute_correction(ws2, after_jump(e.time, 0.003)).step_base.isZero());
+  const double sure_again = e.time;
+  for (; e.time < sure_again + confirm - 2 * dt; e.time += dt)
+    EXPECT_TRUE(corrector.compute_correction(ws2, after_jump(e.time, 0.0002)).step_base.isZero());
+  for (; e.time < sure_again + confirm + 2 * dt; e.time += dt)
+    corrector.compute_correction(ws2, after_jump(e.time, 0.0002));
+  EXPECT_EQ(corrector.compute_correction(ws2, after_jump(e.time, 0.0002)).action, CorrectionAction::compensate);
 }
 
 // The spread along the move is u^T C u: axes whose errors are correlated

@@ -22,6 +22,7 @@ void CorrectionOptions::check() const {
   if (!(max_step_dt_s > 0)) fail("max_step_dt_s must be > 0");
   if (!(max_fit_cost > 0)) fail("max_fit_cost must be > 0");
   if (!(confirm_s >= 0)) fail("confirm_s must be >= 0");
+  if (!(restart_confirm_s >= 0)) fail("restart_confirm_s must be >= 0");
 }
 
 const char* to_string(CorrectionAction action) {
@@ -60,6 +61,7 @@ void RcmCorrector::reset(Workspace& ws) const {
   ws.last_time = 0.0;
   ws.jumps = 0;
   ws.sure_since = -1.0;
+  ws.after_restart = false;
   ws.output = CorrectionOutput{};
 }
 
@@ -121,6 +123,8 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
   // was being acted on is gone, and an action must start over.
   const bool restarted = ws.started && estimate.jumps != ws.jumps;
   ws.jumps = estimate.jumps;
+  if (restarted) ws.after_restart = true;
+  const double confirm = ws.after_restart ? std::max(o.confirm_s, o.restart_confirm_s) : o.confirm_s;
   const CorrectionAction previous = restarted ? CorrectionAction::hold : out.action;
   const double dt = ws.started ? std::clamp(estimate.time - ws.last_time, 0.0, o.max_step_dt_s) : 0.0;
   ws.started = true;
@@ -166,7 +170,7 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
     hold(HoldReason::model_mismatch);
   } else if (previous == CorrectionAction::hold && !starts_action(b, o.tolerance_m)) {
     hold(settled);
-  } else if (previous == CorrectionAction::hold && estimate.time - ws.sure_since < o.confirm_s) {
+  } else if (previous == CorrectionAction::hold && estimate.time - ws.sure_since < confirm) {
     hold(HoldReason::not_confident);  // sure, not yet for long enough
   } else if (previous != CorrectionAction::hold && b.low <= 0.0) {
     hold(HoldReason::not_confident);  // the interval outgrew the move
@@ -179,6 +183,7 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
     else
       out.action = b.low > budget ? CorrectionAction::reposition : CorrectionAction::compensate;
   }
+  if (out.action != CorrectionAction::hold) ws.after_restart = false;
   if (out.action == CorrectionAction::compensate) {
     const double step = std::min({o.max_rate_m_per_s * dt, b.low, budget});
     out.step_base = incision_.R_base_inc * (b.direction * step);
@@ -322,6 +327,9 @@ const OptionTable<CorrectionOptions>& get_option_table(OptionTag<CorrectionOptio
                "back to hold below this fraction of the tolerance", "", OptionLimits::above_up_to(0, 1))
           .add("confirm_s", &CorrectionOptions::confirm_s,
                "an action starts once the estimate has called for it this long without a break", "s",
+               OptionLimits::at_least(0))
+          .add("restart_confirm_s", &CorrectionOptions::restart_confirm_s,
+               "the first action after a restart of the estimate waits this long instead", "s",
                OptionLimits::at_least(0))
           .add("max_step_dt_s", &CorrectionOptions::max_step_dt_s,
                "a sample after a gap moves the RCM by at most this long at max_rate", "s", OptionLimits::above(0))

@@ -33,6 +33,7 @@ void OnlineEstimatorOptions::check() const {
   if (!(jump_threshold >= 0)) fail("jump_threshold must be >= 0 (0: off)");
   if (!(jump_allowance >= 0)) fail("jump_allowance must be >= 0");
   if (!(jump_holdoff_s >= 0)) fail("jump_holdoff_s must be >= 0");
+  if (!(kept_holdoff_s >= 0)) fail("kept_holdoff_s must be >= 0");
   if (!(alarm_force_n > 0)) fail("alarm_force_n must be > 0");
   if (!(alarm_clear_fraction > 0 && alarm_clear_fraction <= 1)) fail("alarm_clear_fraction must be in (0, 1]");
   if (!(max_theta_rad > 0)) fail("max_theta_rad must be > 0");
@@ -65,24 +66,28 @@ OnlineEstimator::Workspace OnlineEstimator::create_workspace() const {
   return ws;
 }
 
-// Every filter back to its start and the prior covariance. Each takes `cost`
-// as its own: the fit cost then stays the forgotten mean of the whole stream,
-// and the bank chooses among the restarted filters by what they explain next.
-void OnlineEstimator::restart_hypotheses(Workspace& ws, double cost) const {
-  ws.num_hypotheses = static_cast<int>(options_.D_starts.size());
+// Every start back to its place and the prior covariance, each with the cost
+// of the filter reported so far (incumbent, -1 at reset: none, cost 0): the fit
+// cost then stays the forgotten mean of the whole stream, and the bank chooses
+// by what the filters explain next. The incumbent itself stays, after them.
+void OnlineEstimator::restart_hypotheses(Workspace& ws, int incumbent) const {
+  const int starts = static_cast<int>(options_.D_starts.size());
+  const Hypothesis kept = incumbent >= 0 ? ws.hypotheses[static_cast<std::size_t>(incumbent)] : Hypothesis{};
   const Eigen::Vector3d sd(options_.initial_radial_sd_m, options_.initial_radial_sd_m, options_.initial_D_sd_m);
-  for (int h = 0; h < ws.num_hypotheses; ++h) {
+  for (int h = 0; h < starts; ++h) {
     Hypothesis& hyp = ws.hypotheses[static_cast<std::size_t>(h)];
     hyp.p = Eigen::Vector3d(0.0, 0.0, options_.D_starts[static_cast<std::size_t>(h)]);
     hyp.P = sd.array().square().matrix().asDiagonal();
-    hyp.cost = cost;
+    hyp.cost = kept.cost;
   }
+  ws.num_hypotheses = starts;
+  if (incumbent >= 0) ws.hypotheses[static_cast<std::size_t>(ws.num_hypotheses++)] = kept;
 }
 
 void OnlineEstimator::reset(Workspace& ws) const {
-  restart_hypotheses(ws, 0.0);
+  restart_hypotheses(ws, -1);
   ws.cost_weight = 0.0;
-  ws.jump_armed_at = 0.0;
+  ws.jump_armed_at = ws.kept_armed_at = 0.0;
   ws.started = false;
   ws.last_time = 0.0;
   ws.output = OnlineOutput{};
@@ -98,10 +103,12 @@ void OnlineEstimator::apply_rcm_shift(Workspace& ws, const Eigen::Vector3d& shif
 }
 
 namespace {
-// The filter with the lowest forgotten innovation cost.
-int get_best_hypothesis(const OnlineEstimator::Workspace& ws) {
-  int best = 0;
-  for (int h = 1; h < ws.num_hypotheses; ++h)
+// The filter with the lowest forgotten innovation cost; on a tie the one kept
+// from before a restart (after the `starts`), which restarted filters that
+// predict alike at rest must beat, not equal.
+int get_best_hypothesis(const OnlineEstimator::Workspace& ws, int starts) {
+  int best = ws.num_hypotheses > starts ? starts : 0;
+  for (int h = 0; h < ws.num_hypotheses; ++h)
     if (ws.hypotheses[static_cast<std::size_t>(h)].cost < ws.hypotheses[static_cast<std::size_t>(best)].cost) best = h;
   return best;
 }
@@ -144,7 +151,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     for (int k = 0; k < 4; ++k) tissue[k] = Jet(tissue_.parameters[k]);
     // The filter reported before this sample: the onset test scores its
     // one-step prediction.
-    const int prior_best = get_best_hypothesis(ws);
+    const int prior_best = get_best_hypothesis(ws, static_cast<int>(o.D_starts.size()));
     // Huber's rho of a normalized residual norm: the robust log-likelihood that
     // both the hypothesis costs and the onset test use, so that a transient the
     // free-space model misses cannot carry either.
@@ -209,11 +216,14 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     // Change point: the reported filter's prediction costs more than its own
     // level (its fit cost before this sample) by more than the allowance, for
     // long enough. Scored as the onset test, per correlation time.
-    if (o.jump_threshold > 0 && !out.at_rest && time >= ws.jump_armed_at) {
+    const bool kept_reported = prior_best == static_cast<int>(o.D_starts.size());
+    const bool armed = time >= ws.jump_armed_at || (kept_reported && time >= ws.kept_armed_at);
+    if (o.jump_threshold > 0 && !out.at_rest && armed) {
       const double excess = (prior_cost_sample - prior_level - o.jump_allowance) * (dt_info / o.correlation_time_s);
       out.jump_cusum = std::max(0.0, out.jump_cusum + excess);
       if (out.jump_cusum > o.jump_threshold) {
-        restart_hypotheses(ws, ws.hypotheses[static_cast<std::size_t>(prior_best)].cost);
+        restart_hypotheses(ws, prior_best);
+        ws.kept_armed_at = time + o.kept_holdoff_s;
         out.jump_cusum = 0.0;
         ++out.jumps;
         out.jump_time = time;
@@ -222,7 +232,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     }
   }
 
-  const int best = get_best_hypothesis(ws);
+  const int best = get_best_hypothesis(ws, static_cast<int>(o.D_starts.size()));
   const Hypothesis& chosen = ws.hypotheses[static_cast<std::size_t>(best)];
   out.hypothesis = best;
   out.misalignment_m = chosen.p;
@@ -442,6 +452,9 @@ const OptionTable<OnlineEstimatorOptions>& get_option_table(OptionTag<OnlineEsti
                OptionLimits::at_least(0))
           .add("jump_holdoff_s", &OnlineEstimatorOptions::jump_holdoff_s,
                "the change-point test waits this long after a reset or a restart", "s", OptionLimits::at_least(0))
+          .add("kept_holdoff_s", &OnlineEstimatorOptions::kept_holdoff_s,
+               "the change-point test waits this long after a restart while the filter kept from before it is reported", "s",
+               OptionLimits::at_least(0))
           .add("alarm_force_n", &OnlineEstimatorOptions::alarm_force_n, "incision force that raises the alarm (paper V-E)",
                "N", positive)
           .add("alarm_clear_fraction", &OnlineEstimatorOptions::alarm_clear_fraction,

@@ -64,6 +64,10 @@ struct CorrectionOptions {
   // move for a few tenths of a second, and at 1.5 kHz that is hundreds of
   // steps; a real misalignment stays.
   double confirm_s = 0.5;
+  // ... and this long for the first action after a change-point restart of
+  // the estimate: a restarted filter can follow a transient the free-space
+  // model missed, sure of a wrong move, for a second.
+  double restart_confirm_s = 1.5;
   void check() const;  // throws std::invalid_argument
 };
 const OptionTable<CorrectionOptions>& get_option_table(OptionTag<CorrectionOptions>);
@@ -105,6 +109,7 @@ class RcmCorrector {
     double last_time = 0.0;
     int jumps = 0;  // the estimate's restarts seen (OnlineOutput::jumps)
     double sure_since = -1.0;  // when the start condition began to hold (< 0: it does not)
+    bool after_restart = false;  // no action since the estimate's last restart
     CorrectionOutput output;
   };
   RcmCorrector(const IncisionFrame& incision, const CorrectionOptions& options);

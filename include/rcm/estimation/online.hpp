@@ -31,8 +31,14 @@
 //   nats per correlation time, means the offsets the filter holds no longer
 //   explain the torques. The bank then restarts from the prior (D_starts,
 //   initial_*_sd_m), as after reset, and re-converges from the data in a few
-//   seconds of motion. A residual the model never explained (an unseen
-//   payload) keeps its level and does not feed it; rest samples do not either.
+//   seconds of motion. The filter reported before stays in the bank: when
+//   nothing moved (a transient the free-space model missed) it keeps
+//   explaining the torques best and stays reported, where restarted filters
+//   would be pulled for seconds to wherever the transient points. While it is
+//   reported its level is still a level, so the test runs again after a
+//   short holdoff: a real change just after such a restart is caught at once.
+//   A residual the model never explained (an unseen payload) keeps its level
+//   and does not feed it; rest samples do not either.
 // - At rest the free-space model's error is the stiction band, a constant torque
 //   that a radial offset would explain just as well (friction memory): rest
 //   samples weigh less (sigma times rest_sigma_factor) and do not feed the onset
@@ -92,8 +98,12 @@ struct OnlineEstimatorOptions {
   // cost scatters about its level by about one (a chi-square of 3, halved).
   double jump_allowance = 1.0;
   // After a reset or a restart the test waits this long: a converging bank's
-  // costs are not yet a level to compare with.
+  // costs are not yet a level to compare with (the filter kept from before a
+  // restart excepted, while it is reported).
   double jump_holdoff_s = 10.0;
+  // ... and this long while the filter kept from before the restart is
+  // reported: its level is still a level.
+  double kept_holdoff_s = 0.2;
   double alarm_force_n = 10.0;           // paper V-E
   double alarm_clear_fraction = 0.9;     // the alarm clears below this fraction of the threshold
   double max_theta_rad = 80.0 * M_PI / 180.0;
@@ -121,7 +131,9 @@ struct OnlineOutput {
   double time = 0.0;  // of the sample the estimate is for
   bool used = false;                 // false: the pivot was beyond max_theta_rad
   bool at_rest = false;
-  int hypothesis = 0;                // index of the reported filter
+  // The reported filter: its start's index in D_starts, or D_starts.size()
+  // for the one kept from before the last change-point restart.
+  int hypothesis = 0;
   Eigen::Vector3d misalignment_m = Eigen::Vector3d::Zero();  // [dr_x, dr_y, D], incision frame
   Eigen::Vector3d sd_m = Eigen::Vector3d::Zero();            // sqrt of the covariance diagonal
   // The covariance of misalignment_m (m^2, incision frame): the spread along
@@ -159,7 +171,7 @@ struct OnlineOutput {
 
 class OnlineEstimator {
  public:
-  static constexpr int kMaxHypotheses = 4;
+  static constexpr int kMaxHypotheses = 4;  // starts (D_starts)
 
   struct Hypothesis {
     Eigen::Vector3d p = Eigen::Vector3d::Zero();
@@ -167,9 +179,12 @@ class OnlineEstimator {
     double cost = 0.0;  // exponentially forgotten mean of the robust loss of the innovation
   };
   struct Workspace {
-    std::array<Hypothesis, kMaxHypotheses> hypotheses;
+    // The restarted starts, then (after a change-point restart) the filter
+    // reported before it.
+    std::array<Hypothesis, kMaxHypotheses + 1> hypotheses;
     int num_hypotheses = 0;
     double jump_armed_at = 0.0;  // the change-point test runs from this time on
+    double kept_armed_at = 0.0;  // ... or from this time on while the kept filter is reported
     double cost_weight = 0.0;  // the forgotten weight of the samples in the costs
     bool started = false;
     double last_time = 0.0;
@@ -195,7 +210,7 @@ class OnlineEstimator {
   const OnlineEstimatorOptions& options() const { return options_; }
 
  private:
-  void restart_hypotheses(Workspace& workspace, double cost) const;
+  void restart_hypotheses(Workspace& workspace, int incumbent) const;
 
   IncisionFrame incision_;
   JointTissueModel tissue_;
