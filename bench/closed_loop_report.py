@@ -318,8 +318,8 @@ def main():
                       f"most half the open loop's: {seeds_where(lambda sc: halves(sc['breathing']))}."]
         if "large_step" in names:
             lines[-1] += (" Large step, the same measures as the step: "
-                          f"{seeds_where(lambda sc: meets_step_targets(sc['large_step']))}; RMS force after settling "
-                          f"below 1 N: {seeds_where(lambda sc: settles_quietly(sc['large_step']['closed']))}.")
+                          f"{seeds_where(lambda sc: meets_step_targets(sc['large_step']))}. Large step, RMS force "
+                          f"after settling below 1 N: {seeds_where(lambda sc: settles_quietly(sc['large_step']['closed']))}.")
     if default_rate:
         times = " / ".join(fmt_time(sc["closed"]["time_to_below_2n_s"]) for _, sc in default_rate)
         rms = " / ".join(f"{sc['closed']['rms_force_after_settle_n']:.2f}" for _, sc in default_rate)
@@ -328,9 +328,9 @@ def main():
                                    for _, o in runs)
         lines += ["", f"The large step on an arm that shifts at the default {1e3 * bench_rate:g} mm/s "
                   f"(`--max-shift-rate {bench_rate:g}`; above, {1e3 * j['scenarios']['large_step']['max_rate_m_per_s']:g}"
-                  f" mm/s), seeds {', '.join(seed for seed, _ in default_rate)}: onset to force below 2 N for good "
-                  f"{times} s; RMS force after settling {rms} N; residual misalignment over the last 10 s {residual} mm "
-                  f"(above: {residual_fast} mm)."]
+                  f" mm/s), seeds {', '.join(seed for seed, _ in default_rate)}. Onset to force below 2 N for good: "
+                  f"{times} s. RMS force after settling: {rms} N. Residual misalignment over the last 10 s: {residual} "
+                  f"mm. Above: {residual_fast} mm."]
     for doc, begin, end in DOCS:
         write_block(doc, begin, end, "\n".join(lines))
     intervals = interval_lines(runs, alt_runs, taus) + tolerance_lines(tolerance_runs)
