@@ -165,7 +165,8 @@ const OptionTable<TissueFitOptions>& get_option_table(OptionTag<TissueFitOptions
                "a front entry beats every simpler one by more than this relative margin", "",
                OptionLimits::from_below(0, 1))
           .add("best_loss_factor", &TissueFitOptions::best_loss_factor,
-               "best: highest score among front entries with loss <= factor x the least loss", "",
+               "best: highest score among front entries with loss <= factor x the least loss (PySR's 1.5 suits a "
+               "few noisy points, e.g. bins)", "",
                OptionLimits::at_least(1))
           .add("bins", &TissueFitOptions::bins, "equal-count bins along x before fitting (0: none)")
           .add_check([](const TissueFitOptions& o) { o.check(); });
