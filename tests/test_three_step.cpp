@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <random>
 
 #include "rcm/common/error.hpp"
@@ -96,27 +97,80 @@ TEST(ThreeStep, InverseDecompositionEqualsJacobianInverse) {
   }
 }
 
-TEST(ThreeStep, ResidualJacobianMatchesFiniteDifferences) {
-  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0, 0, 0.12));
-  const rcm::TissueLaw g = cubic_law(600.0, 2.0e6);
-  const Synthetic s = make_synthetic(inc, g, Eigen::Vector3d(0.008, -0.012, 0.035), 0.02, 2);
-  const rcm::StaticHold hold = rcm::compute_static_hold(s.hold, s.tau_fs_hold, inc.q0);
-  const rcm::CoaxialProblem p = rcm::make_coaxial_problem(inc, s.trial, s.tau_fs_trial, hold.get_dtau());
-  const std::size_t n = p.total.size();
+// A residual function of D (compute_coaxial_residuals or
+// compute_total_force_residuals on one problem) against central differences.
+using ResidualsOfD = std::function<bool(double D, double* residuals, double* jacobian)>;
+void expect_jacobian_matches_finite_differences(const ResidualsOfD& residuals, std::size_t n,
+                                                std::initializer_list<double> offsets) {
   std::vector<double> r(n), rp(n), rm(n), J(n);
-  for (double D : {-0.015, 0.012, 0.03, 0.065}) {
-    ASSERT_TRUE(rcm::compute_coaxial_residuals(p, g, D, r.data(), J.data()));
+  for (double D : offsets) {
+    ASSERT_TRUE(residuals(D, r.data(), J.data()));
     // Central differences with h = 1e-7 m: truncation ~ h^2 psi''' ~ 1e-14 * 1e6,
     // rounding ~ eps |psi| / h ~ 1e-9 * |psi|.
     const double h = 1e-7;
-    ASSERT_TRUE(rcm::compute_coaxial_residuals(p, g, D + h, rp.data(), nullptr));
-    ASSERT_TRUE(rcm::compute_coaxial_residuals(p, g, D - h, rm.data(), nullptr));
+    ASSERT_TRUE(residuals(D + h, rp.data(), nullptr));
+    ASSERT_TRUE(residuals(D - h, rm.data(), nullptr));
     for (std::size_t t = 0; t < n; ++t) {
       const double fd = (rp[t] - rm[t]) / (2 * h);
       EXPECT_NEAR(J[t], fd, 1e-5 * (1.0 + std::abs(fd))) << "D = " << D << " t = " << t;
     }
   }
-  EXPECT_FALSE(rcm::compute_coaxial_residuals(p, g, 0.0, r.data(), nullptr));
+  EXPECT_FALSE(residuals(0.0, r.data(), nullptr));
+}
+
+rcm::CoaxialProblem make_test_problem(const rcm::IncisionFrame& inc, const rcm::TissueLaw& g) {
+  const Synthetic s = make_synthetic(inc, g, Eigen::Vector3d(0.008, -0.012, 0.035), 0.02, 2);
+  const rcm::StaticHold hold = rcm::compute_static_hold(s.hold, s.tau_fs_hold, inc.q0);
+  return rcm::make_coaxial_problem(inc, s.trial, s.tau_fs_trial, hold.get_dtau());
+}
+
+TEST(ThreeStep, ResidualJacobianMatchesFiniteDifferences) {
+  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0, 0, 0.12));
+  const rcm::TissueLaw g = cubic_law(600.0, 2.0e6);
+  const rcm::CoaxialProblem p = make_test_problem(inc, g);
+  expect_jacobian_matches_finite_differences(
+      [&](double D, double* r, double* J) { return rcm::compute_coaxial_residuals(p, g, D, r, J); }, p.total.size(),
+      {-0.015, 0.012, 0.03, 0.065});
+}
+
+TEST(ThreeStep, TotalForceResidualJacobianMatchesFiniteDifferences) {
+  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0, 0, 0.12));
+  const rcm::TissueLaw g = cubic_law(600.0, 2.0e6);
+  const rcm::CoaxialProblem p = make_test_problem(inc, g);
+  // The radial offset's own derivative first: it enters every residual's.
+  const double h = 1e-7;
+  for (double D : {0.012, 0.03, 0.065}) {
+    const rcm::RadialOffset radial = rcm::compute_radial_offset(p, g, D);
+    ASSERT_EQ(radial.inverse, rcm::TissueInverseStatus::ok);
+    const Eigen::Vector3d fd_radial =
+        (rcm::compute_radial_offset(p, g, D + h).dp_r_base - rcm::compute_radial_offset(p, g, D - h).dp_r_base) /
+        (2 * h);
+    EXPECT_LT((radial.d_dp_r_dD - fd_radial).norm(), 1e-5 * (1.0 + fd_radial.norm())) << "D = " << D;
+  }
+  expect_jacobian_matches_finite_differences(
+      [&](double D, double* r, double* J) { return rcm::compute_total_force_residuals(p, g, D, r, J); },
+      p.total.size(), {0.012, 0.03, 0.065});
+}
+
+// The paper's step 3c adds the coaxial and radial stretches' forces as vectors:
+// with stiffening tissue and a radial offset D~ comes out long. Fitting g of the
+// whole stretch recovers every offset exactly.
+TEST(ThreeStep, RecoversExactMisalignmentWithStiffeningTissueAndARadialOffset) {
+  const rcm::IncisionFrame inc = rcm::make_incision_frame(Eigen::Vector3d(0, 0, 0.12));
+  const rcm::TissueLaw g = cubic_law(508.33, 2.2917e5);  // 12 N at 20 mm, 35 N at 40 mm
+  for (const Eigen::Vector3d dp : {Eigen::Vector3d(0.010, 0.015, 0.050), Eigen::Vector3d(-0.012, 0.008, 0.030),
+                                   Eigen::Vector3d(0.010, 0.015, 0.015)}) {
+    const Synthetic s = make_synthetic(inc, g, dp, 0.0, 6);
+    const rcm::StaticHold hold = rcm::compute_static_hold(s.hold, s.tau_fs_hold, inc.q0);
+    const rcm::ThreeStepResult total = rcm::estimate_three_step(inc, g, s.trial, s.tau_fs_trial, hold.get_dtau());
+    EXPECT_TRUE(total.solver.converged) << total.solver.brief_report();
+    EXPECT_LT((total.misalignment_m - dp).norm(), 1e-6) << total.misalignment_m.transpose() << " vs " << dp.transpose();
+    rcm::ThreeStepOptions paper;
+    paper.coaxial_force = rcm::CoaxialForce::difference;
+    const rcm::ThreeStepResult difference =
+        rcm::estimate_three_step(inc, g, s.trial, s.tau_fs_trial, hold.get_dtau(), paper);
+    EXPECT_GT(difference.misalignment_m[2] - dp[2], 1e-3) << difference.misalignment_m.transpose();
+  }
 }
 
 TEST(ThreeStep, RecoversExactMisalignmentWithLinearTissue) {

@@ -76,7 +76,11 @@ void bind_estimation(py::module_& m) {
       .def("brief_report", &SolverReport::brief_report)
       .def("__repr__", [](const SolverReport& s) { return "<rcm.SolverReport " + s.brief_report() + ">"; });
   def_options<CoaxialProblemOptions>(m, "CoaxialProblemOptions", "Which samples the coaxial problem (step 3c) uses");
-  def_options<ThreeStepOptions, CoaxialProblemOptions>(m, "ThreeStepOptions", "The three-step method (paper Algorithm 1)")
+  py::enum_<CoaxialForce>(m, "CoaxialForce", "How step 3c compares the tissue law with the forces")
+      .value("total", CoaxialForce::total)
+      .value("difference", CoaxialForce::difference);
+  def_options<ThreeStepOptions, CoaxialProblemOptions, CoaxialForce>(m, "ThreeStepOptions",
+                                                                     "The three-step method (paper Algorithm 1)")
       .def("check", &ThreeStepOptions::check, "ValueError naming the first bad option");
   py::class_<ThreeStepResult>(m, "ThreeStepResult")
       .def_readonly("misalignment_m", &ThreeStepResult::misalignment_m, "[dr_x, dr_y, D], incision frame, m")

@@ -31,7 +31,7 @@ void bind_study(py::module_& m) {
   // ---- the study on a session ----
   def_options<RecordingReadOptions>(m, "RecordingReadOptions", "How recordings are read");
   def_options<StudyOptions, JointEstimatorOptions, std::optional<dynamics::TorqueModelKind>, dynamics::FitOptions,
-              TissueFitOptions, TissuePairOptions, ThreeStepOptions, RestDetectionOptions, StaticStep,
+              TissueFitOptions, TissuePairOptions, ThreeStepOptions, RestDetectionOptions, StaticStep, CoaxialForce,
               RecordingReadOptions>(
       m, "StudyOptions",
       "Options of run_study / prepare_monitor. model_kind None: the default kind, linear\n"

@@ -55,9 +55,12 @@ class TestOptionsTables(unittest.TestCase):
         d["joint"]["D_starts"] = [0.02, 0.04]
         d["model_kind"] = "linear"
         d["static_step"] = "last-hold"
+        self.assertEqual(d["three_step"]["coaxial_force"], "total")
+        d["three_step"]["coaxial_force"] = "difference"
         o = rcm.StudyOptions.from_dict(d)
         self.assertEqual(o.model_kind, rcm.dynamics.TorqueModelKind.linear)
         self.assertEqual(o.static_step, rcm.StaticStep.last_hold)
+        self.assertEqual(o.three_step.coaxial_force, rcm.CoaxialForce.difference)
         self.assertEqual(o.to_dict(), d)
         with self.assertRaises(rcm.InputError) as cm:
             rcm.StudyOptions.from_dict({"joint": {"huber": 2.0}})

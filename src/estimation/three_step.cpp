@@ -171,12 +171,15 @@ CoaxialProblem make_coaxial_problem(const IncisionFrame& incision, const Recordi
   const TorqueResidual dtau = compute_torque_residual(trial, tau_fs);
   CoaxialProblem p;
   p.radial = compute_inverse_decomposition(incision, incision.q0, dtau_radial);
+  p.R_base_inc = incision.R_base_inc;
   for (Eigen::Index t = 0; t < T; ++t) {
     const Eigen::Vector3d q = trial.position.row(t).head<3>().transpose();
     const double theta = compute_pivot_angle(incision, q);
     if (!(theta <= options.max_theta_rad)) continue;
     p.total.push_back(compute_inverse_decomposition(incision, q, dtau.row(t).transpose()));
     p.tan_theta.push_back(std::tan(theta));
+    const Eigen::Vector3d z3 = compute_z3_base(q);
+    p.stretch_per_D.push_back(z3 / incision.z_inc_base().dot(z3) - incision.z_inc_base());
     p.sample_index.push_back(t);
   }
   if (p.total.empty()) {
@@ -208,50 +211,90 @@ bool compute_coaxial_residuals(const CoaxialProblem& p, const TissueLaw& g, doub
   return true;
 }
 
+RadialOffset compute_radial_offset(const CoaxialProblem& p, const TissueLaw& g, double D) {
+  RadialOffset out;
+  const Eigen::Vector3d f_base = p.radial.evaluate(D);
+  out.f_radial_inc = p.R_base_inc.transpose() * f_base;
+  const Eigen::Vector3d f_plane(out.f_radial_inc[0], out.f_radial_inc[1], 0.0);  // incision frame
+  out.f_in_plane = f_plane.norm();
+  if (!(out.f_in_plane > 0.0)) return out;
+  TissueInverseResult inv = g.compute_inverse(out.f_in_plane);
+  if (inv.status == TissueInverseStatus::out_of_range && g.monotonicity() != Monotonicity::not_monotone) {
+    // The radial force may exceed what the calibration swept (or lie below its
+    // smallest pivot): extend g's domain rather than clip, and say so.
+    const TissueLaw extended(g.expression(), std::min(0.0, g.x_min()), 3.0 * g.x_max());
+    inv = extended.compute_inverse(out.f_in_plane);
+    out.extrapolated = true;
+  }
+  out.inverse = inv.status;
+  out.message = inv.message;
+  if (inv.status != TissueInverseStatus::ok) return out;
+  const Eigen::Vector3d e = f_plane / out.f_in_plane;
+  out.dp_r_base = p.R_base_inc * (-inv.x * e);
+  // f_plane(D) = P R^T (u / D + w): d/dD = P R^T (-u / D^2).
+  Eigen::Vector3d df = p.R_base_inc.transpose() * (-p.radial.u / (D * D));
+  df[2] = 0.0;
+  const double dm = e.dot(df);
+  const double slope = g.derivative(inv.x);
+  const double dx = slope != 0.0 ? dm / slope : 0.0;
+  const Eigen::Vector3d de = (df - e * dm) / out.f_in_plane;
+  out.d_dp_r_dD = p.R_base_inc * (-(dx * e + inv.x * de));
+  return out;
+}
+
+bool compute_total_force_residuals(const CoaxialProblem& p, const TissueLaw& g, double D, double* residuals,
+                                   double* jacobian) {
+  if (!(std::abs(D) > 1e-9) || !std::isfinite(D)) return false;
+  const RadialOffset radial = compute_radial_offset(p, g, D);
+  if (radial.inverse != TissueInverseStatus::ok) return false;
+  const double inv_D = 1.0 / D;
+  for (std::size_t t = 0; t < p.total.size(); ++t) {
+    const Eigen::Vector3d& a = p.stretch_per_D[t];
+    const Eigen::Vector3d stretch = D * a - radial.dp_r_base;
+    const double x = stretch.norm();
+    const Eigen::Vector3d fe = p.total[t].evaluate(D);
+    const double n = fe.norm();
+    residuals[t] = g.evaluate(x) - n;
+    if (jacobian) {
+      const double dx = x > 0.0 ? stretch.dot(a - radial.d_dp_r_dD) / x : 0.0;
+      const double dn = n > 0.0 ? fe.dot(-p.total[t].u * inv_D * inv_D) / n : 0.0;
+      jacobian[t] = g.derivative(x) * dx - dn;
+    }
+    if (!std::isfinite(residuals[t])) return false;
+  }
+  return true;
+}
+
 namespace {
 
 class CoaxialCost final : public ceres::CostFunction {
  public:
-  CoaxialCost(const CoaxialProblem& problem, const TissueLaw& g) : problem_(problem), g_(g) {
+  CoaxialCost(const CoaxialProblem& problem, const TissueLaw& g, CoaxialForce mode)
+      : problem_(problem), g_(g), mode_(mode) {
     set_num_residuals(static_cast<int>(problem.total.size()));
     mutable_parameter_block_sizes()->push_back(1);
   }
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
-    return compute_coaxial_residuals(problem_, g_, parameters[0][0], residuals,
-                                     jacobians && jacobians[0] ? jacobians[0] : nullptr);
+    double* J = jacobians && jacobians[0] ? jacobians[0] : nullptr;
+    if (mode_ == CoaxialForce::total) return compute_total_force_residuals(problem_, g_, parameters[0][0], residuals, J);
+    return compute_coaxial_residuals(problem_, g_, parameters[0][0], residuals, J);
   }
 
  private:
   const CoaxialProblem& problem_;
   const TissueLaw& g_;
+  CoaxialForce mode_;
 };
 
-}  // namespace
-
-std::string SolverReport::brief_report() const {
-  std::ostringstream s;
-  s << termination << ", " << iterations << " iterations, cost " << initial_cost << " -> " << final_cost;
-  return s.str();
-}
-
-void ThreeStepOptions::check() const {
-  if (!(D_min < D_max) || !std::isfinite(D_min) || !std::isfinite(D_max))
-    throw std::invalid_argument("ThreeStepOptions: D_min must be below D_max");
-  if (D_initial && !(*D_initial >= D_min && *D_initial <= D_max))
-    throw std::invalid_argument("ThreeStepOptions: D_initial must lie within [D_min, D_max]");
-  if (!(function_tolerance > 0.0)) throw std::invalid_argument("ThreeStepOptions: function_tolerance must be > 0");
-  if (max_iterations < 1) throw std::invalid_argument("ThreeStepOptions: max_iterations must be >= 1");
-}
-
-double solve_coaxial_offset(const CoaxialProblem& problem, const TissueLaw& g, const ThreeStepOptions& options,
-                            SolverReport* report) {
+double solve_with(const CoaxialProblem& problem, const TissueLaw& g, CoaxialForce mode,
+                  const ThreeStepOptions& options, SolverReport* report) {
   options.check();
   const auto start = std::chrono::steady_clock::now();
   // Bounded trust region on D (the paper: lsqnonlin, trust-region-reflective).
   double D = options.D_initial.value_or(0.5 * (options.D_min + options.D_max));
   if (std::abs(D) < 1e-6) D = 1e-3;  // psi is undefined at D = 0
   ceres::Problem ceres_problem;
-  ceres_problem.AddResidualBlock(new CoaxialCost(problem, g), nullptr, &D);
+  ceres_problem.AddResidualBlock(new CoaxialCost(problem, g, mode), nullptr, &D);
   ceres_problem.SetParameterLowerBound(&D, 0, options.D_min);
   ceres_problem.SetParameterUpperBound(&D, 0, options.D_max);
   ceres::Solver::Options solver_options;
@@ -276,6 +319,33 @@ double solve_coaxial_offset(const CoaxialProblem& problem, const TissueLaw& g, c
     report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   return D;
+}
+
+}  // namespace
+
+std::string SolverReport::brief_report() const {
+  std::ostringstream s;
+  s << termination << ", " << iterations << " iterations, cost " << initial_cost << " -> " << final_cost;
+  return s.str();
+}
+
+void ThreeStepOptions::check() const {
+  if (!(D_min < D_max) || !std::isfinite(D_min) || !std::isfinite(D_max))
+    throw std::invalid_argument("ThreeStepOptions: D_min must be below D_max");
+  if (D_initial && !(*D_initial >= D_min && *D_initial <= D_max))
+    throw std::invalid_argument("ThreeStepOptions: D_initial must lie within [D_min, D_max]");
+  if (!(function_tolerance > 0.0)) throw std::invalid_argument("ThreeStepOptions: function_tolerance must be > 0");
+  if (max_iterations < 1) throw std::invalid_argument("ThreeStepOptions: max_iterations must be >= 1");
+}
+
+double solve_coaxial_offset(const CoaxialProblem& problem, const TissueLaw& g, const ThreeStepOptions& options,
+                            SolverReport* report) {
+  return solve_with(problem, g, CoaxialForce::difference, options, report);
+}
+
+double solve_coaxial_offset_total(const CoaxialProblem& problem, const TissueLaw& g, const ThreeStepOptions& options,
+                                  SolverReport* report) {
+  return solve_with(problem, g, CoaxialForce::total, options, report);
 }
 
 nlohmann::json coaxial_problem_to_json(const CoaxialProblem& p, const TissueLaw& g, const ThreeStepOptions& options) {
@@ -303,30 +373,29 @@ ThreeStepResult estimate_three_step(const IncisionFrame& incision, const TissueL
                                     const ThreeStepOptions& options) {
   const CoaxialProblem problem = make_coaxial_problem(incision, trial, tau_fs_trial, dtau_radial, options.coaxial);
   ThreeStepResult result;
-
-  const double D = solve_coaxial_offset(problem, g, options, &result.solver);
   result.samples_used = problem.total.size();
-
-  // Step 3d: the radial offset from the hold's force at D~, in the pad plane.
-  const Eigen::Vector3d f_r_base = problem.radial.evaluate(D);
-  result.f_radial_inc = incision.R_base_inc.transpose() * f_r_base;
-  const Eigen::Vector2d f_plane = result.f_radial_inc.head<2>();
-  result.f_radial_in_plane = f_plane.norm();
-  Eigen::Vector2d radial = Eigen::Vector2d::Zero();
-  if (result.f_radial_in_plane > 0.0) {
-    TissueInverseResult inv = g.compute_inverse(result.f_radial_in_plane);
-    if (inv.status == TissueInverseStatus::out_of_range && g.monotonicity() != Monotonicity::not_monotone) {
-      // The radial force may exceed what the calibration swept (or lie below its
-      // smallest pivot): extend g's domain rather than clip, and say so.
-      const TissueLaw extended(g.expression(), std::min(0.0, g.x_min()), 3.0 * g.x_max());
-      inv = extended.compute_inverse(result.f_radial_in_plane);
-      result.radial_extrapolated = true;
-    }
-    result.radial_inverse = inv.status;
-    result.radial_message = inv.message;
-    if (inv.status == TissueInverseStatus::ok) radial = -inv.x * f_plane / result.f_radial_in_plane;
+  // The paper's solve: the answer for a linear g, and the start for the total one.
+  double D = solve_coaxial_offset(problem, g, options, &result.solver);
+  if (options.coaxial_force == CoaxialForce::total && compute_radial_offset(problem, g, D).inverse ==
+                                                          TissueInverseStatus::ok) {
+    ThreeStepOptions from_difference = options;
+    from_difference.D_initial = D;
+    SolverReport total;
+    D = solve_coaxial_offset_total(problem, g, from_difference, &total);
+    total.initial_cost = result.solver.initial_cost;
+    total.iterations += result.solver.iterations;
+    total.seconds += result.solver.seconds;
+    result.solver = total;
   }
-  result.misalignment_m << radial[0], radial[1], D;
+  // Step 3d at D~, in the pad plane.
+  const RadialOffset radial = compute_radial_offset(problem, g, D);
+  result.f_radial_inc = radial.f_radial_inc;
+  result.f_radial_in_plane = radial.f_in_plane;
+  result.radial_inverse = radial.inverse;
+  result.radial_extrapolated = radial.extrapolated;
+  result.radial_message = radial.message;
+  const Eigen::Vector3d dp_r_inc = incision.R_base_inc.transpose() * radial.dp_r_base;
+  result.misalignment_m << dp_r_inc[0], dp_r_inc[1], D;
   return result;
 }
 
@@ -344,6 +413,14 @@ const OptionTable<RestDetectionOptions>& get_option_table(OptionTag<RestDetectio
           .add("min_duration_s", &RestDetectionOptions::min_duration_s, "shortest hold at q0", "s",
                OptionLimits::above(0));
   return table;
+}
+
+std::string to_string(CoaxialForce mode) { return mode == CoaxialForce::total ? "total" : "difference"; }
+
+const OptionChoices<CoaxialForce>& get_option_choices(OptionTag<CoaxialForce>) {
+  static const OptionChoices<CoaxialForce> choices = {{"total", CoaxialForce::total},
+                                                      {"difference", CoaxialForce::difference}};
+  return choices;
 }
 
 const OptionChoices<StaticStep>& get_option_choices(OptionTag<StaticStep>) {
@@ -370,6 +447,9 @@ const OptionTable<ThreeStepOptions>& get_option_table(OptionTag<ThreeStepOptions
                "relative change of the cost that ends the solve (paper IV-D)", "", OptionLimits::above(0))
           .add("max_iterations", &ThreeStepOptions::max_iterations, "Ceres iteration limit", "",
                OptionLimits::at_least(1))
+          .add("coaxial_force", &ThreeStepOptions::coaxial_force,
+               "step 3c: total (g of the whole stretch against |f_e|) or difference (the paper's g(D tan theta) "
+               "against |f_e - f_r|, exact for a linear g only)")
           .add_section("coaxial", &ThreeStepOptions::coaxial, "which samples the coaxial problem (step 3c) uses")
           .add_check([](const ThreeStepOptions& o) { o.check(); });
   return table;

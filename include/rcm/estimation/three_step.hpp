@@ -10,6 +10,14 @@
 //           psi = g(D tan theta) - |f_c(D)|, D in [D_min, D_max], (d) radial offset
 //           dp_r = -g^{-1}(|f_r|) f_r / |f_r| in the incision frame.
 //
+// Step 3c as the paper writes it adds the forces of the coaxial and the radial
+// stretch as vectors, which holds for a linear g only: the tissue pulls with
+// g(|s|) along its whole stretch s = D tan(theta) e - dp_r (e the pivot's
+// direction in the pad plane). With stiffening tissue and an 18 mm radial offset
+// that puts D~ 3-5 mm long on the simulated bench. CoaxialForce::total fits
+// psi = g(|s(D)|) - |f_e(D)| instead, dp_r(D) being step 3d's answer at D (the
+// hold's force scales with 1/D); for a linear g both agree.
+//
 // Because the columns of J_D are orthogonal, J_D^{-T} dtau = u / D + w with
 // u = cos(theta) (a1 dtau_1 / cos^2 q2 + a2 dtau_2) and w = z3 dtau_3 (a1, a2 the
 // derivatives of z3): every force is affine in 1/D, so psi and dpsi/dD are exact
@@ -140,7 +148,25 @@ struct CoaxialProblem {
   std::vector<double> tan_theta;
   InverseDecomposition radial;              // f_r at q0
   std::vector<Eigen::Index> sample_index;   // which recording samples are used
+  // d(stretch)/dD of each used sample when the incision lies on the shaft's axis
+  // at q0: z3 / cos(theta) - z_inc (base frame, in the pad plane).
+  std::vector<Eigen::Vector3d> stretch_per_D;
+  Eigen::Matrix3d R_base_inc = Eigen::Matrix3d::Identity();
 };
+
+// Step 3d at D: the radial offset dp_r = -g^{-1}(|f_r|) f_r / |f_r| of the
+// hold's in-plane force, in the base frame, and d(dp_r)/dD. g is extended past
+// its fitted range (up to 3 x_max) when the hold's force lies outside it.
+struct RadialOffset {
+  Eigen::Vector3d dp_r_base = Eigen::Vector3d::Zero();
+  Eigen::Vector3d d_dp_r_dD = Eigen::Vector3d::Zero();
+  Eigen::Vector3d f_radial_inc = Eigen::Vector3d::Zero();  // the hold's force, incision frame
+  double f_in_plane = 0.0;
+  TissueInverseStatus inverse = TissueInverseStatus::ok;
+  bool extrapolated = false;
+  std::string message;
+};
+RadialOffset compute_radial_offset(const CoaxialProblem& problem, const TissueLaw& g, double D);
 
 struct CoaxialProblemOptions {
   // Samples whose pivot exceeds this carry a J_D that amplifies noise without
@@ -157,6 +183,12 @@ CoaxialProblem make_coaxial_problem(const IncisionFrame& incision, const Recordi
 // false where the problem is undefined (D == 0).
 bool compute_coaxial_residuals(const CoaxialProblem& problem, const TissueLaw& g, double D,
                                double* residuals, double* jacobian);
+// CoaxialForce::total's psi_t(D) = g(|D a_t - dp_r(D)|) - |f_e,t(D)| (a_t =
+// stretch_per_D[t], dp_r(D) from compute_radial_offset), and its derivative in D
+// when `jacobian` is not null. False where undefined (D == 0, g not invertible
+// at the hold's force).
+bool compute_total_force_residuals(const CoaxialProblem& problem, const TissueLaw& g, double D,
+                                   double* residuals, double* jacobian);
 
 struct SolverReport {
   bool converged = false;
@@ -168,11 +200,19 @@ struct SolverReport {
   std::string brief_report() const;
 };
 
+// How step 3c compares the law with the forces (see the file comment).
+//  difference  the paper's: g(D tan theta) against |f_e - f_r|.
+//  total       g(|stretch|) against |f_e|, the stretch with step 3d's radial offset.
+enum class CoaxialForce { difference, total };
+std::string to_string(CoaxialForce mode);
+const OptionChoices<CoaxialForce>& get_option_choices(OptionTag<CoaxialForce>);
+
 struct ThreeStepOptions {
   double D_min = -0.020, D_max = 0.070;  // m (paper Eq. 16)
   std::optional<double> D_initial;        // default: middle of the bounds
   double function_tolerance = 1e-6;       // relative change of cost (paper IV-D)
   int max_iterations = 200;
+  CoaxialForce coaxial_force = CoaxialForce::total;
   CoaxialProblemOptions coaxial;
   // Throws std::invalid_argument naming the first bad option.
   void check() const;
@@ -183,6 +223,9 @@ const OptionTable<ThreeStepOptions>& get_option_table(OptionTag<ThreeStepOptions
 // options.D_initial (or the middle of the bounds).
 double solve_coaxial_offset(const CoaxialProblem& problem, const TissueLaw& g, const ThreeStepOptions& options,
                             SolverReport* report);
+// The same with CoaxialForce::total's residuals.
+double solve_coaxial_offset_total(const CoaxialProblem& problem, const TissueLaw& g, const ThreeStepOptions& options,
+                                  SolverReport* report);
 
 // The problem as JSON ("rcm-coaxial-problem/1": per-sample tan(theta), u, w, the
 // radial u0, w0, g, bounds and start), for cross-checking the solver elsewhere
