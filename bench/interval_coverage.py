@@ -198,24 +198,23 @@ def per_seed(trials, key):
 
 
 def spread(values):
-    """'median [min .. max]' in mm."""
-    v = sorted(values)
-    return f"{1e3 * v[len(v) // 2]:.2f} [{1e3 * v[0]:.2f} .. {1e3 * v[-1]:.2f}]"
+    """'min-max' in mm."""
+    return f"{1e3 * min(values):.2f}-{1e3 * max(values):.2f}"
 
 
-def tables(results, wall_s, where):
-    when = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+def tables(results, wall_s, where, finished=None):
+    """The block; `finished`: when the last study ended (default now)."""
+    when = (finished or datetime.datetime.now()).strftime("%Y-%m-%d %H:%M")
     seeds = sorted({r["seed"] for r in results})
-    lines = [f"Measured by `make coverage` (bench/interval_coverage.py, seeds {', '.join(map(str, seeds))}) on {when}, "
-             f"{os.cpu_count()} cores of {cpu_model()}, {where}: {wall_s / 60:.0f} min of wall time in "
-             "all. Default bench (`real` friction, counterweighted arm, each trial its own teleoperation). Per seed "
-             "and tissue law one session of 15 trials (D = 10..50 mm x radial [0, 0], [10, 15], [-12, 8] mm, two "
-             "holds per static file), estimated by `rcm run` with its defaults on the row's linear free-space model. "
-             "A seed's error is its mean e over the trials of D > 20 mm / D <= 20 mm; the worst seed is the "
-             "largest such mean over the seeds and laws, then the median and range over them, in mm.", "",
-             "| free space | law | seeds | joint (default): worst seed | joint: median [range] over seeds, D > 20 / "
-             "<= 20 | joint 95 % intervals covering x / y / D | three-step, balanced holds: worst seed | three-step: "
-             "median [range], D > 20 / <= 20 |", "|---|---|---|---|---|---|---|---|"]
+    rows = [ROWS[r] for r in ROWS if any(x["row"] == r for x in results)]
+    lines = [f"Measured by `make coverage` (bench/interval_coverage.py) on {when}, {os.cpu_count()} cores of "
+             f"{cpu_model()}, {where}: {wall_s / 60:.0f} min. Seeds {seeds[0]}-{seeds[-1]}; free space: "
+             f"{', '.join(f'{m:g} min {p}' for p, m in rows)}. Per seed and law 15 trials "
+             "(D = 10..50 mm x radial [0, 0], [10, 15], [-12, 8] mm), `rcm run` with its defaults. A seed's error "
+             "is its mean e over the trials of D > 20 / <= 20 mm; worst seed and range over seeds and laws, in mm.",
+             "", "| free space | law | joint (default): worst seed | joint: range | joint 95 % intervals covering "
+             "x / y / D | three-step: worst seed |", "|---|---|---|---|---|---|"]
+    worst_of = {}
     for row in ROWS:
         for law in LAWS + ("all",):
             sel = [r for r in results if r["row"] == row and (law == "all" or r["law"] == law)]
@@ -225,28 +224,35 @@ def tables(results, wall_s, where):
             three = [per_seed(r["corrected"]["trials"], "three_step_m") for r in sel]
             trials = [t for r in sel for t in r["corrected"]["trials"]]
             cov = [100.0 * mean([t["covered"][a] for t in trials]) for a in range(3)]
-            worst = lambda v: f"{1e3 * max(x[0] for x in v):.2f} / {1e3 * max(x[1] for x in v):.2f}"
-            lines.append(f"| {ROWS[row][1]:g} min {ROWS[row][0]} | {law} | {len(sel)} | {worst(joint)} | "
+            worst = lambda v: (max(x[0] for x in v), max(x[1] for x in v))
+            if law == "all":  # the row's verdicts only: its worst seed is the worst of the laws' rows
+                worst_of[row] = {"joint": worst(joint), "three_step": worst(three), "coverage": min(cov)}
+                continue
+            mm = lambda w: f"{1e3 * w[0]:.2f} / {1e3 * w[1]:.2f}"
+            lines.append(f"| {ROWS[row][1]:g} min {ROWS[row][0]} | {law} | {mm(worst(joint))} | "
                          f"{spread([x[0] for x in joint])} / {spread([x[1] for x in joint])} | "
-                         f"{cov[0]:.0f} / {cov[1]:.0f} / {cov[2]:.0f} % of {len(trials)} | {worst(three)} | "
-                         f"{spread([x[0] for x in three])} / {spread([x[1] for x in three])} |")
-    lines += ["", "Before and after the calibration's bias correction, per seed (joint method, mean e D > 20 / "
-              "<= 20 mm, 15 min of teleoperation; before: `fit_torque_offset` false, the same fitted model), with "
-              "the calibration self-check (held-out halves, mm) of each:", "",
-              "| seed | law | before | after | self-check before | self-check after | torque offset found "
-              "(N m, N m, N) |", "|---|---|---|---|---|---|---|"]
-    for r in sorted((r for r in results if r["row"] == "teleop15"), key=lambda r: (r["seed"], r["law"])):
-        b, a = per_seed(r["uncorrected"]["trials"], "joint_m"), per_seed(r["corrected"]["trials"], "joint_m")
-        off = r["corrected"]["torque_offset"] or [0, 0, 0]
-        lines.append(f"| {r['seed']} | {r['law']} | {1e3 * b[0]:.2f} / {1e3 * b[1]:.2f} | {1e3 * a[0]:.2f} / "
-                     f"{1e3 * a[1]:.2f} | {1e3 * r['uncorrected']['self_check_m']:.2f} | "
-                     f"{1e3 * r['corrected']['self_check_m']:.2f} | {off[0]:+.3f} / {off[1]:+.3f} / {off[2]:+.2f} |")
+                         f"{cov[0]:.0f} / {cov[1]:.0f} / {cov[2]:.0f} % of {len(trials)} | {mm(worst(three))} |")
+    # Before / after the bias correction: one row per seed, the laws side by side.
+    before_after = sorted((r for r in results if r["row"] == "teleop15"), key=lambda r: (r["seed"], r["law"]))
+    if before_after:
+        lines += ["", "The calibration's bias correction, joint method, 15 min of teleoperation: mean e D > 20 / "
+                  "<= 20 mm before -> after (before: `fit_torque_offset` false):", "",
+                  "| seed | " + " | ".join(LAWS) + " |", "|---|" + "---|" * len(LAWS)]
+        for seed in sorted({r["seed"] for r in before_after}):
+            cells = []
+            for law in LAWS:
+                r = next((r for r in before_after if r["seed"] == seed and r["law"] == law), None)
+                if r is None:
+                    cells.append("-")
+                    continue
+                b, a = per_seed(r["uncorrected"]["trials"], "joint_m"), per_seed(r["corrected"]["trials"], "joint_m")
+                cells.append(f"{1e3 * b[0]:.2f}/{1e3 * b[1]:.2f} -> {1e3 * a[0]:.2f}/{1e3 * a[1]:.2f}")
+            lines.append(f"| {seed} | " + " | ".join(cells) + " |")
+        checks = [(r["uncorrected"]["self_check_m"], r["corrected"]["self_check_m"]) for r in before_after]
+        lines += ["", f"The calibration self-check (held-out halves), largest over these sessions: "
+                  f"{1e3 * max(c[0] for c in checks):.2f} mm before, {1e3 * max(c[1] for c in checks):.2f} mm after."]
     # The self-check against what the estimate turned out to be.
-    lines += ["", f"The calibration self-check as `rcm setup` applies it (not ready above "
-              f"{1e3 * SELF_CHECK_M:g} mm) against the seed's worst trial error of the default method above "
-              f"{1e3 * SELF_CHECK_M:g} mm, over every seed and law of each row:", "",
-              "| free space | not ready, estimate off (hit) | not ready, estimate fine (false alarm) | ready, "
-              "estimate off (miss) | ready, estimate fine |", "|---|---|---|---|---|"]
+    counts = []
     for row in ROWS:
         sel = [r for r in results if r["row"] == row]
         if not sel:
@@ -256,10 +262,20 @@ def tables(results, wall_s, where):
             flagged = r["corrected"]["self_check_m"] > SELF_CHECK_M
             off = max(t["joint_m"] for t in r["corrected"]["trials"]) > SELF_CHECK_M
             n[(0 if off else 1) if flagged else (2 if off else 3)] += 1
-        lines.append(f"| {ROWS[row][1]:g} min {ROWS[row][0]} | " + " | ".join(str(x) for x in n) + " |")
-    lines += ["", "Targets on the worst seed: " + "; ".join(
-        f"{ROWS[row][1]:g} min {ROWS[row][0]}, {method}: {a:g} / {b:g} mm" for row, t in TARGETS.items()
-        for method, (a, b) in t.items()) + "; intervals covering each axis in at least 90 % of trials."]
+        counts.append(f"{ROWS[row][1]:g} min {ROWS[row][0]} {n[0]} / {n[1]} / {n[2]} / {n[3]}")
+    lines += ["", f"`rcm setup`'s self-check (not ready above {1e3 * SELF_CHECK_M:g} mm) against the session's worst "
+              f"trial (off above {1e3 * SELF_CHECK_M:g} mm). Hits / false alarms / misses / ready and fine: "
+              + "; ".join(counts) + "."]
+    # One sentence of verdicts per free-space row.
+    lines.append("")
+    for row, w in worst_of.items():
+        verdicts = []
+        for method, (a, b) in TARGETS.get(row, {}).items():
+            got = w[method]
+            verdicts.append(f"{method} {a:g} / {b:g} mm " +
+                            ("met" if got[0] <= a * 1e-3 and got[1] <= b * 1e-3 else "not met"))
+        verdicts.append("intervals >= 90 % " + ("met" if w["coverage"] >= 90.0 else "not met"))
+        lines.append(f"Targets on the worst seed, {ROWS[row][1]:g} min {ROWS[row][0]}: " + "; ".join(verdicts) + ".")
     return "\n".join(lines)
 
 
@@ -306,7 +322,10 @@ def main():
                        if n.startswith("study_") and os.path.exists(os.path.join(work, n, "task.json"))) - first
         if not results:
             sys.exit(f"no finished study task in {work}")
-        publish_block(DOC, BEGIN, END, tables(results, wall, runs_where(args)), write=not args.no_doc)
+        last = max(os.path.getmtime(os.path.join(work, n, "task.json")) for n in os.listdir(work)
+                   if n.startswith("study_") and os.path.exists(os.path.join(work, n, "task.json")))
+        publish_block(DOC, BEGIN, END, tables(results, wall, runs_where(args), datetime.datetime.fromtimestamp(last)),
+                      write=not args.no_doc)
         return
     def report(r):
         print(f"seed {r['seed']} {r['law']} {r['row']}: joint "
