@@ -172,6 +172,8 @@ def main():
     if args.from_json:
         with open(args.from_json) as f:
             saved = json.load(f)
+        # The runs' own rate and clock (a report.json without them: the command line's).
+        args.rate, args.time_scale = saved.get("rate", args.rate), saved.get("time_scale", args.time_scale)
         runs = {int(k): v for k, v in saved["runs"].items()}
         live = {int(k): v for k, v in saved["live"].items()}
         bench = {int(k): v for k, v in saved["bench"].items()}
@@ -200,7 +202,8 @@ def main():
         steps = step_cost(args.build)
         with open(os.path.join(work, "report.json"), "w") as f:
             json.dump({"runs": runs, "live": live, "bench": bench, "sim_cpu_share": cpu, "steps": steps,
-                       "minutes": (time.monotonic() - started) / 60, "load": os.getloadavg()[0]}, f, indent=2)
+                       "minutes": (time.monotonic() - started) / 60, "load": os.getloadavg()[0],
+                       "rate": args.rate, "time_scale": args.time_scale}, f, indent=2)
 
     # The run's own time: an earlier run's report.json was written when it ended.
     ended = os.path.getmtime(args.from_json) if args.from_json else time.time()
