@@ -209,12 +209,12 @@ def tables(results, wall_s, where, finished=None):
     rows = [ROWS[r] for r in ROWS if any(x["row"] == r for x in results)]
     lines = [f"Measured by `make coverage` (bench/interval_coverage.py) on {when}, {os.cpu_count()} cores of "
              f"{cpu_model()}, {where}: {wall_s / 60:.0f} min. Seeds {seeds[0]}-{seeds[-1]}; free space: "
-             f"{', '.join(f'{m:g} min {p}' for p, m in rows)}. Per seed and law 15 trials "
-             "(D = 10..50 mm x radial [0, 0], [10, 15], [-12, 8] mm), `rcm run` with its defaults. A seed's error "
+             f"{', '.join(f'{m:g} min {p}' for p, m in rows)}. Per seed and law 15 trials (D 10-50 mm, three radial "
+             "offsets), `rcm run` with its defaults. A seed's error "
              "is its mean e over the trials of D > 20 / <= 20 mm; worst seed and range over seeds and laws, in mm.",
              "", "| free space | law | joint (default): worst seed | joint: range | joint 95 % intervals covering "
-             "x / y / D | three-step: worst seed |", "|---|---|---|---|---|---|"]
-    worst_of = {}
+             "x / y / D (%) | three-step: worst seed |", "|---|---|---|---|---|---|"]
+    worst_of, labelled = {}, None
     for row in ROWS:
         for law in LAWS + ("all",):
             sel = [r for r in results if r["row"] == row and (law == "all" or r["law"] == law)]
@@ -229,9 +229,12 @@ def tables(results, wall_s, where, finished=None):
                 worst_of[row] = {"joint": worst(joint), "three_step": worst(three), "coverage": min(cov)}
                 continue
             mm = lambda w: f"{1e3 * w[0]:.2f} / {1e3 * w[1]:.2f}"
-            lines.append(f"| {ROWS[row][1]:g} min {ROWS[row][0]} | {law} | {mm(worst(joint))} | "
+            # The free space named on its first row only.
+            label = "" if row == labelled else f"{ROWS[row][1]:g} min {ROWS[row][0]}"
+            labelled = row
+            lines.append(f"| {label} | {law} | {mm(worst(joint))} | "
                          f"{spread([x[0] for x in joint])} / {spread([x[1] for x in joint])} | "
-                         f"{cov[0]:.0f} / {cov[1]:.0f} / {cov[2]:.0f} % of {len(trials)} | {mm(worst(three))} |")
+                         f"{cov[0]:.0f} / {cov[1]:.0f} / {cov[2]:.0f} of {len(trials)} | {mm(worst(three))} |")
     # Before / after the bias correction: one row per seed, the laws side by side.
     before_after = sorted((r for r in results if r["row"] == "teleop15"), key=lambda r: (r["seed"], r["law"]))
     if before_after:
@@ -248,9 +251,6 @@ def tables(results, wall_s, where, finished=None):
                 b, a = per_seed(r["uncorrected"]["trials"], "joint_m"), per_seed(r["corrected"]["trials"], "joint_m")
                 cells.append(f"{1e3 * b[0]:.2f}/{1e3 * b[1]:.2f} -> {1e3 * a[0]:.2f}/{1e3 * a[1]:.2f}")
             lines.append(f"| {seed} | " + " | ".join(cells) + " |")
-        checks = [(r["uncorrected"]["self_check_m"], r["corrected"]["self_check_m"]) for r in before_after]
-        lines += ["", f"The calibration self-check (held-out halves), largest over these sessions: "
-                  f"{1e3 * max(c[0] for c in checks):.2f} mm before, {1e3 * max(c[1] for c in checks):.2f} mm after."]
     # The self-check against what the estimate turned out to be.
     counts = []
     for row in ROWS:
