@@ -108,9 +108,9 @@ def readme_table(results, seconds, when, machine, summary_path=None):
         return " / ".join(f"{f:.2f}" for f in trial(results, name)["force_rmse_n"]) + " N"
 
     lines = [
-        f"`make demo` on {when} ({machine}; seed 1, the default bench: real friction, two holds per "
-        f"static file, the paper's 10 trials; {fit['kind']} free-space model, fitted in {fit['seconds']:.0f} s; "
-        f"{seconds:.0f} s for `rcm demo` in all; written by `bench/demo_table.py`):",
+        f"`make demo` on {when} ({machine}), by `bench/demo_table.py`: {seconds:.0f} s for `rcm demo` in all. "
+        f"Seed 1 of the default bench (real friction, two holds per static file, the paper's 10 trials), "
+        f"{fit['kind']} free-space model fitted in {fit['seconds']:.0f} s:",
         "",
         "| | paper | rcm three-step (balanced holds) | rcm joint (default) | rcm online (streamed) |",
         "|---|---|---|---|---|",

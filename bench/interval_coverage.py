@@ -262,9 +262,9 @@ def tables(results, wall_s, where, finished=None):
             flagged = r["corrected"]["self_check_m"] > SELF_CHECK_M
             off = max(t["joint_m"] for t in r["corrected"]["trials"]) > SELF_CHECK_M
             n[(0 if off else 1) if flagged else (2 if off else 3)] += 1
-        counts.append(f"{ROWS[row][1]:g} min {ROWS[row][0]} {n[0]} / {n[1]} / {n[2]} / {n[3]}")
+        counts.append(f"{ROWS[row][1]:g} min {ROWS[row][0]} {n[0]}/{n[1]}/{n[2]}/{n[3]}")
     lines += ["", f"`rcm setup`'s self-check (not ready above {1e3 * SELF_CHECK_M:g} mm) against the session's worst "
-              f"trial (off above {1e3 * SELF_CHECK_M:g} mm). Hits / false alarms / misses / ready and fine: "
+              f"trial (off above {1e3 * SELF_CHECK_M:g} mm). Hits/false alarms/misses/ready and fine: "
               + "; ".join(counts) + "."]
     # One sentence of verdicts per free-space row.
     lines.append("")
