@@ -208,8 +208,8 @@ def tables(results, wall_s, where, finished=None):
     seeds = sorted({r["seed"] for r in results})
     rows = [ROWS[r] for r in ROWS if any(x["row"] == r for x in results)]
     lines = [f"Measured by `make coverage` (bench/interval_coverage.py) on {when}, {os.cpu_count()} cores of "
-             f"{cpu_model()}, {where}: {wall_s / 60:.0f} min. Seeds {seeds[0]}-{seeds[-1]}; free space: "
-             f"{', '.join(f'{m:g} min {p}' for p, m in rows)}. Per seed and law 15 trials (D 10-50 mm, three radial "
+             f"{cpu_model()}, {where}: {wall_s / 60:.0f} min. Seeds {seeds[0]}-{seeds[-1]}, {len(rows)} free spaces. "
+             "Per seed and law 15 trials (D 10-50 mm, three radial "
              "offsets), `rcm run` with its defaults. A seed's error "
              "is its mean e over the trials of D > 20 / <= 20 mm; worst seed and range over seeds and laws, in mm.",
              "", "| free space | law | joint (default): worst seed | joint: range | joint 95 % intervals covering "
@@ -238,8 +238,8 @@ def tables(results, wall_s, where, finished=None):
     # Before / after the bias correction: one row per seed, the laws side by side.
     before_after = sorted((r for r in results if r["row"] == "teleop15"), key=lambda r: (r["seed"], r["law"]))
     if before_after:
-        lines += ["", "The calibration's bias correction, joint method, 15 min of teleoperation: mean e D > 20 / "
-                  "<= 20 mm before -> after (before: `fit_torque_offset` false):", "",
+        lines += ["", "The bias correction (`joint.fit_torque_offset`), joint method, 15 min of teleoperation: "
+                  "mean e D > 20 / <= 20 mm without -> with it:", "",
                   "| seed | " + " | ".join(LAWS) + " |", "|---|" + "---|" * len(LAWS)]
         for seed in sorted({r["seed"] for r in before_after}):
             cells = []
@@ -264,7 +264,7 @@ def tables(results, wall_s, where, finished=None):
             n[(0 if off else 1) if flagged else (2 if off else 3)] += 1
         counts.append(f"{ROWS[row][1]:g} min {ROWS[row][0]} {n[0]}/{n[1]}/{n[2]}/{n[3]}")
     lines += ["", f"`rcm setup`'s self-check (not ready above {1e3 * SELF_CHECK_M:g} mm) against the session's worst "
-              f"trial (off above {1e3 * SELF_CHECK_M:g} mm). Hits/false alarms/misses/ready and fine: "
+              f"trial (off above {1e3 * SELF_CHECK_M:g} mm). Hits/false alarms/misses/fine: "
               + "; ".join(counts) + "."]
     # One sentence of verdicts per free-space row.
     lines.append("")
