@@ -81,14 +81,14 @@ def worst_case_rows(summary_path):
     def seeds(key):
         far = sorted(mean_of([t[key] for t in r["corrected"]["trials"] if t["far"]]) for r in sel)
         near = sorted(mean_of([t[key] for t in r["corrected"]["trials"] if not t["far"]]) for r in sel)
-        return (f"{mm(far[-1])} / {mm(near[-1])} mm (median {mm(far[len(far) // 2])} / "
+        return (f"{mm(far[-1])} / {mm(near[-1])} mm (median {mm(far[len(far) // 2])}/"
                 f"{mm(near[len(near) // 2])})")
 
     trials = [t for r in sel for t in r["corrected"]["trials"]]
     cov = " / ".join(f"{100 * mean_of([t['covered'][a] for t in trials]):.0f}" for a in range(3))
     laws = sorted({r["law"] for r in sel})
     n_seeds = len({r["seed"] for r in sel})
-    return [f"| mean e, worst of {n_seeds} seeds x {len(laws)} tissue laws, D > 20 / <= 20 mm (`make coverage`) | | "
+    return [f"| mean e, worst of {n_seeds} seeds x {len(laws)} laws (`make coverage`) | | "
             f"{seeds('three_step_m')} | {seeds('joint_m')} | |",
             f"| 95 % intervals covering x / y / D, those {len(trials)} trials | | | {cov} % | |"]
 
@@ -134,10 +134,9 @@ def times_table(full, quick, when, machine):
     lines = [
         f"Measured by `bench/demo_table.py` on {when}, {machine}.", "",
         "| what | wall | target |", "|---|---|---|",
-        f"| `rcm demo` (simulate the default bench, {full[0]['free_space_model']['fit']['kind']} free-space fit "
-        f"{full[0]['free_space_model']['fit']['seconds']:.0f} s, tissue law with D* +- 3 mm refits, 10 trials by "
-        "the joint method with 60 + 30 bootstrap replicates, three-step beside it, streamed through the online "
-        f"estimator, report and figures) | {full[1]:.0f} s | < 10 min |",
+        f"| `rcm demo`: the whole study, {full[0]['free_space_model']['fit']['kind']} fit "
+        f"{full[0]['free_space_model']['fit']['seconds']:.0f} s, 10 trials, 60 + 30 bootstrap replicates, "
+        f"three-step and online beside | {full[1]:.0f} s | < 10 min |",
         f"| `rcm demo --quick` (150 s of free space, 30 s trials, 20 + 10 replicates) | {quick[1]:.0f} s | < 2 min |",
     ]
     return "\n".join(lines)

@@ -242,8 +242,8 @@ def main():
             return f"{what}: no run."
         t = [r["time_to_below_2n_s"] for r in rs if r["time_to_below_2n_s"] is not None]
         return (f"{what}: force below 2 N for good within 5 s of the step on {sum(meets(r) for r in rs)} of "
-                f"{len(rs)} seeds, RMS force after settling below 1 N on "
-                f"{sum(r['rms_force_after_settle_n'] < 1.0 for r in rs)}, "
+                f"{len(rs)} seeds. RMS force after settling below 1 N on "
+                f"{sum(r['rms_force_after_settle_n'] < 1.0 for r in rs)}; "
                 f"{sum(r['wrong_direction_moves'] for r in rs)} wrong-direction moves in all. Median onset to below "
                 f"2 N {statistics.median(t) if t else float('nan'):.1f} s, median RMS after settling "
                 f"{statistics.median(r['rms_force_after_settle_n'] for r in rs):.2f} N.")
@@ -292,8 +292,8 @@ def main():
             "one run.", "",
             *whole[:-1],
             whole[-1] + f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
-            f"span at {rate:g} Hz differ by {lost} in all"
-            + (f"; the largest pacing error {100 * max(pacing):.4f} % of a file's duration." if pacing else "."),
+            f"span at {rate:g} Hz differ by {lost} in all."
+            + (f" The largest pacing error is {100 * max(pacing):.4f} % of a file's duration." if pacing else ""),
             "",
             "A late `servo_jp` holds the setpoint for a period, and a later period takes two (fourth column), as "
             "on a dVRK. The simulated arm keeps its velocity as the reference until the next one (at most 20 ms)."]
