@@ -117,6 +117,8 @@ int get_best_hypothesis(const OnlineEstimator::Workspace& ws, int starts) {
 const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, const Eigen::Vector3d& q,
                                                     const Eigen::Vector3d& qd, const Eigen::Vector3d& dtau_measured) const {
   const OnlineEstimatorOptions& o = options_;
+  // The index of the filter kept from before the last restart, when there is one.
+  const int kept = static_cast<int>(o.D_starts.size());
   // The free-space model's torque offset the calibration found (0 when not fitted).
   const Eigen::Vector3d dtau = dtau_measured - tissue_.torque_offset;
   const double dt = ws.started ? std::max(time - ws.last_time, o.min_dt_s) : o.min_dt_s;
@@ -151,7 +153,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     for (int k = 0; k < 4; ++k) tissue[k] = Jet(tissue_.parameters[k]);
     // The filter reported before this sample: the onset test scores its
     // one-step prediction.
-    const int prior_best = get_best_hypothesis(ws, static_cast<int>(o.D_starts.size()));
+    const int prior_best = get_best_hypothesis(ws, kept);
     // Huber's rho of a normalized residual norm: the robust log-likelihood that
     // both the hypothesis costs and the onset test use, so that a transient the
     // free-space model misses cannot carry either.
@@ -216,7 +218,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     // Change point: the reported filter's prediction costs more than its own
     // level (its fit cost before this sample) by more than the allowance, for
     // long enough. Scored as the onset test, per correlation time.
-    const bool kept_reported = prior_best == static_cast<int>(o.D_starts.size());
+    const bool kept_reported = prior_best == kept;
     const bool armed = time >= ws.jump_armed_at || (kept_reported && time >= ws.kept_armed_at);
     if (o.jump_threshold > 0 && !out.at_rest && armed) {
       const double excess = (prior_cost_sample - prior_level - o.jump_allowance) * (dt_info / o.correlation_time_s);
@@ -232,7 +234,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
     }
   }
 
-  const int best = get_best_hypothesis(ws, static_cast<int>(o.D_starts.size()));
+  const int best = get_best_hypothesis(ws, kept);
   const Hypothesis& chosen = ws.hypotheses[static_cast<std::size_t>(best)];
   out.hypothesis = best;
   out.misalignment_m = chosen.p;
