@@ -304,7 +304,7 @@ def main():
 
         def seeds_where(test):
             hit = [seed for seed, o in runs if test(o["scenarios"])]
-            return f"{len(hit)} of {len(runs)} seeds" + (f" ({', '.join(hit)})" if hit else "")
+            return f"{len(hit)} of {len(runs)} seeds" + (f" ({', '.join(hit)})" if 0 < len(hit) < len(runs) else "")
 
         def closes(sc):
             return sc["drift"]["closed"]["time_to_below_2n_s"] is not None

@@ -293,10 +293,7 @@ def main():
             *whole[:-1],
             whole[-1] + f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
             f"span at {rate:g} Hz differ by {lost} in all."
-            + (f" The largest pacing error is {100 * max(pacing):.4f} % of a file's duration." if pacing else ""),
-            "",
-            "A late `servo_jp` holds the setpoint for a period, and a later period takes two (fourth column), as "
-            "on a dVRK. The simulated arm keeps its velocity as the reference until the next one (at most 20 ms)."]
+            + (f" The largest pacing error is {100 * max(pacing):.4f} % of a file's duration." if pacing else "")]
     block = "\n".join(text)
     print(block)
     bench_lines = []

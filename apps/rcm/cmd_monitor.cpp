@@ -240,6 +240,8 @@ const bool registered = rcm::cli::register_command({"monitor", 70, [](CLI::App& 
   cmd->add_option("--session", o->session, "rcm-session/1 manifest (free-space data, q0, calibration)")->required();
   cmd->add_option("RECORDING", o->recording, "recording to replay (CSV, bag, rosbag2 directory, .db3 or .mcap)")->required();
   rcm::cli::add_free_space_flags(cmd, o->study);
+  o->study.add(cmd, "--tissue-model-file", {"tissue_model_file"},
+               "tissue_model.json of rcm setup, made with --model-file");
   cmd->add_option("--print-every", o->print_every_s, "seconds of recording between printed estimates (default 1; 0: none)");
   o->online.add(cmd, "--alarm-force", {"alarm_force_n"});
   o->online.add(cmd, "--onset-threshold", {"onset_threshold"});

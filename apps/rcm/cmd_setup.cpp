@@ -1,6 +1,6 @@
 // rcm setup: between docking and the first estimate, is the arm ready? Checks
-// the session's free space and calibration, fits the free-space model, saves it
-// for `rcm monitor --model-file` and the nodes, and says "ready" or what is
+// the session's free space and calibration, fits the free-space model and the
+// tissue model, saves them for `rcm monitor` and the nodes, and says "ready" or what is
 // missing. Exit status 3 when not ready (the report is written either way).
 #include <filesystem>
 #include <iostream>
@@ -8,6 +8,7 @@
 #include "cli_util.hpp"
 #include "command_registry.hpp"
 #include "rcm/dynamics/torque_model.hpp"
+#include "rcm/estimation/joint_tissue_file.hpp"
 #include "rcm/estimation/setup.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/session.hpp"
@@ -33,7 +34,13 @@ void run(const Options& o) {
   std::filesystem::create_directories(out);
   // The model is saved whether or not the arm is ready: a team that accepts a
   // finding can still monitor with it.
-  if (!study.model_file) rcm::dynamics::save_torque_model(out / "free_space_model.json", *report.free_space.model);
+  const std::filesystem::path model_file = study.model_file ? *study.model_file : out / "free_space_model.json";
+  if (!study.model_file) rcm::dynamics::save_torque_model(model_file, *report.free_space.model);
+  // The tissue model identified on the calibration with that model: the
+  // monitor and the nodes load it (--tissue-model-file) rather than identify it again.
+  if (report.tissue)
+    rcm::save_joint_tissue_model(out / "tissue_model.json", *report.tissue,
+                                 rcm::get_tissue_model_origin(session, model_file));
   rcm::save_json_file(out / "setup.json", report.to_json());
   if (o.json) {
     rcm::cli::print_json(report.to_json());
@@ -41,6 +48,8 @@ void run(const Options& o) {
     std::cout << report.to_text();
     if (!study.model_file)
       std::cout << "model: " << (out / "free_space_model.json").string() << " (rcm monitor --model-file)\n";
+    if (report.tissue)
+      std::cout << "tissue model: " << (out / "tissue_model.json").string() << " (rcm monitor --tissue-model-file)\n";
     std::cout << "report: " << (out / "setup.json").string() << "\n";
   }
   if (!report.ready) throw rcm::cli::ExitStatus{3};
@@ -50,8 +59,8 @@ const bool registered = rcm::cli::register_command({"setup", 55, [](CLI::App& ap
   auto o = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "setup",
-      "Is the arm ready to estimate? Checks the free space and the calibration, fits the free-space model, "
-      "writes free_space_model.json and setup.json; exit 3 when not ready, with what is missing");
+      "Is the arm ready to estimate? Checks the free space and the calibration, fits the free-space and tissue models "
+      "(free_space_model.json, tissue_model.json), writes setup.json; exit 3 when not ready, with what is missing");
   cmd->add_option("SESSION", o->session, "rcm-session/1 manifest (free space, q0, calibration)")->required();
   cmd->add_option("--out", o->out, "output folder (default rcm-setup)");
   rcm::cli::add_free_space_flags(cmd, o->study);

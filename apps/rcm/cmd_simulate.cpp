@@ -429,7 +429,7 @@ const bool registered = rcm::cli::register_command({"simulate", 20, [](CLI::App&
   auto opts = std::make_shared<SimulateOptions>();
   auto* cmd = app.add_subcommand(
       "simulate",
-      "Simulated phantom bench (closed-loop dVRK Classic PSM, hysteretic LuGre friction, tissue pad, "
+      "Simulated phantom bench (closed-loop dVRK Classic PSM, friction identified on a real one, tissue pad, "
       "sensors): write a session (rcm-session/1, with ground truth), the Fig. 3 sweep, the closed loop or the "
       "speed pair");
   cmd->add_option("--out", opts->out, "output directory");

@@ -35,6 +35,7 @@ void read_params_file(const std::string& file, const std::string& node_name, rcm
     try {
       if (name == "session") p.session = v.as<std::string>();
       else if (name == "model_file") p.model_file = v.as<std::string>();
+      else if (name == "tissue_model_file") p.tissue_model_file = v.as<std::string>();
       else if (name == "arm") p.arm = v.as<std::string>();
       else if (name == "joint_names")
         p.joint_names = v.IsSequence() ? v.as<std::vector<std::string>>()

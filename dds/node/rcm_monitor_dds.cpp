@@ -45,6 +45,7 @@ int run(int argc, char** argv) {
   app.add_option("--node-name", node_name, "the node's name: the key read in the parameters file")->capture_default_str();
   app.add_option("--session", p.session, "rcm-session/1 manifest (calibration, q0)");
   app.add_option("--model-file", p.model_file, "saved free-space model (free_space_model.json of rcm run)");
+  app.add_option("--tissue-model-file", p.tissue_model_file, "tissue_model.json of rcm setup (default: identified again)");
   app.add_option("--arm", p.arm, "arm namespace: subscribes <arm>/measured_js, publishes <arm>/rcm/...")->capture_default_str();
   app.add_option("--joint-names", joint_names, "joint order of the model, comma separated (default: the first message's)");
   app.add_option("--alarm-force-n", p.alarm_force_n, "force alarm threshold (N)")->capture_default_str();

@@ -71,6 +71,8 @@ void ProcedureOptions::check(const std::function<InputLocation(const std::string
   if (session.empty() != model_file.empty())
     throw InputError(flag(session.empty() ? "--session" : "--model-file"),
                      "--session and --model-file go together: a setup made before");
+  if (!tissue_model_file.empty() && session.empty())
+    throw InputError(flag("--tissue-model-file"), "goes with --session and --model-file: a setup made before");
   const fs::path here = get_program_directory();
   if (rcm.empty()) rcm = (here / "rcm").string();
   if (monitor.empty()) monitor = (here / "rcm_monitor_dds").string();
@@ -165,6 +167,10 @@ bool Procedure::start_monitor(const std::string& segment, bool loop) {
                                    "--domain", std::to_string(o_.domain),
                                    "--seed", std::to_string(o_.seed),
                                    "--status-period-s", "5"};
+  // The tissue model rcm setup identified: the monitor comes up in about a
+  // second rather than identifying it again.
+  const std::string tissue = given ? o_.tissue_model_file : (o_.out / "setup" / "tissue_model.json").string();
+  if (!tissue.empty()) args.insert(args.end(), {"--tissue-model-file", tissue});
   CorrectionOptions gates;
   if (loop) {
     for (const auto& m : sim::make_default_incision_motions())

@@ -46,8 +46,9 @@ struct ProcedureOptions {
   PlayerOptions player;
   std::string rcm, monitor;  // programs; empty: beside this one
   // Both given: a setup made before (a session and its model); the procedure
-  // goes straight to the live phase.
-  std::string session, model_file;
+  // goes straight to the live phase. With them, optionally, the tissue model
+  // that setup saved (else the monitor identifies it on the calibration).
+  std::string session, model_file, tissue_model_file;
   // Throws InputError at `flag(name)`; fills rcm, monitor and the players' limits.
   void check(const std::function<InputLocation(const std::string&)>& flag);
 };

@@ -101,6 +101,8 @@ int run(int argc, char** argv) {
   app.add_option("--session", o.session,
                  "with --model-file: a setup made before; go straight to the live phase (rcm-session/1)");
   app.add_option("--model-file", o.model_file, "with --session: its free-space model (free_space_model.json)");
+  app.add_option("--tissue-model-file", o.tissue_model_file,
+                 "with --session: its tissue_model.json (default: identified again)");
   app.add_option("--rcm", o.rcm, "the rcm program (default: beside this one)");
   app.add_option("--monitor", o.monitor, "the rcm_monitor_dds program (default: beside this one)");
   app.add_option("--domain", o.domain, "DDS domain (default: ROS_DOMAIN_ID, else 0)");

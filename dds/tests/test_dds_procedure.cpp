@@ -336,6 +336,14 @@ TEST(DdsProcedure, ProcedureFromExcitationToTheLoopAcrossProcesses) {
   // the corrector's safety has its in-process tests (test_sim_closed_loop).
   const nlohmann::json& loop = j["closed_loop"];
   EXPECT_EQ(loop["monitor_exit"], 0);
+  // Both monitors took the tissue model rcm setup saved, not identified again.
+  for (const char* log : {"monitor_check.log", "monitor_loop.log"}) {
+    const std::string text = rcm::test::read_text(dir / "out" / log);
+    EXPECT_NE(text.find("loading tissue model " + (dir / "out" / "setup" / "tissue_model.json").string()),
+              std::string::npos)
+        << log << ":\n" << text;
+    EXPECT_EQ(text.find("identifying the tissue model"), std::string::npos) << log << ":\n" << text;
+  }
   EXPECT_GT(loop["truth_samples"].get<int>(), 0);
   for (const char* key : {"peak_force_n", "moves", "wrong_direction_moves"}) EXPECT_TRUE(loop[key].is_number()) << key;
   std::cout << "[ loop     ] " << loop.dump() << "\n";

@@ -10,6 +10,7 @@
 #include "rcm/common/options.hpp"
 #include "rcm/dynamics/linear_model.hpp"
 #include "rcm/dynamics/metrics.hpp"
+#include "rcm/estimation/joint_tissue_file.hpp"
 #include "rcm/force/incision_force.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/recording_reader.hpp"
@@ -47,6 +48,8 @@ const OptionTable<StudyOptions>& get_option_table(OptionTag<StudyOptions>) {
           .add("model_kind", &StudyOptions::model_kind,
                "free-space model to fit (null: the default kind, linear)")
           .add("model_file", &StudyOptions::model_file, "use this saved free-space model instead of fitting one")
+          .add("tissue_model_file", &StudyOptions::tissue_model_file,
+               "the monitor: tissue_model.json of rcm setup, made with model_file")
           .add_section("fit", &StudyOptions::fit, "the free-space model's fit")
           .add_section("tissue", &StudyOptions::tissue, "the tissue law's symbolic regression")
           .add_section("tissue_pairs", &StudyOptions::tissue_pairs, "the calibration's pairs x, |f_inc|")
@@ -174,15 +177,33 @@ void require_monitor_calibration(const Session& session) {
   throw InputError(where, "missing: the monitor identifies the tissue on a calibration at a known coaxial offset");
 }
 
+// The tissue model was identified with one free-space model: only a saved one
+// can be checked to be the same.
+void require_model_file_with_tissue_model_file(const StudyOptions& options) {
+  if (options.tissue_model_file && !options.model_file)
+    throw InputError(InputLocation::plain("", "tissue_model_file"),
+                     "goes with model_file: the free-space model the tissue model was identified with");
+}
+
 }  // namespace
 
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter) {
   require_monitor_calibration(session);
+  require_model_file_with_tissue_model_file(options);
   return prepare_monitor(session, options, fit_free_space_step(session, options, fitter));
 }
 
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space) {
   require_monitor_calibration(session);
+  require_model_file_with_tissue_model_file(options);
+  if (options.tissue_model_file) {
+    MonitorSetup setup{std::move(free_space), make_incision_frame(session.q0), {}, {}};
+    setup.joint_options = make_joint_options_for_model(options.joint, setup.free_space);
+    progress(options.verbose, "loading tissue model " + options.tissue_model_file->string());
+    setup.tissue = load_joint_tissue_model(*options.tissue_model_file,
+                                           get_tissue_model_origin(session, *options.model_file));
+    return setup;
+  }
   return prepare_monitor(session, options, std::move(free_space),
                          load_recording(session.calibration->recording, get_read_options(session, options.read)));
 }

@@ -73,6 +73,7 @@ std::unique_ptr<OnlinePipeline> make_monitor_pipeline(const MonitorNodeParameter
   const Session session = load_session(p.session);
   StudyOptions options;
   options.model_file = p.model_file;
+  if (!p.tissue_model_file.empty()) options.tissue_model_file = p.tissue_model_file;
   options.fit.seed = static_cast<unsigned>(p.seed);
   options.joint.seed = static_cast<unsigned>(p.seed);
   options.read.dedupe = p.dedupe;

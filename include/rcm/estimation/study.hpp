@@ -72,6 +72,9 @@ struct StudyOptions {
   // The free-space model to fit; unset: dynamics::get_default_model_kind(), linear.
   std::optional<dynamics::TorqueModelKind> model_kind;
   std::optional<std::filesystem::path> model_file;  // use a saved model, skip fitting
+  // The monitor (prepare_monitor): with model_file, the tissue model `rcm setup`
+  // saved with it (tissue_model.json), instead of identifying it again.
+  std::optional<std::filesystem::path> tissue_model_file;
   dynamics::FitOptions fit;
   TissueFitOptions tissue;
   TissuePairOptions tissue_pairs;
@@ -184,9 +187,12 @@ struct MonitorSetup {
   JointEstimatorOptions joint_options;
 };
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, const TorqueModelFitter& fitter);
-// The same with the free-space model already fitted (or loaded).
+// The same with the free-space model already fitted (or loaded). With
+// options.tissue_model_file the tissue model is loaded, checked against the
+// session's calibration and options.model_file (estimation/joint_tissue_file.hpp).
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space);
-// The same with the session's calibration recording already read, too.
+// The same with the session's calibration recording already read, too: the
+// tissue model identified on it (what `rcm setup` saves).
 MonitorSetup prepare_monitor(const Session& session, const StudyOptions& options, FreeSpaceModelStep free_space,
                              const Recording& calibration);
 

@@ -36,6 +36,7 @@ namespace rcm {
 // The node parameters, one declaration for every node (docs/cli-programs.md).
 struct MonitorNodeParameters {
   std::string session, model_file;
+  std::string tissue_model_file;  // tissue_model.json of `rcm setup`; empty: identified on the calibration
   std::string arm = "PSM1";
   std::vector<std::string> joint_names;  // empty: the first message's order
   double alarm_force_n = OnlineEstimatorOptions{}.alarm_force_n;
