@@ -54,8 +54,8 @@ test: build
 # ASan reports it with its stack, as it does an access out of bounds.
 # The random-session property test runs one session of two trials instrumented.
 # The library is shared (RCM_SHARED_LIBS): linked statically, each of the 77
-# programs held its own instrumented copy, 3.2 GB in all, and a CI machine's
-# disk ran out (the table of docs/validation-reliability.md gives the disk used).
+# programs would hold its own 48 MB instrumented copy, 3.2 GB in all (the disk
+# each phase leaves: docs/validation-reliability.md).
 SANITIZE_BUILD ?= build-sanitize
 SANITIZE_FLAGS := -O2 -g1 -DNDEBUG -fsanitize=address,undefined -fno-sanitize-recover=all \
   -fno-sanitize=null,alignment,pointer-overflow \
