@@ -181,8 +181,8 @@ void require_monitor_calibration(const Session& session) {
 // can be checked to be the same.
 void require_model_file_with_tissue_model_file(const StudyOptions& options) {
   if (options.tissue_model_file && !options.model_file)
-    throw InputError(InputLocation::plain("", "tissue_model_file"),
-                     "goes with model_file: the free-space model the tissue model was identified with");
+    throw InputError(InputLocation::plain("options", "tissue_model_file"),
+                     "goes with model_file (--model-file): the free-space model the tissue model was identified with");
 }
 
 }  // namespace
