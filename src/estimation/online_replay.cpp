@@ -30,10 +30,6 @@ struct TracePoint {
   double m[3];
 };
 
-struct CloseFile {
-  void operator()(std::FILE* f) const { std::fclose(f); }
-};
-
 }  // namespace
 
 struct OnlineReplayer::Trace {
@@ -41,6 +37,11 @@ struct OnlineReplayer::Trace {
   struct Span {
     std::size_t first = 0, count = 0;
     Eigen::Vector3d lo, hi;
+  };
+  // A member type, not one of this file's anonymous namespace: the Trace
+  // declared in the header is a type other files can name.
+  struct CloseFile {
+    void operator()(std::FILE* f) const { std::fclose(f); }
   };
   std::unique_ptr<std::FILE, CloseFile> file;
   std::vector<Span> spans;
