@@ -9,6 +9,7 @@
 #include "common.hpp"
 #include "options.hpp"
 #include "rcm/estimation/joint.hpp"
+#include "rcm/estimation/joint_tissue_file.hpp"
 #include "rcm/estimation/three_step.hpp"
 
 namespace rcm::python {
@@ -148,6 +149,19 @@ void bind_estimation(py::module_& m) {
     return fit_joint_tissue_model(inc, calibration, D_star, o);
   }, py::arg("incision"), py::arg("calibration"), py::arg("D_star"), py::arg("options") = JointEstimatorOptions{},
         "Step 2 in torque space on the calibration samples at the known D* (m)");
+  py::class_<TissueModelOrigin>(m, "TissueModelOrigin",
+                                "What a saved tissue model was made from: the calibration recording's and the "
+                                "free-space model file's digests, D* (m) and q0")
+      .def_readonly("calibration_digest", &TissueModelOrigin::calibration_digest)
+      .def_readonly("free_space_model_digest", &TissueModelOrigin::free_space_model_digest)
+      .def_readonly("calibration_offset_m", &TissueModelOrigin::calibration_offset_m)
+      .def_readonly("q0", &TissueModelOrigin::q0);
+  m.def("get_tissue_model_origin", &get_tissue_model_origin, py::arg("session"), py::arg("free_space_model_file"),
+        "The origin of a tissue model identified on the session's calibration with that saved free-space model");
+  m.def("save_joint_tissue_model", &save_joint_tissue_model, py::arg("path"), py::arg("model"), py::arg("origin"),
+        "Writes tissue_model.json (rcm-tissue-model/1), as rcm setup does");
+  m.def("load_joint_tissue_model", &load_joint_tissue_model, py::arg("path"), py::arg("expected_origin"),
+        "Reads a saved tissue model; InputError when a field is bad or it was made from another origin");
   py::class_<JointEstimate>(m, "JointEstimate")
       .def_readonly("misalignment_m", &JointEstimate::misalignment_m, "[dr_x, dr_y, D], incision frame, m")
       .def_readonly("covariance", &JointEstimate::covariance)

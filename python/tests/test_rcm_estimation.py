@@ -126,6 +126,22 @@ class TestOnline(unittest.TestCase):
         self.assertEqual(replay.regime.flagged, cli["regime"]["flagged"])
         self.assertEqual(replay.regime.samples, cli["regime"]["samples"])
 
+    def test_saved_tissue_model_is_the_identified_one(self):
+        origin = rcm.get_tissue_model_origin(self.session, _state["model_path"])
+        path = tmp_path("tissue_model.json")
+        rcm.save_joint_tissue_model(path, self.setup.tissue, origin)
+        loaded = rcm.load_joint_tissue_model(path, origin)
+        np.testing.assert_array_equal(loaded.parameters, self.setup.tissue.parameters)
+        np.testing.assert_array_equal(loaded.covariance, self.setup.tissue.covariance)
+        setup = rcm.prepare_monitor(self.session, quiet_study_options(tissue_model_file=path))
+        np.testing.assert_array_equal(setup.tissue.torque_offset, self.setup.tissue.torque_offset)
+        other = tmp_path("other_model.json")
+        with open(_state["model_path"]) as f, open(other, "w") as g:
+            g.write(f.read() + "\n")
+        with self.assertRaises(rcm.InputError) as caught:
+            rcm.load_joint_tissue_model(path, rcm.get_tissue_model_origin(self.session, other))
+        self.assertEqual(caught.exception.field, "made_from.free_space_model_digest")
+
     def test_replay_of_chunks_equals_the_whole_replay(self):
         path = session_file("D30_r10_15.csv")
         whole = rcm.replay_online(self.make_pipeline(), self.trial)
