@@ -59,8 +59,12 @@ std::string get_file_digest(const std::filesystem::path& path) {
   std::uint64_t h = 14695981039346656037ULL;
   if (std::filesystem::is_directory(path, ec)) {
     std::vector<std::filesystem::path> files;
-    for (const auto& entry : std::filesystem::recursive_directory_iterator(path))
-      if (entry.is_regular_file()) files.push_back(entry.path());
+    try {
+      for (const auto& entry : std::filesystem::recursive_directory_iterator(path))
+        if (entry.is_regular_file()) files.push_back(entry.path());
+    } catch (const std::filesystem::filesystem_error& e) {
+      throw InputError(where, std::string("cannot be listed: ") + e.code().message());
+    }
     std::sort(files.begin(), files.end());
     for (const auto& file : files) {
       const std::string name = std::filesystem::relative(file, path).generic_string();
