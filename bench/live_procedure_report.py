@@ -134,7 +134,7 @@ def earlier_whole_procedure():
     """The whole procedure's section of the block in docs/validation.md, under the date it was measured on."""
     text = open(VALIDATION).read() if os.path.exists(VALIDATION) else ""
     block = text.split("<!-- live-procedure:begin -->", 1)[-1].split("<!-- live-procedure:end -->", 1)[0]
-    if "| seed | `rcm setup` |" not in block or " on 20" not in block:
+    if "| seed | `rcm setup`" not in block or " on 20" not in block:
         return ["The whole procedure from the excitation on: not run in this measurement (`--full-seeds`).", "", ""]
     # Its date: that of the block, or the one it already carries from a run before.
     date = block.split("(measured on 20" if "(measured on 20" in block else " on 20", 1)[1][:14]
@@ -283,13 +283,10 @@ def main():
         # section of the block already written stays, under its own date.
         whole = earlier_whole_procedure()
     text = [head, "",
-            "The loop on the large step runs on the in-process bench's own setup (its session and free-space model, "
-            "`rcm_procedure_dds --session --model-file`), so that only the processes differ. "
-            f"The estimator reads measured_js at {rate:g} Hz over DDS (the bench: at {rate:g} Hz in one process) and "
-            "commands the shift on `/PSM1/rcm/shift`; the simulator moves its RCM.", "", *rows, "",
-            summary(loops, "Across processes"), summary(benches, "In process (the bench)"),
-            "The two runs of a seed also differ in the teleoperation's draw and the sensors' noise. Each figure is "
-            "one run.", "",
+            "The loop on the large step runs on the in-process bench's session and model (`rcm_procedure_dds "
+            f"--session --model-file`), the estimator reading measured_js at {rate:g} Hz in both. The two runs of a "
+            "seed differ in the surgeon's draw and the sensors' noise.", "", *rows, "",
+            summary(loops, "Across processes"), summary(benches, "In process (the bench)"), "",
             *whole[:-1],
             whole[-1] + f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
             f"span at {rate:g} Hz differ by {lost} in all."

@@ -201,6 +201,20 @@ TEST(Correction, RepositionsBeyondTheLimitAndCountsTheShiftInEffect) {
   EXPECT_EQ(c.action, CorrectionAction::reposition);  // 2.8 + 0.39 mm > 3 mm
   c = corrector.compute_correction(ws3, make_estimate(0.02, Eigen::Vector3d(0, 0, 0.0028), 0.00005), applied7);
   EXPECT_EQ(c.action, CorrectionAction::compensate);
+  // The limit bounds the shift from the docked RCM: with 9 mm shifted, 6 mm
+  // back is a software shift (3 mm from the docked RCM after it), and 5 mm
+  // across reaches sqrt(10^2 - 9^2) = 4.4 mm: a re-docking.
+  auto ws4 = corrector.create_workspace();
+  c = corrector.compute_correction(ws4, make_estimate(0.0, Eigen::Vector3d(0, 0, -0.006), 0.0002), applied);
+  EXPECT_EQ(c.action, CorrectionAction::compensate);
+  c = corrector.compute_correction(ws4, make_estimate(0.1, Eigen::Vector3d(0, 0, -0.006), 0.0002), applied);
+  EXPECT_LT(c.applied_base.norm(), applied.norm()) << "the shift back shortens the shift in effect";
+  auto ws5 = corrector.create_workspace();
+  c = corrector.compute_correction(ws5, make_estimate(0.0, Eigen::Vector3d(0.005, 0, 0), 0.0002), applied);
+  EXPECT_EQ(c.action, CorrectionAction::reposition);
+  auto ws6 = corrector.create_workspace();
+  c = corrector.compute_correction(ws6, make_estimate(0.0, Eigen::Vector3d(0.004, 0, 0), 0.0002), applied);
+  EXPECT_EQ(c.action, CorrectionAction::compensate) << "4.0 + 0.4 mm across fit in the 4.4 mm left that way";
 }
 
 TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
@@ -276,6 +290,50 @@ TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {
   const auto& done = corrector.compute_correction(ws2, make_estimate(0.02, Eigen::Vector3d(0.0006, 0, 0), 0.0001));
   EXPECT_EQ(done.action, CorrectionAction::hold);
   EXPECT_EQ(done.reason, HoldReason::within_tolerance);
+}
+
+// A compensation that stopped at its lower bound goes on once that bound
+// clears zero again; a first action, or one after a restart or a settled hold,
+// needs an interval narrower than the move.
+TEST(Correction, AStoppedCompensationResumesOnItsLowerBound) {
+  const RcmCorrector corrector(make_frame(), make_immediate_options());
+  const Eigen::Vector3d rest(0.003, 0, 0);  // 3 mm remain
+  const double sure_of_bound = 0.0012;      // 0.65 to 5.4 mm: lower bound past zero, interval wider than 3 mm
+  ASSERT_GT(2.0 * 1.96 * sure_of_bound, rest.norm());
+  ASSERT_GT(rest.norm() - 1.96 * sure_of_bound, 0.0);
+  {
+    auto fresh = corrector.create_workspace();
+    EXPECT_EQ(corrector.compute_correction(fresh, make_estimate(0, rest, sure_of_bound)).reason,
+              HoldReason::not_confident)
+        << "a first action needs the interval narrower than the move";
+  }
+  auto stopped = [&](RcmCorrector::Workspace& ws) {
+    EXPECT_EQ(corrector.compute_correction(ws, make_estimate(0, Eigen::Vector3d(0.010, 0, 0), 0.001)).action,
+              CorrectionAction::compensate);
+    const auto& c = corrector.compute_correction(ws, make_estimate(0.01, rest, 0.002));  // 0 to 6.9 mm
+    EXPECT_EQ(c.reason, HoldReason::not_confident);
+    EXPECT_TRUE(c.step_base.isZero());
+  };
+  auto ws = corrector.create_workspace();
+  stopped(ws);
+  const auto& resumed = corrector.compute_correction(ws, make_estimate(0.02, rest, sure_of_bound));
+  EXPECT_EQ(resumed.action, CorrectionAction::compensate);
+  EXPECT_GT(resumed.step_base.norm(), 0.0);
+  EXPECT_LE(resumed.step_base.norm(), resumed.distance_low_m + 1e-15) << "never beyond the lower bound";
+
+  // A restart, or a hold sure to be within tolerance, ends what could resume.
+  auto ws2 = corrector.create_workspace();
+  stopped(ws2);
+  OnlineOutput restarted = make_estimate(0.02, rest, sure_of_bound);
+  restarted.jumps = 1;
+  for (; restarted.time < 0.02 + 3.0 * corrector.options().restart_confirm_s; restarted.time += 0.01)
+    EXPECT_EQ(corrector.compute_correction(ws2, restarted).action, CorrectionAction::hold) << restarted.time;
+  auto ws3 = corrector.create_workspace();
+  stopped(ws3);
+  EXPECT_EQ(corrector.compute_correction(ws3, make_estimate(0.02, Eigen::Vector3d(0.0005, 0, 0), 0.0001)).reason,
+            HoldReason::within_tolerance);
+  EXPECT_EQ(corrector.compute_correction(ws3, make_estimate(0.03, rest, sure_of_bound)).action,
+            CorrectionAction::hold);
 }
 
 TEST(Correction, AnActionStartsOnceCalledForWithoutABreakForTheConfirmationTime) {

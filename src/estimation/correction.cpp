@@ -62,6 +62,7 @@ void RcmCorrector::reset(Workspace& ws) const {
   ws.jumps = 0;
   ws.sure_since = -1.0;
   ws.after_restart = false;
+  ws.resumable = false;
   ws.output = CorrectionOutput{};
 }
 
@@ -103,7 +104,26 @@ bool is_sure_of_move(const MoveBounds& b) {
   return b.low > 0 && interval < b.distance;
 }
 
-bool starts_action(const MoveBounds& b, double tolerance) { return b.distance > tolerance && is_sure_of_move(b); }
+// A compensation that stopped at its lower bound (the evidence along the move
+// ran out before the move did) resumes on the condition it ran on: the lower
+// bound above zero. Asking again for an interval narrower than the move would
+// leave the remaining offset, between the tolerance and a few millimetres, until
+// the evidence has grown about fourfold (the interval shrinks with its square
+// root): seconds of tissue stretched for nothing. The direction is not in
+// question there, the first move having been sure of it.
+bool starts_action(const MoveBounds& b, double tolerance, bool resumable) {
+  return b.distance > tolerance && (resumable ? b.low > 0 : is_sure_of_move(b));
+}
+
+// The largest s >= 0 with |applied + s u| <= limit (u a unit vector, or zero
+// for no move: then what is left of the limit in any direction).
+double compute_shift_reach(const Eigen::Vector3d& applied, const Eigen::Vector3d& u, double limit) {
+  const double left = limit * limit - applied.squaredNorm();
+  if (left <= 0.0 && !(u.dot(applied) < 0.0)) return 0.0;
+  if (u.isZero()) return std::sqrt(std::max(0.0, left));
+  const double along = u.dot(applied);
+  return std::max(0.0, -along + std::sqrt(std::max(0.0, along * along + left)));
+}
 
 }  // namespace
 
@@ -123,7 +143,10 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
   // was being acted on is gone, and an action must start over.
   const bool restarted = ws.started && estimate.jumps != ws.jumps;
   ws.jumps = estimate.jumps;
-  if (restarted) ws.after_restart = true;
+  if (restarted) {
+    ws.after_restart = true;
+    ws.resumable = false;
+  }
   const double confirm = ws.after_restart ? std::max(o.confirm_s, o.restart_confirm_s) : o.confirm_s;
   const CorrectionAction previous = restarted ? CorrectionAction::hold : out.action;
   const double dt = ws.started ? std::clamp(estimate.time - ws.last_time, 0.0, o.max_step_dt_s) : 0.0;
@@ -149,7 +172,7 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
   out.fit_cost = estimate.fit_cost;
 
   // Since when the estimate has called for an action without a break.
-  const bool calls_for_action = finite && estimate.onset && starts_action(b, o.tolerance_m);
+  const bool calls_for_action = finite && estimate.onset && starts_action(b, o.tolerance_m, ws.resumable);
   if (!calls_for_action || restarted) ws.sure_since = -1.0;
   if (calls_for_action && ws.sure_since < 0) ws.sure_since = estimate.time;
 
@@ -157,8 +180,11 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
     out.action = CorrectionAction::hold;
     out.reason = reason;
   };
-  // What the software shift may still add before the arm must be re-docked.
-  const double budget = std::max(0.0, o.compensate_limit_m - applied_base.norm());
+  // How far the software shift may still go along the move before the arm must
+  // be re-docked: the limit bounds the shift from the docked RCM, so a move
+  // back toward it (after a wrong one) is never refused for the way already
+  // gone.
+  const double budget = compute_shift_reach(applied_base, incision_.R_base_inc * b.direction, o.compensate_limit_m);
   // Holding: sure to be within tolerance (upper bound), with the same
   // hysteresis on the way out, or not sure either way.
   const double within_bound =
@@ -168,12 +194,13 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
     hold(HoldReason::no_onset);
   } else if (!(estimate.fit_cost <= o.max_fit_cost)) {
     hold(HoldReason::model_mismatch);
-  } else if (previous == CorrectionAction::hold && !starts_action(b, o.tolerance_m)) {
+  } else if (previous == CorrectionAction::hold && !starts_action(b, o.tolerance_m, ws.resumable)) {
     hold(settled);
   } else if (previous == CorrectionAction::hold && estimate.time - ws.sure_since < confirm) {
     hold(HoldReason::not_confident);  // sure, not yet for long enough
   } else if (previous != CorrectionAction::hold && b.low <= 0.0) {
     hold(HoldReason::not_confident);  // the interval outgrew the move
+    ws.resumable = previous == CorrectionAction::compensate;
   } else if (previous != CorrectionAction::hold && b.distance < o.release_fraction * o.tolerance_m) {
     hold(settled);
   } else {
@@ -184,6 +211,10 @@ const CorrectionOutput& RcmCorrector::compute_correction(Workspace& ws, const On
       out.action = b.low > budget ? CorrectionAction::reposition : CorrectionAction::compensate;
   }
   if (out.action != CorrectionAction::hold) ws.after_restart = false;
+  // Done, or nothing to resume on: the next action must be sure of its direction again.
+  if (out.action == CorrectionAction::reposition ||
+      (out.action == CorrectionAction::hold && out.reason != HoldReason::not_confident))
+    ws.resumable = false;
   if (out.action == CorrectionAction::compensate) {
     const double step = std::min({o.max_rate_m_per_s * dt, b.low, budget});
     out.step_base = incision_.R_base_inc * (b.direction * step);

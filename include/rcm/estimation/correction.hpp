@@ -23,7 +23,9 @@
 //   manual re-docking advice, the move in the arm's own words.
 //
 // Hysteresis: hold turns into an action once the estimate exceeds the
-// tolerance with an interval narrower than the move; an action returns to hold
+// tolerance with an interval narrower than the move (a compensation that
+// stopped at its lower bound resumes once that bound is above zero again, the
+// direction being known), for confirm_s; an action returns to hold
 // once the estimate falls below release_fraction of the tolerance, its lower
 // bound reaches zero, or the estimate restarts (OnlineOutput::jumps);
 // reposition turns back into compensate only once the upper bound is within
@@ -110,6 +112,7 @@ class RcmCorrector {
     int jumps = 0;  // the estimate's restarts seen (OnlineOutput::jumps)
     double sure_since = -1.0;  // when the start condition began to hold (< 0: it does not)
     bool after_restart = false;  // no action since the estimate's last restart
+    bool resumable = false;  // a compensation stopped at its lower bound, and nothing since says it is done
     CorrectionOutput output;
   };
   RcmCorrector(const IncisionFrame& incision, const CorrectionOptions& options);
