@@ -78,16 +78,16 @@ void apply_friction_preset(SimConfig& c, const std::string& name) {
     // the last motion left, so a joint at rest holds anywhere in a band of about
     // +-0.12 / +-0.24 N m / +-0.6 N. Coulomb levels at the band, a little viscous
     // friction, no Stribeck peak; the bristles take 2 mrad / 0.2 mm to reverse.
-    c.friction[0] = {0.125, 0.115, 1.0, 0.02, 0.01, 60.0, 1.0, 0.008};
-    c.friction[1] = {0.25, 0.23, 1.0, 0.02, 0.02, 120.0, 2.0, -0.012};
-    c.friction[2] = {0.58, 0.62, 1.0, 0.004, 0.2, 3000.0, 40.0, 0.0};
+    c.friction[0] = {0.125, 0.115, 1.0, 0.02, 0.01, 60.0, 1.0, 0.008, {}, 0.0};
+    c.friction[1] = {0.25, 0.23, 1.0, 0.02, 0.02, 120.0, 2.0, -0.012, {}, 0.0};
+    c.friction[2] = {0.58, 0.62, 1.0, 0.004, 0.2, 3000.0, 40.0, 0.0, {}, 0.0};
   } else if (name == "smooth") {
     // Smaller Coulomb levels with a Stribeck peak and stiff bristles, and most of
     // the friction viscous: Coulomb ~0.050 / 0.067 N m and 0.45 / 0.58 N, viscous
     // 0.09 / 0.22 N m s/rad and 1.2 N s/m.
-    c.friction[0] = {0.052, 0.048, 1.3, 0.02, 0.09, 500.0, 2.0, 0.008};
-    c.friction[1] = {0.070, 0.064, 1.3, 0.02, 0.22, 600.0, 2.5, -0.012};
-    c.friction[2] = {0.45, 0.58, 1.25, 0.004, 1.2, 2.5e4, 40.0, 0.0};
+    c.friction[0] = {0.052, 0.048, 1.3, 0.02, 0.09, 500.0, 2.0, 0.008, {}, 0.0};
+    c.friction[1] = {0.070, 0.064, 1.3, 0.02, 0.22, 600.0, 2.5, -0.012, {}, 0.0};
+    c.friction[2] = {0.45, 0.58, 1.25, 0.004, 1.2, 2.5e4, 40.0, 0.0, {}, 0.0};
   } else {
     throw_unknown_preset("friction", name, get_friction_preset_names());
   }
