@@ -202,8 +202,9 @@ TEST(Correction, RepositionsBeyondTheLimitAndCountsTheShiftInEffect) {
   c = corrector.compute_correction(ws3, make_estimate(0.02, Eigen::Vector3d(0, 0, 0.0028), 0.00005), applied7);
   EXPECT_EQ(c.action, CorrectionAction::compensate);
   // The limit bounds the shift from the docked RCM: with 9 mm shifted, 6 mm
-  // back is a software shift (3 mm from the docked RCM after it), and 5 mm
-  // across reaches sqrt(10^2 - 9^2) = 4.4 mm: a re-docking.
+  // back is a software shift (3 mm from the docked RCM after it); across, the
+  // shift reaches sqrt(10^2 - 9^2) = 4.4 mm: 5 mm (lower bound 4.6 mm) is a
+  // re-docking, 4 mm (lower bound 3.6 mm) a shift.
   auto ws4 = corrector.create_workspace();
   c = corrector.compute_correction(ws4, make_estimate(0.0, Eigen::Vector3d(0, 0, -0.006), 0.0002), applied);
   EXPECT_EQ(c.action, CorrectionAction::compensate);
@@ -214,7 +215,7 @@ TEST(Correction, RepositionsBeyondTheLimitAndCountsTheShiftInEffect) {
   EXPECT_EQ(c.action, CorrectionAction::reposition);
   auto ws6 = corrector.create_workspace();
   c = corrector.compute_correction(ws6, make_estimate(0.0, Eigen::Vector3d(0.004, 0, 0), 0.0002), applied);
-  EXPECT_EQ(c.action, CorrectionAction::compensate) << "4.0 + 0.4 mm across fit in the 4.4 mm left that way";
+  EXPECT_EQ(c.action, CorrectionAction::compensate) << "the lower bound, 3.6 mm across, fits in the 4.4 mm left";
 }
 
 TEST(Correction, HysteresisKeepsTheAdviceSteadyNearTheTolerance) {

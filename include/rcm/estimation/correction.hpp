@@ -22,10 +22,10 @@
 // - reposition: beyond the limit (or once the software shifts add up to it):
 //   manual re-docking advice, the move in the arm's own words.
 //
-// Hysteresis: hold turns into an action once the estimate exceeds the
-// tolerance with an interval narrower than the move (a compensation that
-// stopped at its lower bound resumes once that bound is above zero again, the
-// direction being known), for confirm_s; an action returns to hold
+// Hysteresis: hold turns into an action once the estimate has exceeded the
+// tolerance with an interval narrower than the move for confirm_s (a
+// compensation that stopped at its lower bound resumes on that bound above
+// zero alone: its direction is known); an action returns to hold
 // once the estimate falls below release_fraction of the tolerance, its lower
 // bound reaches zero, or the estimate restarts (OnlineOutput::jumps);
 // reposition turns back into compensate only once the upper bound is within
