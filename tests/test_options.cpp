@@ -248,6 +248,11 @@ TEST(OptionsCli, FlagsTakeTheirHelpAndChecksFromTheTable) {
   EXPECT_NE(out.find("--tolerance"), std::string::npos) << out;
   EXPECT_EQ(rcm::test::run_cli("run x.json --max-train-minutes 0", out), 2);
   EXPECT_NE(out.find("--max-train-minutes"), std::string::npos) << out;
+  // A flag no command has, or a missing required one: bad input too.
+  EXPECT_EQ(rcm::test::run_cli("monitor --session x.json rec.csv --trial rec.csv", out), 2);
+  EXPECT_NE(out.find("--trial"), std::string::npos) << out;
+  EXPECT_EQ(rcm::test::run_cli("monitor rec.csv", out), 2);
+  EXPECT_NE(out.find("--session"), std::string::npos) << out;
 }
 
 TEST(OptionsCli, OptionsFileErrorsNameTheFileAndTheField) {

@@ -14,6 +14,7 @@
 
 #include "cli_util.hpp"
 #include "command_registry.hpp"
+#include "rcm/common/command_line.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/common/interrupt.hpp"
 
@@ -42,7 +43,7 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return rcm::exit_on_parse_error(app, e);
   } catch (const rcm::Interrupted& e) {
     return interrupted(e.what());
   } catch (const rcm::cli::ExitStatus& e) {

@@ -20,6 +20,7 @@
 
 #include "dds_params.hpp"
 #include "dds_sink.hpp"
+#include "rcm/common/command_line.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/live/monitor_node.hpp"
 #include "support/program_main.hpp"
@@ -76,7 +77,7 @@ int run(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return rcm::exit_on_parse_error(app, e);
   }
   const std::string source = params_file.empty() ? "command line" : "command line / " + params_file;
   if (!joint_names.empty()) p.joint_names = rcm::parse_joint_names(joint_names, param_location(source, "--joint-names"));

@@ -22,6 +22,7 @@
 
 #include "support/program_main.hpp"
 #include "support/crtk_client.hpp"
+#include "rcm/common/command_line.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/joint_trajectory.hpp"
 #include "rcm/io/json_file.hpp"
@@ -83,7 +84,7 @@ int run(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return rcm::exit_on_parse_error(app, e);
   }
   const int sources = !trajectory_file.empty() + (hold_s > 0) + (record_s > 0);
   if (sources != 1)

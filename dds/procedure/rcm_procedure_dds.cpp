@@ -34,6 +34,7 @@
 #include "support/crtk_client.hpp"
 #include "live_observer.hpp"
 #include "procedure.hpp"
+#include "rcm/common/command_line.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
 
@@ -109,7 +110,7 @@ int run(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return rcm::exit_on_parse_error(app, e);
   }
   o.q0 = parse_vector(q0_text, "--q0");
   o.check_offset_m = parse_vector(check_text, "--check-offset");

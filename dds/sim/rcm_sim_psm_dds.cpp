@@ -21,6 +21,7 @@
 
 #include "support/program_main.hpp"
 #include "support/dds_io.hpp"
+#include "rcm/common/command_line.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/sim/simulated_psm.hpp"
@@ -122,7 +123,7 @@ int run(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return rcm::exit_on_parse_error(app, e);
   }
   const auto where = [](const std::string& name) {
     std::string flag = "--" + name;
