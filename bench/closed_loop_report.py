@@ -339,15 +339,22 @@ def main():
                   f" mm/s), seeds {', '.join(seed for seed, _ in default_rate)}. Onset to force below 2 N for good: "
                   f"{times} s. RMS force after settling: {rms} N."]
     if draw_runs:
-        misses = [f"seed {seed} {draw} {fmt_time(sc['closed']['time_to_below_2n_s'])} s / "
-                  f"{sc['closed']['rms_force_after_settle_n']:.2f} N / {sc['closed']['wrong_direction_moves']}"
-                  for seed, draw, sc in draw_runs if not meets_step_targets(sc)]
-        met = len(draw_runs) - len(misses)
-        lines += ["", f"The large step against {a.draws} other draws of the surgeon's motion on each seed (`--teleop-stream "
-                  f"teleop:1` to `teleop:{a.draws}`, the simulated PSM's idle spells), the estimator reading the arm at "
-                  f"1.5 kHz (`--stream-rate 1500`): every target met on {met} of {len(draw_runs)} runs"
-                  + (". Misses (below 2 N for good / RMS after settling / wrong moves): "
-                     + "; ".join(misses) + "." if misses else ".")]
+        missed = [(seed, draw, sc["closed"]) for seed, draw, sc in draw_runs if not meets_step_targets(sc)]
+        lines += ["", f"The large step against the simulated PSM's draws 1-{a.draws} of the surgeon's motion on each seed "
+                  f"(`--teleop-stream teleop:N --stream-rate 1500`): every target met on "
+                  f"{len(draw_runs) - len(missed)} of {len(draw_runs)} runs."]
+        if missed:
+            # Each miss by the measures that can miss: the time always, the others where any run missed them.
+            times = " / ".join(fmt_time(c["time_to_below_2n_s"]) for _, _, c in missed)
+            parts = [f"below 2 N for good after {times} s"]
+            if any(not settles_quietly(c) for _, _, c in missed):
+                rms = " / ".join(f"{c['rms_force_after_settle_n']:.2f}" for _, _, c in missed)
+                parts.append(f"RMS after settling {rms} N")
+            if any(c["wrong_direction_moves"] for _, _, c in missed):
+                wrong = " / ".join(str(c["wrong_direction_moves"]) for _, _, c in missed)
+                parts.append(f"{wrong} wrong moves")
+            lines[-1] += (f" Misses: {', '.join(f'seed {seed} {draw}' for seed, draw, _ in missed)}; "
+                          + "; ".join(parts) + ".")
     for doc, begin, end in DOCS:
         write_block(doc, begin, end, "\n".join(lines))
     intervals = interval_lines(runs, alt_runs, taus) + tolerance_lines(tolerance_runs)
