@@ -41,6 +41,35 @@ TEST(Metrics, ReferenceValues) {
   EXPECT_THROW(compute_torque_errors(measured, predicted.topRows(3)), std::invalid_argument);
 }
 
+TEST(Metrics, HuberScaleIsTheSpreadOfTheBulk) {
+  // Normal errors: the standard deviation. With 1 % of the samples spikes of
+  // 20 standard deviations, the RMSE more than doubles; the scale moves by
+  // about their share. A bias counts: the scale is about zero.
+  std::mt19937 rng(3);
+  std::normal_distribution<double> normal(0.0, 0.05);
+  Eigen::VectorXd e(20000);
+  for (Eigen::Index i = 0; i < e.size(); ++i) e[i] = normal(rng);
+  const double sd = std::sqrt(e.squaredNorm() / static_cast<double>(e.size()));
+  EXPECT_NEAR(compute_huber_scale(e), sd, 0.01 * sd);
+  Eigen::VectorXd spiky = e;
+  for (Eigen::Index i = 0; i < spiky.size(); i += 100) spiky[i] = (i % 200 == 0 ? 1.0 : -1.0);
+  const double rms = std::sqrt(spiky.squaredNorm() / static_cast<double>(spiky.size()));
+  EXPECT_GT(rms, 2.0 * sd);
+  EXPECT_NEAR(compute_huber_scale(spiky), sd, 0.05 * sd);
+  EXPECT_NEAR(compute_huber_scale(Eigen::VectorXd::Constant(10, 0.1)), 0.1, 0.005);
+  EXPECT_EQ(compute_huber_scale(Eigen::VectorXd::Zero(10)), 0.0);
+  EXPECT_THROW(compute_huber_scale(Eigen::VectorXd()), std::invalid_argument);
+  // compute_torque_errors gives it per joint; the streaming accumulator cannot.
+  Eigen::MatrixXd measured(e.size(), 2), predicted = Eigen::MatrixXd::Zero(e.size(), 2);
+  measured << e, spiky;
+  const auto errors = compute_torque_errors(measured, predicted);
+  EXPECT_NEAR(errors[1].robust_sd, compute_huber_scale(spiky), 1e-12);
+  EXPECT_NEAR(errors[1].rmse, rms, 1e-12);
+  TorqueErrorAccumulator accumulator(2);
+  accumulator.add(measured, predicted);
+  EXPECT_TRUE(std::isnan(accumulator.get_errors()[0].robust_sd));
+}
+
 TEST(LossBalance, PowerMeanReferenceValues) {
   Eigen::ArrayXd mse(3);
   mse << 4.0, 1.0, 0.25;

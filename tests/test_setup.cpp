@@ -117,6 +117,32 @@ TEST(Setup, ReadyOnTheSimulatedSession) {
   EXPECT_NE(r.to_text().find("ready"), std::string::npos);
 }
 
+TEST(Setup, RareTorqueSpikesAreANoteNotAForceError) {
+  // The free space with a spike on yaw and pitch at 1 % of its samples (a
+  // servo setpoint a period late, then two at once): the RMSE more than
+  // doubles, the force error hardly moves, and a note says why.
+  rcm::test::TempDir dir;
+  const rcm::Session session = rcm::load_session(kSession);
+  const rcm::SetupReport clean = run(session);
+  rcm::Recording r = rcm::load_recording(session.free_space.front());
+  for (Eigen::Index i = 0; i < r.effort.rows(); i += 100) {
+    r.effort(i, 0) += (i % 200 == 0 ? 0.4 : -0.4);
+    r.effort(i, 1) += (i % 200 == 0 ? -0.4 : 0.4);
+  }
+  const std::filesystem::path spiky_file = dir.path() / "spiky_free_space.csv";
+  rcm::save_recording(spiky_file, r);
+  rcm::Session spiky_session = session;
+  spiky_session.free_space = {spiky_file};
+  const rcm::SetupReport spiky = run(spiky_session);
+  EXPECT_TRUE(spiky.ready) << missing_text(spiky);
+  EXPECT_GT(spiky.free_space.errors[0].rmse, 2.0 * clean.free_space.errors[0].rmse);
+  EXPECT_NEAR(spiky.force_error_n, clean.force_error_n, 0.15 * clean.force_error_n);
+  const rcm::SetupFinding* note = find(spiky, "model.spikes");
+  ASSERT_NE(note, nullptr);
+  EXPECT_EQ(note->severity, rcm::SetupSeverity::note);
+  EXPECT_EQ(find(clean, "model.spikes"), nullptr) << find(clean, "model.spikes")->message;
+}
+
 TEST(Setup, AShortFreeSpaceSaysHowMuchMore) {
   rcm::test::TempDir dir;
   const rcm::Session session = rcm::load_session(kSession);

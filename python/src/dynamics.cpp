@@ -310,6 +310,8 @@ void bind_dynamics(py::module_& m, py::module_& d) {
       .def_readonly("rmse", &JointTorqueError::rmse, "N m (N for joint 3)")
       .def_readonly("nrmse_percent", &JointTorqueError::nrmse_percent, "RMSE / (max - min) x 100")
       .def_readonly("range", &JointTorqueError::range)
+      .def_readonly("robust_sd", &JointTorqueError::robust_sd,
+                    "the spread of the error's bulk (Huber scale), which rare spikes leave alone; NaN when streamed")
       .def("__repr__", [](const JointTorqueError& e) {
         return "<JointTorqueError joint " + std::to_string(e.index) + ": RMSE " + std::to_string(e.rmse) + ", NRMSE " +
                std::to_string(e.nrmse_percent) + " %>";

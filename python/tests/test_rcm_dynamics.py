@@ -139,6 +139,12 @@ class TestDynamics(unittest.TestCase):
         summary = _state["fit"].summary
         self.assertEqual([e.index for e in summary.test_errors], [1, 2, 3])
         self.assertLess(summary.test_errors[0].nrmse_percent, 10.0)
+        # The spread of its bulk: near the RMSE on the bench's spike-free errors (no `rcm setup` spike note, which
+        # takes a ratio of 1.5); a streamed evaluation has none.
+        for e in summary.test_errors:
+            self.assertGreater(e.robust_sd, e.rmse / 1.5)
+            self.assertLess(e.robust_sd, 1.05 * e.rmse)
+        self.assertTrue(all(np.isnan(e.robust_sd) for e in streaming))
 
     def test_save_load_is_bit_exact(self):
         loaded = rcm.dynamics.load_torque_model(_state["model_path"])

@@ -44,11 +44,34 @@ std::vector<JointTorqueError> TorqueErrorAccumulator::get_errors() const {
   return errors;
 }
 
+double compute_huber_scale(const Eigen::Ref<const Eigen::VectorXd>& e, double c) {
+  if (!(c > 0)) throw std::invalid_argument("compute_huber_scale: c must be > 0");
+  if (e.size() == 0) throw std::invalid_argument("compute_huber_scale: no samples");
+  // kappa(c) = E[min(Z^2, c^2)] = (2 Phi(c) - 1) - 2 c phi(c) + c^2 P(|Z| > c).
+  const double tail = std::erfc(c / std::sqrt(2.0));
+  const double kappa = (1.0 - tail) - 2.0 * c * std::exp(-0.5 * c * c) / std::sqrt(2.0 * M_PI) + c * c * tail;
+  // The fixed point from the RMS down: each step is the root mean square of
+  // the errors clipped at c times the last scale, and the map is monotone.
+  double s = std::sqrt(e.squaredNorm() / static_cast<double>(e.size()) / kappa);
+  for (int it = 0; it < 200 && s > 0; ++it) {
+    const double clip = c * s;
+    const double next =
+        std::sqrt(e.array().square().min(clip * clip).sum() / static_cast<double>(e.size()) / kappa);
+    const bool done = std::abs(next - s) <= 1e-10 * s;
+    s = next;
+    if (done) break;
+  }
+  return s;
+}
+
 std::vector<JointTorqueError> compute_torque_errors(const Eigen::MatrixXd& measured,
                                                     const Eigen::MatrixXd& predicted) {
-  TorqueErrorAccumulator errors(static_cast<int>(measured.cols()));
-  errors.add(measured, predicted);
-  return errors.get_errors();
+  TorqueErrorAccumulator accumulator(static_cast<int>(measured.cols()));
+  accumulator.add(measured, predicted);
+  std::vector<JointTorqueError> errors = accumulator.get_errors();
+  for (Eigen::Index j = 0; j < measured.cols(); ++j)
+    errors[static_cast<std::size_t>(j)].robust_sd = compute_huber_scale(measured.col(j) - predicted.col(j));
+  return errors;
 }
 
 std::vector<JointTorqueError> evaluate_torque_model(const TorqueModel& model,

@@ -55,7 +55,10 @@ const OptionTable<SetupOptions>& get_option_table(OptionTag<SetupOptions>) {
           .add("check_pivot_rad", &SetupOptions::check_pivot_rad, "pivot (yaw from q0) of that statement", "rad",
                OptionLimits::within(0, 1.4))
           .add("max_force_error_n", &SetupOptions::max_force_error_n,
-               "incision force the model's held-out error may cause there", "N", OptionLimits::above(0))
+               "incision force the spread of the model's held-out error may cause there", "N", OptionLimits::above(0))
+          .add("max_spike_ratio", &SetupOptions::max_spike_ratio,
+               "a note when a joint's held-out RMSE exceeds this many times the spread of its bulk (rare spikes)", "",
+               OptionLimits::at_least(1))
           .add("max_calibration_error_m", &SetupOptions::max_calibration_error_m,
                "offset the identified models may find on the calibration beyond its known one", "m",
                OptionLimits::above(0))
@@ -176,6 +179,15 @@ Eigen::Vector3d get_rmse3(const std::vector<dynamics::JointTorqueError>& errors)
   return out;
 }
 
+// The spread of the errors' bulk (JointTorqueError::robust_sd), the RMSE where
+// it was not computed.
+Eigen::Vector3d get_robust_sd3(const std::vector<dynamics::JointTorqueError>& errors) {
+  Eigen::Vector3d out = get_rmse3(errors);
+  for (const auto& e : errors)
+    if (e.index >= 1 && e.index <= 3 && std::isfinite(e.robust_sd)) out[e.index - 1] = e.robust_sd;
+  return out;
+}
+
 }  // namespace
 
 SetupReport run_setup(const Session& session, const StudyOptions& study, const SetupOptions& options,
@@ -293,14 +305,29 @@ SetupReport run_setup(const Session& session, const StudyOptions& study, const S
     add("model.fit", SetupSeverity::missing, std::string("free-space model: not fitted: ") + e.what());
     return finish(r, start);
   }
-  const Eigen::Vector3d sigma = get_rmse3(r.free_space.errors);
+  // The force error counts the spread of the held-out error's bulk: rare
+  // spikes (a servo setpoint a period late, then two at once; a bump) can hold
+  // most of the RMSE, and the estimate, which averages over seconds, hardly
+  // feels them. They are a note.
+  const Eigen::Vector3d rmse = get_rmse3(r.free_space.errors);
+  const Eigen::Vector3d sigma = get_robust_sd3(r.free_space.errors);
   const Eigen::Vector3d q_check = session.q0 + Eigen::Vector3d(options.check_pivot_rad, 0.0, 0.0);
   r.force_error_n = compute_force_error_rms(incision, q_check, options.check_offset_m, sigma);
   const std::string model_error = fmt::format(
-      "free-space model ({}): held-out error {:.3f} N m / {:.3f} N m / {:.3f} N, {:.1f} N at the incision at D = {:.0f} "
-      "mm, theta = {:.0f} deg",
+      "free-space model ({}): held-out error {:.3f} N m / {:.3f} N m / {:.3f} N (the spread of its bulk), {:.1f} N at "
+      "the incision at D = {:.0f} mm, theta = {:.0f} deg",
       dynamics::to_string(r.free_space.kind), sigma[0], sigma[1], sigma[2], r.force_error_n,
       options.check_offset_m * 1e3, options.check_pivot_rad * 180.0 / M_PI);
+  int spiky = -1;
+  for (int j = 0; j < 3; ++j)
+    if (rmse[j] > options.max_spike_ratio * sigma[j] && (spiky < 0 || rmse[j] / sigma[j] > rmse[spiky] / sigma[spiky]))
+      spiky = j;
+  if (spiky >= 0)
+    add("model.spikes", SetupSeverity::note,
+        fmt::format("{}: the held-out error's RMS is {:.1f} times the spread of its bulk: rare torque spikes (a servo "
+                    "stream that missed the arm's periods, a bump) hold most of it; the force error leaves them "
+                    "out",
+                    r.joints[static_cast<std::size_t>(spiky)].name, rmse[spiky] / sigma[spiky]));
   if (!(r.force_error_n <= options.max_force_error_n))
     add("model.force_error", SetupSeverity::missing,
         model_error + fmt::format("; at most {:.1f} N wanted: the model does not explain this arm's free space well "

@@ -10,7 +10,11 @@ namespace {
 
 nlohmann::json errors_json(const std::vector<dynamics::JointTorqueError>& errors) {
   nlohmann::json out = nlohmann::json::array();
-  for (const auto& e : errors) out.push_back({{"index", e.index}, {"rmse", e.rmse}, {"nrmse_percent", e.nrmse_percent}});
+  for (const auto& e : errors) {
+    nlohmann::json j = {{"index", e.index}, {"rmse", e.rmse}, {"nrmse_percent", e.nrmse_percent}};
+    if (std::isfinite(e.robust_sd)) j["robust_sd"] = e.robust_sd;
+    out.push_back(std::move(j));
+  }
   return out;
 }
 

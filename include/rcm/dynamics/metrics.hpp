@@ -3,6 +3,7 @@
 // measured torque on the evaluated data) x 100.
 
 #include <Eigen/Core>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <vector>
 
@@ -17,7 +18,19 @@ struct JointTorqueError {
   double rmse = 0.0;           // N m (N for the insertion joint)
   double nrmse_percent = 0.0;  // RMSE / (max - min) x 100
   double range = 0.0;          // max - min of the measured torque
+  // The spread of the error's bulk (compute_huber_scale, clipped at 3 of
+  // itself, as the online estimate weighs its innovations). Rare spikes (a
+  // servo setpoint late by a period, a bump) can hold most of the RMSE and
+  // leave this alone. NaN from TorqueErrorAccumulator, which keeps no samples.
+  double robust_sd = std::numeric_limits<double>::quiet_NaN();
 };
+
+// Huber's scale of the errors e about zero (his "proposal 2"): the s with
+// mean(min(e^2, c^2 s^2)) = kappa(c) s^2, kappa(c) = E[min(Z^2, c^2)] for a
+// standard normal Z, so that s is the standard deviation of normal errors
+// and a share of spikes moves it by about their share, not their size. A bias
+// counts (the scale is about zero, not the median). 0 for no error.
+double compute_huber_scale(const Eigen::Ref<const Eigen::VectorXd>& e, double c = 3.0);
 
 // measured and predicted: T x M with the same shape; throws std::invalid_argument otherwise.
 std::vector<JointTorqueError> compute_torque_errors(const Eigen::MatrixXd& measured,

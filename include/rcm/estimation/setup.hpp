@@ -49,6 +49,10 @@ struct SetupOptions {
   double check_offset_m = 0.03;
   double check_pivot_rad = 0.349;
   double max_force_error_n = 2.0;
+  // A note when a joint's held-out RMSE exceeds this many times the spread of
+  // its bulk (dynamics::JointTorqueError::robust_sd): rare spikes hold most
+  // of it. Normal errors give 1.
+  double max_spike_ratio = 1.5;
   // The offset the identified models find on the calibration, against its
   // known [0, 0, D*].
   double max_calibration_error_m = 0.001;
