@@ -641,6 +641,15 @@ TEST(OnlinePipeline, FlagsATorqueResidualNoIncisionForceExplains) {
             std::string::npos);
 }
 
+namespace {
+// The estimator on linear_tissue() with the closed-loop bench's change-point test.
+rcm::OnlineEstimator make_estimator_with_jumps(const rcm::IncisionFrame& incision) {
+  rcm::OnlineEstimatorOptions options = default_options();
+  options.jump_threshold = 4.0;
+  return rcm::OnlineEstimator(incision, linear_tissue(), options);
+}
+}  // namespace
+
 TEST(OnlineEstimator, AJumpOfTheIncisionRestartsTheFiltersAndTheyReconverge) {
   // A settled estimate, then the incision jumps 10 mm: the change-point test
   // fires within seconds and the bank, restarted from the prior, is back within
@@ -700,6 +709,43 @@ TEST(OnlineEstimator, AJumpOfTheIncisionRestartsTheFiltersAndTheyReconverge) {
   EXPECT_EQ(rcm::get_online_output(ws).jumps, 0);
 }
 
+TEST(OnlineEstimator, ARestartedFilterIsNotChargedForConverging) {
+  // A stretch of torque the models miss (10 s, then gone: a path the
+  // free-space model fits poorly) raises the fit cost and restarts the bank;
+  // the incision then jumps 35 mm (the closed-loop bench's large step). Once
+  // the bank restarts on the jump, its filters converge from centimetres away:
+  // their innovations are large while they do, and they predict so. The fit
+  // cost the corrector's mismatch gate reads is the restarted filter's own:
+  // below the gate (10) within half a second of that restart, where a cost
+  // carried over from before it held the gate to the end of the stream.
+  const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
+  const auto tissue = linear_tissue();
+  const rcm::OnlineEstimator estimator = make_estimator_with_jumps(incision);
+  const Eigen::Vector3d before(0.002, -0.001, 0.012), after = before + Eigen::Vector3d(0.010, 0.015, 0.030);
+  const double t_jump = 30.0, rate = 200.0;
+  auto ws = estimator.create_workspace();
+  std::mt19937 rng(9);
+  double worst_before = 0.0, last_above_gate = 0.0, restart_after_jump = NAN;
+  for (int k = 0; k < 50 * rate; ++k) {
+    const PathSample s = path(k / rate);
+    Eigen::Vector3d dtau =
+        make_dtau(incision, tissue, s, s.t >= t_jump ? after : before, Eigen::Vector3d(0.02, 0.02, 0.1), rng);
+    if (s.t >= t_jump - 10.0 && s.t < t_jump)
+      dtau += 0.15 * std::sin(2.0 * M_PI * 0.7 * s.t) * Eigen::Vector3d(1.0, -1.0, 0.0);
+    const auto& out = estimator.compute_update(ws, s.t, s.q, s.qd, dtau);
+    if (s.t < t_jump) {
+      worst_before = std::max(worst_before, out.fit_cost);
+      continue;
+    }
+    if (std::isnan(restart_after_jump) && out.jump_time >= t_jump) restart_after_jump = out.jump_time;
+    if (out.fit_cost > 10.0) last_above_gate = s.t;
+  }
+  EXPECT_GT(worst_before, 10.0) << "the missed torque must raise the fit cost for this test to mean anything";
+  ASSERT_FALSE(std::isnan(restart_after_jump)) << "the jump restarts the bank";
+  EXPECT_LT(last_above_gate, restart_after_jump + 0.5) << "restart on the jump at " << restart_after_jump << " s";
+  EXPECT_LT((rcm::get_online_output(ws).misalignment_m - after).norm(), 0.001);
+}
+
 TEST(OnlineEstimator, ARestartOnATransientKeepsTheEstimateAndAJumpJustAfterIsCaught) {
   // A settled estimate, then a 0.3 s burst of torque the free-space model
   // misses (a friction transient): the change-point test restarts the bank.
@@ -710,9 +756,7 @@ TEST(OnlineEstimator, ARestartOnATransientKeepsTheEstimateAndAJumpJustAfterIsCau
   // within 3 s and the bank follows the jump.
   const rcm::IncisionFrame incision = rcm::make_incision_frame(kQ0);
   const auto tissue = linear_tissue();
-  rcm::OnlineEstimatorOptions options = default_options();
-  options.jump_threshold = 4.0;  // the closed-loop bench's
-  const rcm::OnlineEstimator estimator(incision, tissue, options);
+  const rcm::OnlineEstimator estimator = make_estimator_with_jumps(incision);
   const Eigen::Vector3d before(0.002, -0.001, 0.012), after = before + Eigen::Vector3d(0.006, 0.0, 0.008);
   const double t_burst = 30.0, t_jump = 31.2, rate = 200.0;
   for (const bool jump : {false, true}) {

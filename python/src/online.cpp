@@ -54,7 +54,8 @@ void bind_online(py::module_& m) {
       .def_readonly("force_norm_n", &OnlineOutput::force_norm_n)
       .def_readonly("cusum", &OnlineOutput::cusum)
       .def_readonly("fit_cost", &OnlineOutput::fit_cost,
-                    "the reported filter's mean robust loss per sample: about 1.5 when the model explains the residual")
+                    "the reported filter's mean robust loss per sample since it started, each innovation against the "
+                    "spread the filter predicts for it: about 1.5 when the model explains the residual")
       .def_readonly("onset", &OnlineOutput::onset)
       .def_readonly("onset_time", &OnlineOutput::onset_time)
       .def_readonly("alarm", &OnlineOutput::alarm)

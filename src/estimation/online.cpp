@@ -79,6 +79,7 @@ void OnlineEstimator::restart_hypotheses(Workspace& ws, int incumbent) const {
     hyp.p = Eigen::Vector3d(0.0, 0.0, options_.D_starts[static_cast<std::size_t>(h)]);
     hyp.P = sd.array().square().matrix().asDiagonal();
     hyp.cost = kept.cost;
+    hyp.fit = hyp.fit_weight = 0.0;
   }
   ws.num_hypotheses = starts;
   if (incumbent >= 0) ws.hypotheses[static_cast<std::size_t>(ws.num_hypotheses++)] = kept;
@@ -184,7 +185,17 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
       hyp.cost = forget * hyp.cost + (1.0 - forget) * cost_sample;
 
       const Eigen::Matrix3d PHt = hyp.P * H.transpose();
-      Eigen::Matrix3d S = H * PHt;
+      const Eigen::Matrix3d HPHt = H * PHt;
+      // The fit: the innovation against the spread the filter predicts for it.
+      Eigen::Matrix3d S_fit = HPHt;
+      S_fit.diagonal() += o.torque_sigma.cwiseAbs2();
+      const Eigen::LLT<Eigen::Matrix3d> llt_fit(S_fit);
+      if (llt_fit.info() == Eigen::Success) {
+        const double fit_sample = rho(llt_fit.matrixL().solve(nu).norm());
+        hyp.fit = forget * hyp.fit + (1.0 - forget) * fit_sample;
+        hyp.fit_weight = forget * hyp.fit_weight + (1.0 - forget);
+      }
+      Eigen::Matrix3d S = HPHt;
       S.diagonal() += R / w;
       const Eigen::LLT<Eigen::Matrix3d> llt(S);
       if (llt.info() != Eigen::Success) continue;
@@ -216,7 +227,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
       out.onset_time = time;
     }
     // Change point: the reported filter's prediction costs more than its own
-    // level (its fit cost before this sample) by more than the allowance, for
+    // level (its forgotten mean before this sample) by more than the allowance, for
     // long enough. Scored as the onset test, per correlation time.
     const bool kept_reported = prior_best == kept;
     const bool armed = time >= ws.jump_armed_at || (kept_reported && time >= ws.kept_armed_at);
@@ -240,7 +251,7 @@ const OnlineOutput& OnlineEstimator::compute_update(Workspace& ws, double time, 
   out.misalignment_m = chosen.p;
   out.sd_m = chosen.P.diagonal().cwiseMax(0.0).cwiseSqrt();
   out.covariance_m2 = chosen.P;
-  out.fit_cost = ws.cost_weight > 0 ? chosen.cost / ws.cost_weight : 0.0;
+  out.fit_cost = chosen.fit_weight > 0 ? chosen.fit / chosen.fit_weight : 0.0;
 
   if (out.used) {
     Eigen::Vector3d f;
@@ -450,7 +461,7 @@ const OptionTable<OnlineEstimatorOptions>& get_option_table(OptionTag<OnlineEsti
                "CUSUM threshold of the change-point test that restarts the filters (0: off)",
                "nats per correlation time", OptionLimits::at_least(0))
           .add("jump_allowance", &OnlineEstimatorOptions::jump_allowance,
-               "the change-point test counts the innovation cost above the fit cost plus this", "nats per sample",
+               "the change-point test counts the innovation cost above its recent level plus this", "nats per sample",
                OptionLimits::at_least(0))
           .add("jump_holdoff_s", &OnlineEstimatorOptions::jump_holdoff_s,
                "the change-point test waits this long after a reset or a restart", "s", OptionLimits::at_least(0))

@@ -61,10 +61,10 @@ struct RegimeCheckOptions {
   // arm, stays inside the positions and speeds it was fitted on; what gives it
   // away is a torque residual that no incision force explains. The online
   // estimate's fit cost (OnlineOutput::fit_cost, about 1.5 when the models
-  // explain the torques; 13-26 on the simulated bench with 200 g the model
-  // never saw) above this for residual_persistence_s flags the samples
-  // (kResidualRegimeBit); the estimate catching up with a new offset rises
-  // above it for a moment.
+  // explain the torques; 27-43 in the test stream of
+  // OnlinePipeline.FlagsATorqueResidualNoIncisionForceExplains, with 200 g the
+  // model never saw) above this for residual_persistence_s flags the samples
+  // (kResidualRegimeBit).
   double max_fit_cost = 10.0;
   double residual_persistence_s = 2.0;
   void check() const;

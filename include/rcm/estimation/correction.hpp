@@ -53,9 +53,9 @@ struct CorrectionOptions {
   double compensate_limit_m = 0.010;   // software shifts up to this (in all, since reset), beyond: re-dock
   double max_rate_m_per_s = 0.005;     // speed of the software shift
   double confidence_z = 1.96;          // the 95 % interval
-  // Above this fit cost the model does not explain the residual: hold. 1.5 is
-  // a perfect fit; 10 is an RMS innovation of about 2.6 free-space-model sigma
-  // (docs/validation.md, the closed loop, has what it separates on the bench).
+  // Above this fit cost (OnlineOutput::fit_cost) the model does not explain
+  // the residual: hold. 1.5 is a perfect fit; 10 is an RMS innovation of about
+  // 2.6 times the spread its filter predicts.
   double max_fit_cost = 10.0;
   double release_fraction = 0.5;       // back to hold below this fraction of the tolerance
   // A sample after a gap in the stream moves the RCM by at most this much time

@@ -27,7 +27,7 @@
 //   and near p = 0 blind to first order (the torque about the RCM is the
 //   force times the coaxial offset, both proportional to p), would follow in
 //   tens of seconds. A CUSUM watches the reported filter's robust innovation
-//   cost against its own recent level (the fit cost): a sustained excess, in
+//   cost against its own recent level (its forgotten mean): a sustained excess, in
 //   nats per correlation time, means the offsets the filter holds no longer
 //   explain the torques. The bank then restarts from the prior (D_starts,
 //   initial_*_sd_m), as after reset, and re-converges from the data in a few
@@ -86,7 +86,7 @@ struct OnlineEstimatorOptions {
   double hypothesis_memory_s = 10.0;     // forgetting time of each filter's innovation cost
   double onset_threshold = 10.0;         // CUSUM threshold, nats per correlation time
   // The change-point test (0: off, the default): CUSUM threshold on the
-  // reported filter's robust innovation cost above its fit cost plus
+  // reported filter's robust innovation cost above its recent level plus
   // jump_allowance, in nats per correlation time. 4 passes a 10 mm step within
   // a few seconds of motion on the closed-loop bench (which turns it on:
   // make_closed_loop_online_options) and never fires there at rest, moving
@@ -94,7 +94,7 @@ struct OnlineEstimatorOptions {
   // incision does not move, it restarted the bank and left the streamed
   // estimates worse and later settled than without it (the demo table).
   double jump_threshold = 0.0;
-  // Nats per sample above the fit cost that count. A matched model's sample
+  // Nats per sample above that level that count. A matched model's sample
   // cost scatters about its level by about one (a chi-square of 3, halved).
   double jump_allowance = 1.0;
   // After a reset or a restart the test waits this long: a converging bank's
@@ -149,10 +149,14 @@ struct OnlineOutput {
   int jumps = 0;
   double jump_time = 0.0;
   // How well the reported filter explains the residual: the forgotten mean of
-  // its robust loss rho(|nu / sigma|) per sample (normalized for the samples
-  // seen). About 1.5 (half a chi-square of 3) when the model and the free-space
-  // model's error scale fit the data; a residual the tissue model cannot
-  // explain (a payload the free-space model never saw) raises it.
+  // its robust loss rho(|S^-1/2 nu|) per sample since the filter started
+  // (normalized for the samples seen), S = H P H^T + diag(sigma^2) the spread
+  // the filter predicts for its innovation nu. About 1.5 (half a chi-square of
+  // 3) when the model and the free-space model's error scale fit the data; a
+  // residual the tissue model cannot explain (a payload the free-space model
+  // never saw) raises it once the filter is sure of its offsets. A filter
+  // still converging predicts its innovations' spread and is not charged for
+  // them: a restart (the change-point test) does not read as a mismatch.
   double fit_cost = 0.0;
   bool onset = false;                // onset detected (at or before this sample)
   double onset_time = 0.0;
@@ -177,6 +181,12 @@ class OnlineEstimator {
     Eigen::Vector3d p = Eigen::Vector3d::Zero();
     Eigen::Matrix3d P = Eigen::Matrix3d::Zero();
     double cost = 0.0;  // exponentially forgotten mean of the robust loss of the innovation
+    // The same loss of the innovation against its predicted spread (the
+    // free-space model's error and the filter's own uncertainty, H P H^T),
+    // forgotten alike with its own weight: since the filter started, so that
+    // a filter restarted from the prior is not charged for converging.
+    double fit = 0.0;
+    double fit_weight = 0.0;
   };
   struct Workspace {
     // The restarted starts, then (after a change-point restart) the filter
