@@ -212,9 +212,9 @@ def main():
     minutes = (time.monotonic() - started) / 60
     head = (f"Measured by `bench/live_procedure_report.py --seeds {','.join(map(str, seeds))} --full-seeds "
             f"{','.join(map(str, full_seeds)) or chr(39) * 2} --rate {args.rate:g} --time-scale {args.time_scale:g}` on {stamp}, "
-            f"{cpu_model()}, {os.cpu_count()} cores shared with other work (load average {load:.1f} at the end), "
-            f"{minutes:.0f} min in all. Each run: `rcm_sim_psm_dds --rate {args.rate:g} --teleop --software-rcm` "
-            f"(its clock {args.time_scale:g} times the wall's) and `rcm_procedure_dds --simulator --power "
+            f"{cpu_model()}, {os.cpu_count()} cores (load average {load:.1f} at the end), "
+            f"{minutes:.0f} min in all. Each run: `rcm_sim_psm_dds --rate {args.rate:g} --time-scale {args.time_scale:g} --teleop --software-rcm` "
+            f"and `rcm_procedure_dds --simulator --power "
             "--software-rcm --incision-motion large_step --measured-timeout-s 5` over loopback DDS, three processes "
             "in the loop (simulator, monitor, procedure).")
     rows = ["| seed | across processes: onset to < 2 N for good (s) / RMS after settling (N) / wrong moves / peak (N) "
@@ -259,8 +259,12 @@ def main():
         pacing = ex.get("pacing_error")
         rms = (ex.get("rms_tracking_error") or {}).get("outer_yaw")
         missing = ", ".join(m.split(":")[0] for m in setup.get("missing") or [])
-        verdict = "ready" if setup.get("ready") else f"not ready: {missing}" if setup else "-"
-        full.append(f"| {s_} | {verdict} ({setup.get('force_error_n') or float('nan'):.1f} N) | "
+        if setup:
+            verdict = ("ready" if setup.get("ready") else f"not ready: {missing}") + f" ({setup['force_error_n']:.1f} N)"
+        else:  # the procedure stopped before rcm setup: the phase that stopped it says why
+            stopped = next((p for p in j.get("phases", []) if p.get("status") == "stopped"), {})
+            verdict = f"not run: {stopped.get('name', 'a phase')} stopped ({stopped.get('message', '').split(':')[0]})"
+        full.append(f"| {s_} | {verdict} | "
                     f"{ex.get('samples_recorded', '-')} / {ex.get('rows_sent', '-')}, "
                     f"{'-' if pacing is None else f'{100 * pacing:+.3f} %'}, "
                     f"{'-' if rms is None else f'{1e3 * rms:.2f}'} | "
@@ -275,7 +279,7 @@ def main():
     rate = args.rate
     lost = sum(abs(p["samples_recorded"] - (round(p["recorded_span_s"] * rate) + 1)) for p in phases
                if p["samples_recorded"])
-    pacing = [abs(p["pacing_error"]) for p in phases if p.get("pacing_error") is not None]
+    pacing = [abs(p["pacing_error"]) for p in phases if p.get("pacing_error") is not None and p.get("status") != "stopped"]
     whole = ["The whole procedure from the excitation on:", "", *full, "",
              f"`rcm setup` ready on {len(ready)} of {len(full_seeds)} seeds. "]
     if not full_seeds:
@@ -290,7 +294,8 @@ def main():
             *whole[:-1],
             whole[-1] + f"The player, every phase of every run ({len(phases)} phases): the samples recorded and the arm's stamps' "
             f"span at {rate:g} Hz differ by {lost} in all."
-            + (f" The largest pacing error is {100 * max(pacing):.4f} % of a file's duration." if pacing else "")]
+            + (f" The largest pacing error of a phase played to its end is {100 * max(pacing):.4f} % of a file's "
+           "duration." if pacing else "")]
     block = "\n".join(text)
     print(block)
     bench_lines = []
