@@ -132,8 +132,8 @@ def main():
     over = "one run" if args.runs == 1 else f"the range over {args.runs} runs"
     lines = [
         f"Measured by `bench/live_nodes_report.py --runs {args.runs}` on {when}, {os.cpu_count()} cores of "
-        f"{cpu_model()}, load average {load_start:.1f} at the start and {os.getloadavg()[0]:.1f} at the end "
-        f"(the machine is shared: the other core may be busy). Each node's end-to-end test ({names}, run by "
+        f"{cpu_model()}, load average {load_start:.1f} at the start and {os.getloadavg()[0]:.1f} at the end; "
+        f"the other core may be busy. Each node's end-to-end test ({names}, run by "
         "`ctest -R`) streams the simulated trial through the node, with bad messages among the samples. The "
         "figures are what the node prints at exit (`rcm: per sample:` and `rcm: publishing (own thread):`), "
         f"{over}. Model: linear, 3 joints.", "",
