@@ -92,8 +92,7 @@ def main():
              f"`rcm run` one after another, results identical: "
              f"{'met' if same and a.workers == 2 and serial / many >= TARGET else 'not met'}. "
              "`rcm batch` does a little more per session than `rcm run` (the setup checks of setup.json) and "
-             "starts its cluster (a few seconds). The machine is shared: the load averages above say how much other "
-             "work ran on the same cores, which moves the times from one run to the next."]
+             "starts its cluster (a few seconds)."]
     publish_block(DOC, BEGIN, END, "\n".join(lines), write=not a.no_doc)
     return 0 if same else 1
 

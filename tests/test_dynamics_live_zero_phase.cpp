@@ -252,7 +252,7 @@ TEST(LiveZeroPhase, ComputeStepDoesNotAllocate) {
 
 // A fit takes the flag from FitOptions::live_zero_phase.
 TEST(LiveZeroPhase, FitOptionSetsTheFlag) {
-  const Stream s = make_stream(0.005, 60.0, 0.0);
+  const Stream s = make_stream(0.005, 20.0, 0.0);
   const LinearTorqueModel truth(make_info(0.005), make_parameters(false));
   rcm::Recording r;
   r.source = "memory";

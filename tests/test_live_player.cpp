@@ -31,6 +31,16 @@ struct Bench {
   std::vector<double> position, velocity, effort, setpoint, none;
   std::int64_t wall_ns = 0;
   bool deliver = true;  // false: the arm's messages stop (its node hangs)
+  // A stall of the player's side: for this many periods the arm's messages
+  // wait, then come together, each with its age (when it came less when the
+  // arm wrote it). tell_age false: a middleware that does not say.
+  int stall_periods = 0;
+  bool tell_age = true;
+  struct Message {
+    rcm::sim::PsmSample sample;
+    std::int64_t stamp, written;
+  };
+  std::vector<Message> waiting;
 
   explicit Bench(double rate_hz)
       : psm(rcm::sim::make_default_config(), [&] {
@@ -53,19 +63,29 @@ struct Bench {
     else if (c.kind == rcm::PlayerCommand::Kind::move_jp)
       psm.apply_move_jp(s, c.position.data(), c.position.size());
   }
+  void deliver_message(TrajectoryPlayer& player, const rcm::sim::PsmSample& x, std::int64_t stamp_ns,
+                       std::int64_t written_ns) {
+    apply(player.compute_operating_state(to_string(x.state), x.homed, x.busy, wall_ns));
+    setpoint.assign(x.setpoint.data(), x.setpoint.data() + 6);
+    player.add_setpoint({names, setpoint, none, none}, stamp_ns);
+    position.assign(x.position.data(), x.position.data() + 6);
+    velocity.assign(x.velocity.data(), x.velocity.data() + 6);
+    effort.assign(x.effort.data(), x.effort.data() + 6);
+    // 50 us on the way: the age of a message that came at once.
+    const std::int64_t age = tell_age ? wall_ns - written_ns + 50000 : -1;
+    apply(player.compute_measured({names, position, velocity, effort}, stamp_ns, wall_ns, age));
+  }
   // One period of the arm and what the player makes of it.
   void step(TrajectoryPlayer& player) {
     psm.compute_step(s);
     wall_ns += std::llround(psm.period_s() * 1e9);
-    if (deliver) {
-      const rcm::sim::PsmSample& x = s.sample;
-      apply(player.compute_operating_state(to_string(x.state), x.homed, x.busy, wall_ns));
-      setpoint.assign(x.setpoint.data(), x.setpoint.data() + 6);
-      player.add_setpoint({names, setpoint, none, none}, stamp());
-      position.assign(x.position.data(), x.position.data() + 6);
-      velocity.assign(x.velocity.data(), x.velocity.data() + 6);
-      effort.assign(x.effort.data(), x.effort.data() + 6);
-      apply(player.compute_measured({names, position, velocity, effort}, stamp(), wall_ns));
+    if (stall_periods > 0) {
+      waiting.push_back({s.sample, stamp(), wall_ns});
+      if (--stall_periods > 0) return;
+      for (const Message& m : waiting) deliver_message(player, m.sample, m.stamp, m.written);
+      waiting.clear();
+    } else if (deliver) {
+      deliver_message(player, s.sample, stamp(), wall_ns);
     }
     apply(player.compute_tick(wall_ns));
   }
@@ -223,6 +243,54 @@ TEST(TrajectoryPlayer, StopsOnTrackingErrorAndHoldsTheArm) {
       << player.summary().message;
   ASSERT_EQ(last.kind, rcm::PlayerCommand::Kind::servo_jp) << "the last command holds the arm where it is";
   EXPECT_EQ(last.position, b.position);
+}
+
+// A 16 ms stall of the player's side at 1.5 kHz, where the file moves
+// fastest: the arm holds the last row it got. Told the messages' ages, the
+// player pauses the file over the late ones and the arm resumes from the row it
+// holds; not told, the arm's setpoint jumps to where the file is by then.
+TEST(TrajectoryPlayer, PausesTheFileOverAStallRatherThanJumpTheSetpoint) {
+  const rcm::JointTrajectory t = make_trajectory(1500.0, 1.0);
+  auto run = [&](bool tell_age, double& largest_step, rcm::PlayerSummary& summary) {
+    Bench b(1500.0);
+    b.make_ready();
+    b.tell_age = tell_age;
+    TrajectoryPlayer player(t, {});
+    largest_step = 0.0;
+    bool stalled = false;
+    for (long k = 0; k < 100000 && !player.finished(); ++k) {
+      // A quarter of the file in: the yaw's speed at its peak, 0.31 rad/s.
+      if (!stalled && player.summary().rows_sent == 375) {
+        b.stall_periods = 24;
+        stalled = true;
+      }
+      const double before = b.s.setpoint[0];
+      b.step(player);
+      if (player.summary().rows_sent > 0) largest_step = std::max(largest_step, std::abs(b.s.setpoint[0] - before));
+    }
+    ASSERT_TRUE(stalled);
+    ASSERT_EQ(player.phase(), PlayerPhase::done) << player.summary().message;
+    summary = player.summary();
+    const rcm::Recording r = player.get_recording("x");
+    for (Eigen::Index k = 1; k < r.time.size(); ++k)
+      ASSERT_NEAR(r.time[k] - r.time[k - 1], 1.0 / 1500, 1e-6) << "every sample recorded once, the late ones too";
+  };
+  double paused_step = 0.0, jumped_step = 0.0;
+  rcm::PlayerSummary paused, jumped;
+  run(true, paused_step, paused);
+  run(false, jumped_step, jumped);
+  const double row_step = 0.1 * M_PI / 1500;  // the file's largest step from one row to the next
+  EXPECT_GT(jumped_step, 15 * row_step) << "without the ages: a jump over most of the stall";
+  EXPECT_LT(paused_step, 9 * row_step) << "with them: at most stall_s (7.5 periods) of the file at once";
+  EXPECT_EQ(jumped.stalls, 0u);
+  EXPECT_EQ(paused.stalls, 1u);
+  // Late beyond 5 ms: the first 16 of the 24 messages, each a period of the file's pause.
+  EXPECT_NEAR(paused.paused_s, 16.0 / 1500, 2.0 / 1500);
+  EXPECT_NEAR(paused.sent_span_s - jumped.sent_span_s, paused.paused_s, 1.0 / 1500) << "the pause is in the pacing";
+  EXPECT_EQ(paused.rows_sent + paused.rows_skipped, t.num_samples());
+  EXPECT_NE(paused.message.find("paused 0.01"), std::string::npos) << paused.message;
+  const nlohmann::json j = rcm::to_json(paused, {"outer_yaw"});
+  EXPECT_EQ(j["stalls"], 1);
 }
 
 TEST(TrajectoryPlayer, RejectsBadMeasuredJsAndRecordsOnly) {

@@ -35,23 +35,6 @@ using namespace rcm::dds_node;
 
 rcm::InputLocation flag(const std::string& name) { return rcm::InputLocation::plain("command line", name); }
 
-std::vector<double> parse_list(const std::string& text, const std::string& name) {
-  std::vector<double> v;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    std::size_t end = text.find(',', start);
-    if (end == std::string::npos) end = text.size();
-    const std::string cell = text.substr(start, end - start);
-    char* stop = nullptr;
-    const double x = std::strtod(cell.c_str(), &stop);
-    if (cell.empty() || !stop || *stop != '\0' || !std::isfinite(x))
-      throw rcm::InputError(flag(name), "expected numbers separated by commas, got '" + text + "'");
-    v.push_back(x);
-    start = end + 1;
-  }
-  return v;
-}
-
 int run(int argc, char** argv) {
   CLI::App app{"rcm_play_dds: play a joint trajectory on a CRTK arm over ROS 2 (DDS) and record its measured_js"};
   std::string trajectory_file, out, arm = "PSM1", q0_text, max_error_text, tolerance_text, json_file;
@@ -67,8 +50,8 @@ int run(int argc, char** argv) {
   app.add_option("--hold-rate", hold_rate_hz, "servo_jp rows per second of --hold (Hz)")->capture_default_str();
   app.add_option("--record", record_s, "instead of a file: record this long (s of the arm's time) without commanding");
   app.add_option("--max-tracking-error", max_error_text,
-                 "stop beyond this |measured - setpoint| per joint, comma separated (rad or m; joints beyond the list: "
-                 "its last value; default 0.05,0.05,0.005,0.2)");
+                 "stop beyond this |measured - setpoint| per joint, comma separated (rad or m; the last for the rest; "
+                 "default 0.05,0.05,0.005,0.2)");
   app.add_option("--goal-tolerance", tolerance_text,
                  "the first row is reached within this per joint (rad or m; default 0.01,0.01,0.001,0.01)");
   app.add_option("--measured-timeout-s", o.measured_timeout_s, "stop when no measured_js came for this long (s, wall)")
@@ -78,6 +61,9 @@ int run(int argc, char** argv) {
   app.add_option("--move-timeout-s", o.move_timeout_s, "give up when the first row is not reached within this (s of the arm's time)")
       ->capture_default_str();
   app.add_option("--settle-s", o.settle_s, "record this long after the last row (s of the arm's time)")->capture_default_str();
+  app.add_option("--stall-s", o.stall_s,
+                 "pause the file on measured_js this late (s, arm's time; 0: never)")
+      ->capture_default_str();
   app.add_flag("--power", power, "enable and home the arm first (state_command enable, home)");
   app.add_option("--json", json_file, "write the summary as JSON to this file");
   app.add_option("--domain", domain, "DDS domain (default: ROS_DOMAIN_ID, else 0)");
@@ -91,8 +77,8 @@ int run(int argc, char** argv) {
     throw rcm::InputError(flag("TRAJECTORY"), "give exactly one of a trajectory file, --hold S or --record S");
   if (hold_s < 0) throw rcm::InputError(flag("--hold"), "must be > 0");
   if (record_s < 0) throw rcm::InputError(flag("--record"), "must be > 0");
-  if (!max_error_text.empty()) o.max_tracking_error = parse_list(max_error_text, "--max-tracking-error");
-  if (!tolerance_text.empty()) o.goal_tolerance = parse_list(tolerance_text, "--goal-tolerance");
+  if (!max_error_text.empty()) o.max_tracking_error = rcm::parse_number_list(max_error_text, flag("--max-tracking-error"));
+  if (!tolerance_text.empty()) o.goal_tolerance = rcm::parse_number_list(tolerance_text, flag("--goal-tolerance"));
   o.check([](const std::string& name) {
     std::string f = "--" + name;
     for (char& c : f)
@@ -107,7 +93,7 @@ int run(int argc, char** argv) {
     player.emplace(rcm::load_joint_trajectory(trajectory_file), o);
   } else if (hold_s > 0) {
     if (q0_text.empty()) throw rcm::InputError(flag("--q0"), "required with --hold: the pose to hold");
-    const std::vector<double> q = parse_list(q0_text, "--q0");
+    const std::vector<double> q = rcm::parse_number_list(q0_text, flag("--q0"));
     player.emplace(rcm::make_hold_trajectory(Eigen::Map<const Eigen::VectorXd>(q.data(), static_cast<Eigen::Index>(q.size())),
                                              hold_s, hold_rate_hz),
                    o);

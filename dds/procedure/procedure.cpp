@@ -10,6 +10,7 @@
 #include <iostream>
 #include <thread>
 
+#include "rcm/common/command_line.hpp"
 #include "rcm/io/joint_trajectory.hpp"
 #include "rcm/io/json_file.hpp"
 #include "rcm/io/recording.hpp"
@@ -57,17 +58,13 @@ void ProcedureOptions::check(const std::function<InputLocation(const std::string
       throw InputError(flag("--incision-motion"), "needs --simulator and --software-rcm (the loop across processes)");
   }
   load_robot_model(robot, "--robot").check_within_limits(q0, flag("--q0"));
-  if (!max_tracking_error_text.empty()) {
-    player.max_tracking_error.clear();
-    std::size_t start = 0;
-    while (start <= max_tracking_error_text.size()) {
-      std::size_t end = max_tracking_error_text.find(',', start);
-      if (end == std::string::npos) end = max_tracking_error_text.size();
-      player.max_tracking_error.push_back(std::atof(max_tracking_error_text.substr(start, end - start).c_str()));
-      start = end + 1;
-    }
-  }
-  player.check([&](const std::string& name) { return flag("--" + name); });
+  if (!max_tracking_error_text.empty())
+    player.max_tracking_error = parse_number_list(max_tracking_error_text, flag("--max-tracking-error"));
+  player.check([&](const std::string& name) {
+    std::string f = "--" + name;
+    std::replace(f.begin(), f.end(), '_', '-');
+    return flag(f);
+  });
   if (session.empty() != model_file.empty())
     throw InputError(flag(session.empty() ? "--session" : "--model-file"),
                      "--session and --model-file go together: a setup made before");

@@ -99,6 +99,9 @@ int run(int argc, char** argv) {
                  "players: stop beyond this |measured - setpoint| per joint, comma separated (rad or m)");
   app.add_option("--measured-timeout-s", o.player.measured_timeout_s, "players: stop when no measured_js came for this long (s, wall)")
       ->capture_default_str();
+  app.add_option("--stall-s", o.player.stall_s,
+                 "players: pause the file on measured_js this late (s, arm's time; 0: never)")
+      ->capture_default_str();
   app.add_option("--session", o.session,
                  "with --model-file: a setup made before; go straight to the live phase (rcm-session/1)");
   app.add_option("--model-file", o.model_file, "with --session: its free-space model (free_space_model.json)");

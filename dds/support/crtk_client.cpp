@@ -72,7 +72,7 @@ void CrtkClient::wait_and_dispatch(int timeout_ms, const Handlers& h) {
     buffer_.assign(m);
     h.on_setpoint(buffer_.view(), get_stamp_ns(m.header));
   });
-  take_all(measured_, [&](const void* s) {
+  take_all(measured_, [&](const void* s, std::int64_t source_ns) {
     const auto& m = *static_cast<const sensor_msgs_msg_dds__JointState_*>(s);
     const std::int64_t stamp = get_stamp_ns(m.header);
     if (last_measured_stamp_ > 0 && stamp > last_measured_stamp_) {
@@ -82,7 +82,7 @@ void CrtkClient::wait_and_dispatch(int timeout_ms, const Handlers& h) {
     last_measured_stamp_ = stamp;
     if (!h.on_measured) return;
     buffer_.assign(m);
-    h.on_measured(buffer_.view(), get_stamp_ns(m.header));
+    h.on_measured(buffer_.view(), get_stamp_ns(m.header), get_wall_ns() - source_ns);
   });
 }
 
@@ -105,7 +105,7 @@ bool wait_for_arm(CrtkClient& arm, bool power, double timeout_s, const std::func
   std::string last_command;
   bool heard_measured = false;
   CrtkClient::Handlers h;
-  h.on_measured = [&](const JointStateView&, std::int64_t) { heard_measured = true; };
+  h.on_measured = [&](const JointStateView&, std::int64_t, std::int64_t) { heard_measured = true; };
   while (!interrupted()) {
     arm.wait_and_dispatch(20, h);
     const ArmState& s = arm.get_state();
@@ -146,9 +146,9 @@ void run_player(CrtkClient& arm, TrajectoryPlayer& player, const std::function<b
   CrtkClient::Handlers h;
   h.on_state = [&](const ArmState& s) { send(player.compute_operating_state(s.state, s.homed, s.busy, get_steady_ns())); };
   h.on_setpoint = [&](const JointStateView& m, std::int64_t stamp) { player.add_setpoint(m, stamp); };
-  h.on_measured = [&](const JointStateView& m, std::int64_t stamp) {
+  h.on_measured = [&](const JointStateView& m, std::int64_t stamp, std::int64_t age_ns) {
     last_stamp = stamp;
-    send(player.compute_measured(m, stamp, get_steady_ns()));
+    send(player.compute_measured(m, stamp, get_steady_ns(), age_ns));
   };
   arm.discard_pending();
   // The state the arm last reported counts before the first message of this player.

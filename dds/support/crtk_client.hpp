@@ -35,7 +35,9 @@ class CrtkClient {
 
   struct Handlers {
     std::function<void(const ArmState&)> on_state;
-    std::function<void(const JointStateView&, std::int64_t stamp_ns)> on_measured, on_setpoint;
+    std::function<void(const JointStateView&, std::int64_t stamp_ns)> on_setpoint;
+    // age_ns: how long ago the arm wrote it (this machine's wall clock less the writer's timestamp).
+    std::function<void(const JointStateView&, std::int64_t stamp_ns, std::int64_t age_ns)> on_measured;
   };
   // Waits up to `timeout_ms` for a message, then hands every waiting one to the
   // handlers: operating_state first, then setpoint_js, then measured_js.

@@ -75,6 +75,10 @@ bool is_matched_reader(dds_entity_t reader) {
 }
 
 void take_all(dds_entity_t reader, const std::function<void(const void*)>& on_sample) {
+  take_all(reader, [&](const void* sample, std::int64_t) { on_sample(sample); });
+}
+
+void take_all(dds_entity_t reader, const std::function<void(const void*, std::int64_t)>& on_sample) {
   constexpr std::size_t kBatch = 64;
   void* samples[kBatch];
   dds_sample_info_t infos[kBatch];
@@ -83,7 +87,7 @@ void take_all(dds_entity_t reader, const std::function<void(const void*)>& on_sa
     const dds_return_t n = dds_take(reader, samples, infos, kBatch, kBatch);
     if (n < 0) dds_fail("take", n);
     for (dds_return_t i = 0; i < n; ++i)
-      if (infos[i].valid_data) on_sample(samples[i]);
+      if (infos[i].valid_data) on_sample(samples[i], infos[i].source_timestamp);
     if (n > 0) dds_return_loan(reader, samples, n);
     if (n < static_cast<dds_return_t>(kBatch)) return;
   }

@@ -32,8 +32,10 @@ dds_entity_t make_writer(dds_entity_t participant, const dds_topic_descriptor_t*
 bool is_matched_writer(dds_entity_t writer);
 bool is_matched_reader(dds_entity_t reader);
 
-// Takes every sample waiting on `reader`, calling `on_sample` with each valid one.
+// Takes every sample waiting on `reader`, calling `on_sample` with each valid
+// one (and, in the second form, the writer's timestamp of it: ns, the writer's wall clock).
 void take_all(dds_entity_t reader, const std::function<void(const void*)>& on_sample);
+void take_all(dds_entity_t reader, const std::function<void(const void*, std::int64_t source_ns)>& on_sample);
 
 std::int64_t get_stamp_ns(const std_msgs_msg_dds__Header_& header);
 void set_stamp(std_msgs_msg_dds__Header_& header, std::int64_t ns);

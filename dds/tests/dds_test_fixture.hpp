@@ -1,6 +1,6 @@
 #pragma once
 // Shared by the DDS tests: the fixture's simulated session (CTest fixture
-// dds_test_session) and running the rcm CLI for the reference answers.
+// live_test_session) and running the rcm CLI for the reference answers.
 
 #include <sys/wait.h>
 

@@ -218,7 +218,7 @@ TEST(DdsFastDdsInterop, CycloneConfigurationIsLoopbackOnly) {
 
 TEST(DdsFastDdsInterop, FastDdsPublisherAndSubscribersAgreeWithRcmMonitor) {
   ASSERT_NE(std::getenv("CYCLONEDDS_URI"), nullptr) << "ctest sets CYCLONEDDS_URI to dds/cyclonedds-lo.xml";
-  ASSERT_TRUE(fs::exists(kSession) && fs::exists(kModel)) << "run through ctest (fixture dds_test_session)";
+  ASSERT_TRUE(fs::exists(kSession) && fs::exists(kModel)) << "run through ctest (fixture live_test_session)";
   const rcm::Recording rec = rcm::load_recording(kTrial);
   const auto monitor = run_cli("monitor --session " + kSession.string() + " --model-file " + kModel.string() +
                                " --json " + kTrial.string());

@@ -105,7 +105,7 @@ TEST(DdsMonitorNode, ConfigurationNamesLoopbackOnly) {
 
 // A ROS 2 parameters file sets the defaults, flags override it, bad values are located errors.
 TEST(DdsMonitorNode, ParametersFileAndFlags) {
-  ASSERT_TRUE(fs::exists(kSession) && fs::exists(kModel)) << "run through ctest (fixture dds_test_session)";
+  ASSERT_TRUE(fs::exists(kSession) && fs::exists(kModel)) << "run through ctest (fixture live_test_session)";
   const fs::path dir = fs::temp_directory_path() / ("rcm_test_dds_params_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const fs::path params = dir / "params.yaml";
@@ -144,7 +144,7 @@ TEST(DdsMonitorNode, ParametersFileAndFlags) {
 }
 
 TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
-  ASSERT_TRUE(fs::exists(kSession) && fs::exists(kModel)) << "run through ctest (fixture dds_test_session)";
+  ASSERT_TRUE(fs::exists(kSession) && fs::exists(kModel)) << "run through ctest (fixture live_test_session)";
   const rcm::Recording rec = rcm::load_recording(kTrial);
   const auto monitor = run_cli("monitor --session " + kSession.string() + " --model-file " + kModel.string() +
                                " --json " + kTrial.string());

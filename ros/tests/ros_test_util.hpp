@@ -22,7 +22,7 @@
 
 namespace rcm::test {
 
-// Made by make_test_session.cmake (CTest fixture ros_test_session).
+// Made by make_test_session.cmake (CTest fixture live_test_session).
 inline std::filesystem::path get_fixture_dir() { return RCM_ROS_TEST_DIR; }
 inline std::filesystem::path get_session_manifest() { return get_fixture_dir() / "session" / "session.json"; }
 inline std::filesystem::path get_model_file() { return get_fixture_dir() / "model.json"; }
@@ -31,7 +31,7 @@ inline std::filesystem::path get_trial_csv() { return get_fixture_dir() / "sessi
 inline bool fixture_present() {
   return std::filesystem::exists(get_session_manifest()) && std::filesystem::exists(get_model_file());
 }
-inline const char* kFixtureHint = "the fixture is missing: run the tests through ctest (fixture ros_test_session)";
+inline const char* kFixtureHint = "the fixture is missing: run the tests through ctest (fixture live_test_session)";
 
 // Stamps an absolute epoch-like time base + t, in whole nanoseconds.
 constexpr std::int64_t kStampBaseNs = 1700000000LL * 1000000000LL;

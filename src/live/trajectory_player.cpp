@@ -25,6 +25,7 @@ void PlayerOptions::check(const std::function<InputLocation(const std::string&)>
   if (!(start_timeout_s > 0)) throw InputError(where("start_timeout_s"), "must be > 0");
   if (!(move_timeout_s > 0)) throw InputError(where("move_timeout_s"), "must be > 0");
   if (!(settle_s >= 0)) throw InputError(where("settle_s"), "must be >= 0");
+  if (!(stall_s >= 0) || !std::isfinite(stall_s)) throw InputError(where("stall_s"), "must be a finite number >= 0");
 }
 
 const char* to_string(PlayerPhase phase) {
@@ -82,10 +83,33 @@ void TrajectoryPlayer::finish() {
   summary_.message =
       record_only_ ? fmt::format("recorded {} samples over {:.3f} s of the arm's time", summary_.samples_recorded,
                                  summary_.recorded_span_s)
-                   : fmt::format("played {} rows over {:.3f} s of the arm's time (the file: {:.3f} s), recorded {} "
+                   : fmt::format("played {} rows over {:.3f} s of the arm's time (the file: {:.3f} s{}), recorded {} "
                                  "samples",
                                  summary_.rows_sent, summary_.sent_span_s, summary_.file_duration_s,
+                                 summary_.stalls > 0 ? fmt::format("; paused {:.3f} s over {} stall{} of the stream",
+                                                                   summary_.paused_s, summary_.stalls,
+                                                                   summary_.stalls > 1 ? "s" : "")
+                                                     : std::string(),
                                  summary_.samples_recorded);
+}
+
+double TrajectoryPlayer::get_lateness_s(std::int64_t age_ns, std::int64_t stamp_ns, std::int64_t previous_stamp_ns,
+                                        std::int64_t wall_ns) {
+  if (first_measured_stamp_ns_ < 0) {
+    first_measured_stamp_ns_ = stamp_ns;
+    first_measured_wall_ns_ = wall_ns;
+  }
+  if (age_ns < 0) return 0.0;
+  // The floor may rise by 1 ms per second of the arm: far faster than two
+  // machines' clocks drift apart, far slower than a stall builds up.
+  const std::int64_t rise = previous_stamp_ns > 0 ? (stamp_ns - previous_stamp_ns) / 1000 : 0;
+  age_floor_ns_ = age_floor_ns_ < 0 ? age_ns : std::min(age_ns, age_floor_ns_ + rise);
+  // The arm's clock against the wall (a simulator may run faster), once the
+  // two have run long enough to tell.
+  const double wall_span = static_cast<double>(wall_ns - first_measured_wall_ns_) * kNs;
+  const double scale =
+      wall_span > 0.2 ? static_cast<double>(stamp_ns - first_measured_stamp_ns_) * kNs / wall_span : 1.0;
+  return static_cast<double>(age_ns - age_floor_ns_) * kNs * scale;
 }
 
 bool TrajectoryPlayer::check_measured(const JointStateView& m, std::int64_t stamp_ns) {
@@ -165,10 +189,12 @@ const PlayerCommand& TrajectoryPlayer::compute_tick(std::int64_t wall_ns) {
 }
 
 const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m, std::int64_t stamp_ns,
-                                                        std::int64_t wall_ns) {
+                                                        std::int64_t wall_ns, std::int64_t age_ns) {
   if (first_wall_ns_ < 0) first_wall_ns_ = wall_ns;
   none();
   if (finished() || !check_measured(m, stamp_ns)) return command_;
+  const std::int64_t previous_stamp_ns = last_stamp_ns_;
+  const double late_s = get_lateness_s(age_ns, stamp_ns, previous_stamp_ns, wall_ns);
   last_measured_wall_ns_ = wall_ns;
   last_stamp_ns_ = stamp_ns;
   const std::size_t n = m.position.size();
@@ -229,8 +255,18 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
     start_stamp_ns_ = stamp_ns;
   }
 
-  // Streaming (or recording only).
-  const double elapsed = static_cast<double>(stamp_ns - start_stamp_ns_) * kNs;
+  // Streaming (or recording only). A late message while rows remain pauses
+  // the file by the arm time it covers: no row is due on it.
+  const bool late = !record_only_ && options_.stall_s > 0 && summary_.rows_sent > 0 &&
+                    next_row_ < trajectory_.num_samples() &&
+                    late_s > std::max(options_.stall_s, static_cast<double>(stamp_ns - previous_stamp_ns) * kNs);
+  if (late) {
+    paused_ns_ += stamp_ns - previous_stamp_ns;
+    summary_.paused_s = static_cast<double>(paused_ns_) * kNs;
+    if (!in_stall_) ++summary_.stalls;
+  }
+  in_stall_ = late;
+  const double elapsed = static_cast<double>(stamp_ns - start_stamp_ns_ - paused_ns_) * kNs;
   const double end_s = record_only_ ? record_s_ : summary_.file_duration_s + options_.settle_s;
   if (elapsed > end_s + 1e-9) {
     finish();
@@ -263,7 +299,7 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
       }
   }
 
-  if (!record_only_ && next_row_ < trajectory_.num_samples()) {
+  if (!record_only_ && !late && next_row_ < trajectory_.num_samples()) {
     // The last row due by the arm's clock; rows due together are skipped but one.
     std::size_t due = next_row_;
     const double t0 = trajectory_.time[0];
@@ -318,6 +354,8 @@ nlohmann::json to_json(const PlayerSummary& s, const std::vector<std::string>& n
           {"rows_skipped", s.rows_skipped},
           {"samples_recorded", s.samples_recorded},
           {"rejected", s.rejected},
+          {"stalls", s.stalls},
+          {"paused_s", s.paused_s},
           {"file_duration_s", s.file_duration_s},
           {"sent_span_s", s.sent_span_s},
           {"recorded_span_s", s.recorded_span_s},
@@ -330,11 +368,14 @@ nlohmann::json to_json(const PlayerSummary& s, const std::vector<std::string>& n
 std::string format_player_summary(const PlayerSummary& s, const std::vector<std::string>& names) {
   std::string t = s.message + "\n";
   if (s.rows > 0)
-    t += fmt::format("  rows sent {} of {} ({} skipped), over {:.4f} s of the arm's time against the file's {:.4f} s{}\n",
+    t += fmt::format("  rows sent {} of {} ({} skipped), over {:.4f} s of the arm's time against the file's {:.4f} s{}{}\n",
                      s.rows_sent, s.rows, s.rows_skipped, s.sent_span_s, s.file_duration_s,
                      s.rows_sent > 1 && s.file_duration_s > 0
                          ? fmt::format(" ({:+.3f} %)", 100.0 * (s.sent_span_s - s.file_duration_s) / s.file_duration_s)
-                         : std::string());
+                         : std::string(),
+                     s.stalls > 0 ? fmt::format(", paused {:.4f} s over {} stall{}", s.paused_s, s.stalls,
+                                                              s.stalls > 1 ? "s" : "")
+                                  : std::string());
   t += fmt::format("  measured_js recorded {} over {:.4f} s, {} rejected\n", s.samples_recorded, s.recorded_span_s,
                    s.rejected);
   if (!s.max_tracking_error.empty()) {

@@ -15,6 +15,12 @@
 //      row per measured_js at most. Every measured_js from the first row on is
 //      recorded (time: its header stamp) until the arm's clock passes the last
 //      row by settle_s.
+//   4. Stalls: a measured_js that comes late (its age beyond the freshest
+//      ones' by more than stall_s of the arm's time, or by a period of the arm
+//      when that is longer) was written while this program could not answer:
+//      the arm held the last row all along. The player answers none of the late
+//      ones and pauses the file by their time, so the arm resumes from the row
+//      it holds instead of jumping to where the file is now. Recorded as usual.
 //
 // A record-only player (no trajectory) skips 2 and 3 and records for a given
 // duration of the arm's time, whatever moves the arm (a surgeon at the
@@ -53,6 +59,7 @@ struct PlayerOptions {
   double start_timeout_s = 10.0;    // wall time to hear the arm's state and measured_js
   double move_timeout_s = 60.0;     // arm time to reach the first row
   double settle_s = 0.0;            // arm time recorded after the last row
+  double stall_s = 0.005;           // arm time a measured_js may come late before the file pauses (0: never)
   // Throws InputError at `where(name)` for a value out of range.
   void check(const std::function<InputLocation(const std::string&)>& where) const;
 };
@@ -72,6 +79,8 @@ struct PlayerSummary {
   std::size_t rows_skipped = 0;    // rows due together with a later one (the file faster than measured_js)
   std::size_t samples_recorded = 0;
   std::size_t rejected = 0;        // measured_js not recorded: malformed, or a stamp not after the last
+  std::size_t stalls = 0;          // runs of late measured_js the file paused over
+  double paused_s = 0.0;           // arm time the file paused, in all (part of sent_span_s)
   double file_duration_s = 0.0;    // last row's time - first row's
   double sent_span_s = 0.0;        // arm time from the first row sent to the last
   double recorded_span_s = 0.0;    // first to last recorded stamp
@@ -88,8 +97,13 @@ class TrajectoryPlayer {
 
   // Each message as it comes: header stamp (ns, the arm's clock) and the wall
   // time it came (ns, a steady clock). The returned command is valid until the next call.
+  // `age_ns`: how long ago the arm wrote the message, on the wall (the time
+  // it came less the writer's own timestamp; a constant offset between the two
+  // machines' clocks does no harm); negative when the middleware does not say,
+  // and then no stall is seen.
   const PlayerCommand& compute_operating_state(const std::string& state, bool homed, bool busy, std::int64_t wall_ns);
-  const PlayerCommand& compute_measured(const JointStateView& message, std::int64_t stamp_ns, std::int64_t wall_ns);
+  const PlayerCommand& compute_measured(const JointStateView& message, std::int64_t stamp_ns, std::int64_t wall_ns,
+                                        std::int64_t age_ns = -1);
   void add_setpoint(const JointStateView& message, std::int64_t stamp_ns);
   // Timeouts, between messages.
   const PlayerCommand& compute_tick(std::int64_t wall_ns);
@@ -126,6 +140,14 @@ class TrajectoryPlayer {
   bool homed_ = false, busy_ = false;
   std::int64_t first_wall_ns_ = -1, last_measured_wall_ns_ = -1, last_stamp_ns_ = 0;
   std::int64_t start_stamp_ns_ = 0, move_stamp_ns_ = 0, first_sent_stamp_ns_ = 0, last_sent_stamp_ns_ = 0;
+  // Stalls: the freshest age seen (let rise slowly, so that two clocks'
+  // drift is not taken for lateness), the arm's clock against the wall, and
+  // the arm time the file paused.
+  std::int64_t age_floor_ns_ = -1, first_measured_stamp_ns_ = -1, first_measured_wall_ns_ = -1;
+  std::int64_t paused_ns_ = 0;
+  bool in_stall_ = false;
+  double get_lateness_s(std::int64_t age_ns, std::int64_t stamp_ns, std::int64_t previous_stamp_ns,
+                        std::int64_t wall_ns);
   std::size_t next_row_ = 0;
   std::vector<double> held_, goal_, last_sent_, measured_;
   // The arm's recent setpoint_js, by stamp: each measured_js is held against
@@ -143,9 +165,9 @@ class TrajectoryPlayer {
 };
 
 // The summary as JSON: rows, rows_sent, rows_skipped, samples_recorded,
-// rejected, file_duration_s, sent_span_s, recorded_span_s, pacing_error (the
-// sent span's relative difference from the file's duration; null when nothing
-// was streamed), max_tracking_error and rms_tracking_error ({joint: value}),
+// rejected, stalls, paused_s, file_duration_s, sent_span_s, recorded_span_s,
+// pacing_error (the sent span's relative difference from the file's duration,
+// pauses included; null when nothing was streamed), max_tracking_error and rms_tracking_error ({joint: value}),
 // message.
 nlohmann::json to_json(const PlayerSummary& summary, const std::vector<std::string>& joint_names);
 // The same in lines for a terminal.
