@@ -9,6 +9,7 @@
 #include <set>
 #include <string>
 
+#include "rcm/common/command_line.hpp"
 #include "rcm/common/error.hpp"
 #include "rcm/common/options.hpp"
 #include "rcm/dynamics/linear_model.hpp"
@@ -120,6 +121,24 @@ TEST(OptionsTable, StudyJsonToStructToJson) {
   rcm::apply_options_json(cleared, json{{"model_kind", nullptr}, {"three_step", {{"D_initial", nullptr}}}}, "x");
   EXPECT_FALSE(cleared.model_kind.has_value());
   EXPECT_FALSE(cleared.three_step.D_initial.has_value());
+}
+
+// A flag's comma-separated numbers: every cell a whole finite number, or an
+// error that names the flag and shows what was given.
+TEST(CommandLine, NumberListsAreWholeNumbersOrALocatedError) {
+  const rcm::InputLocation flag = rcm::InputLocation::plain("command line", "--max-tracking-error");
+  EXPECT_EQ(rcm::parse_number_list("0.05,0.05,5e-3", flag), (std::vector<double>{0.05, 0.05, 0.005}));
+  EXPECT_EQ(rcm::parse_number_list("-1", flag), (std::vector<double>{-1.0}));
+  for (const char* bad : {"", "abc", "0.05,", ",0.05", "0.05,,1", "0.05x", "nan", "1,inf"}) {
+    try {
+      rcm::parse_number_list(bad, flag);
+      ADD_FAILURE() << "accepted '" << bad << "'";
+    } catch (const rcm::InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("--max-tracking-error"), std::string::npos) << what;
+      EXPECT_NE(what.find("'" + std::string(bad) + "'"), std::string::npos) << what;
+    }
+  }
 }
 
 TEST(OptionsTable, UnknownKeyIsLocated) {
