@@ -40,7 +40,7 @@ SAMPLE_PERIOD_US = 1e6 / 1500.0  # the dVRK's fastest joint-state rate
 # (node, how the test publishes, ctest name, where the node publishes when it prints no line of its own)
 NODES = [
     ("`rcm_monitor_node` (ROS 1)", "publisher at full speed", "MonitorNode.EndToEndAgreesWithRcmMonitor",
-     "in the callback (roscpp queues each message for its own thread)"),
+     "Queued in the callback. roscpp's thread writes."),
     ("`rcm_monitor_dds` (DDS)", "publisher paced at 1.5 kHz", "DdsMonitorNode.EndToEndAgreesWithRcmMonitor", ""),
 ]
 
@@ -101,10 +101,11 @@ def row(node, publisher, publishes, runs):
     callback = f"{span(runs, 'callback_mean', '{:.1f}')} us mean, {span(runs, 'callback_max', '{:.0f}')} us max"
     share = span([{"s": 100.0 * r["callback_mean"] / SAMPLE_PERIOD_US} for r in runs], "s", "{:.1f}") + " %"
     if any("publish_mean" in r for r in runs):
-        publishing = (f"own thread: {span(runs, 'publish_mean', '{:.0f}')} us mean, "
-                      f"{span(runs, 'publish_max', '{:.0f}')} us max per estimate (4 writes); queue depth at most "
-                      f"{max(r['depth'] for r in runs)} of {runs[0]['capacity']}, "
-                      f"{sum(r['dropped'] for r in runs)} outputs dropped")
+        # Short sentences: the row's cells before this one are the first's words.
+        publishing = (f"Sent from its own thread. Per estimate (4 writes): {span(runs, 'publish_mean', '{:.0f}')} "
+                      f"us mean, {span(runs, 'publish_max', '{:.0f}')} us max. Queue depth at most "
+                      f"{max(r['depth'] for r in runs)} of {runs[0]['capacity']}; "
+                      f"{sum(r['dropped'] for r in runs)} outputs dropped.")
     else:
         publishing = publishes
     return f"| {node}, {publisher} | {samples} | {step} | {callback} | {share} | {publishing} |"
