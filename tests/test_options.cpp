@@ -126,6 +126,7 @@ TEST(OptionsTable, StudyJsonToStructToJson) {
 // A flag's comma-separated numbers: every cell a whole finite number, or an
 // error that names the flag and shows what was given.
 TEST(CommandLine, NumberListsAreWholeNumbersOrALocatedError) {
+  EXPECT_EQ(rcm::get_flag_name("max_tracking_error"), "--max-tracking-error");
   const rcm::InputLocation flag = rcm::InputLocation::plain("command line", "--max-tracking-error");
   EXPECT_EQ(rcm::parse_number_list("0.05,0.05,5e-3", flag), (std::vector<double>{0.05, 0.05, 0.005}));
   EXPECT_EQ(rcm::parse_number_list("-1", flag), (std::vector<double>{-1.0}));

@@ -79,12 +79,7 @@ int run(int argc, char** argv) {
   if (record_s < 0) throw rcm::InputError(flag("--record"), "must be > 0");
   if (!max_error_text.empty()) o.max_tracking_error = rcm::parse_number_list(max_error_text, flag("--max-tracking-error"));
   if (!tolerance_text.empty()) o.goal_tolerance = rcm::parse_number_list(tolerance_text, flag("--goal-tolerance"));
-  o.check([](const std::string& name) {
-    std::string f = "--" + name;
-    for (char& c : f)
-      if (c == '_') c = '-';
-    return flag(f);
-  });
+  o.check([](const std::string& name) { return flag(rcm::get_flag_name(name)); });
   if (!(hold_rate_hz > 0)) throw rcm::InputError(flag("--hold-rate"), "must be > 0");
   const int d = get_domain(domain, "command line");
 

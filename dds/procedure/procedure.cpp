@@ -60,11 +60,7 @@ void ProcedureOptions::check(const std::function<InputLocation(const std::string
   load_robot_model(robot, "--robot").check_within_limits(q0, flag("--q0"));
   if (!max_tracking_error_text.empty())
     player.max_tracking_error = parse_number_list(max_tracking_error_text, flag("--max-tracking-error"));
-  player.check([&](const std::string& name) {
-    std::string f = "--" + name;
-    std::replace(f.begin(), f.end(), '_', '-');
-    return flag(f);
-  });
+  player.check([&](const std::string& name) { return flag(get_flag_name(name)); });
   if (session.empty() != model_file.empty())
     throw InputError(flag(session.empty() ? "--session" : "--model-file"),
                      "--session and --model-file go together: a setup made before");

@@ -19,6 +19,14 @@ inline int exit_on_parse_error(const CLI::App& app, const CLI::ParseError& e) {
   return code == 0 ? 0 : 2;
 }
 
+// The flag of an options field: "stall_s" -> "--stall-s".
+inline std::string get_flag_name(const std::string& field) {
+  std::string f = "--" + field;
+  for (char& c : f)
+    if (c == '_') c = '-';
+  return f;
+}
+
 // A flag's comma-separated numbers ("0.05,0.05,0.005"): InputError at
 // `where` for an empty cell, a cell that is not a whole number, or NaN/inf.
 inline std::vector<double> parse_number_list(const std::string& text, const InputLocation& where) {
