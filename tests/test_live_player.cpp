@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <random>
+
 #include <cmath>
 #include <limits>
 
@@ -291,6 +293,27 @@ TEST(TrajectoryPlayer, PausesTheFileOverAStallRatherThanJumpTheSetpoint) {
   EXPECT_NE(paused.message.find("paused 0.01"), std::string::npos) << paused.message;
   const nlohmann::json j = rcm::to_json(paused, {"outer_yaw"});
   EXPECT_EQ(j["stalls"], 1);
+}
+
+// Short stalls all along the file, as a busy computer makes them (2 to 12
+// periods every 97): once the pauses have added up, every row still goes out
+// on its own message, none skipped, the setpoint never held a period.
+TEST(TrajectoryPlayer, ManyShortStallsSkipNoRow) {
+  const rcm::JointTrajectory t = make_trajectory(1500.0, 10.0);
+  Bench b(1500.0);
+  b.make_ready();
+  TrajectoryPlayer player(t, {});
+  std::mt19937 rng(1);
+  std::uniform_int_distribution<int> periods(2, 12);
+  for (long k = 0; k < 60 * 1500 && !player.finished(); ++k) {
+    if (b.stall_periods == 0 && k % 97 == 0) b.stall_periods = periods(rng);
+    b.step(player);
+  }
+  ASSERT_EQ(player.phase(), PlayerPhase::done) << player.summary().message;
+  const rcm::PlayerSummary& s = player.summary();
+  EXPECT_GT(s.stalls, 20u) << "stalls longer than stall_s (7.5 periods) pause the file";
+  EXPECT_EQ(s.rows_skipped, 0u) << s.message;
+  EXPECT_EQ(s.rows_sent, t.num_samples());
 }
 
 TEST(TrajectoryPlayer, RejectsBadMeasuredJsAndRecordsOnly) {

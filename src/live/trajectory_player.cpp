@@ -301,11 +301,18 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
 
   if (!record_only_ && !late && next_row_ < trajectory_.num_samples()) {
     // The last row due by the arm's clock; rows due together are skipped but one.
+    // A row is due within half a period of the arm: the stamps (whole
+    // nanoseconds) and the file's times (decimal seconds) round a period apart,
+    // and a pause adds the stamps' rounding to the file's clock, so that an
+    // exact comparison finds a row a nanosecond early on one message and two
+    // rows due on the next, a skipped row each time.
+    const double slack =
+        previous_stamp_ns > 0 ? 0.5 * static_cast<double>(stamp_ns - previous_stamp_ns) * kNs : 1e-9;
     std::size_t due = next_row_;
     const double t0 = trajectory_.time[0];
-    if (trajectory_.time[static_cast<Eigen::Index>(due)] - t0 <= elapsed + 1e-9) {
+    if (trajectory_.time[static_cast<Eigen::Index>(due)] - t0 <= elapsed + slack) {
       while (due + 1 < trajectory_.num_samples() &&
-             trajectory_.time[static_cast<Eigen::Index>(due + 1)] - t0 <= elapsed + 1e-9)
+             trajectory_.time[static_cast<Eigen::Index>(due + 1)] - t0 <= elapsed + slack)
         ++due;
       summary_.rows_skipped += due - next_row_;
       const auto k = static_cast<Eigen::Index>(due);
