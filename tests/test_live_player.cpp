@@ -6,10 +6,9 @@
 
 #include <gtest/gtest.h>
 
-#include <random>
-
 #include <cmath>
 #include <limits>
+#include <random>
 
 #include "rcm/live/trajectory_player.hpp"
 #include "rcm/sim/simulated_psm.hpp"

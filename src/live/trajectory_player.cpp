@@ -303,9 +303,9 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
     // The last row due by the arm's clock; rows due together are skipped but one.
     // A row is due within half a period of the arm: the stamps (whole
     // nanoseconds) and the file's times (decimal seconds) round a period apart,
-    // and a pause adds the stamps' rounding to the file's clock, so that an
-    // exact comparison finds a row a nanosecond early on one message and two
-    // rows due on the next, a skipped row each time.
+    // and a pause adds the stamps' rounding to the file's clock: compared
+    // exactly, the clock falls a nanosecond short of a row on one message and
+    // finds two rows due on the next, a skipped row each time.
     const double slack =
         previous_stamp_ns > 0 ? 0.5 * static_cast<double>(stamp_ns - previous_stamp_ns) * kNs : 1e-9;
     std::size_t due = next_row_;
