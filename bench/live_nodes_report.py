@@ -39,7 +39,7 @@ SAMPLE_PERIOD_US = 1e6 / 1500.0  # the dVRK's fastest joint-state rate
 
 # (node, how the test publishes, ctest name, where the node publishes when it prints no line of its own)
 NODES = [
-    ("`rcm_monitor_node` (ROS 1)", "publisher at full speed", "MonitorNode.EndToEndAgreesWithRcmMonitor",
+    ("`rcm_monitor_node` (ROS 1)", "unpaced publisher", "MonitorNode.EndToEndAgreesWithRcmMonitor",
      "Queued in the callback. roscpp's thread writes."),
     ("`rcm_monitor_dds` (DDS)", "publisher paced at 1.5 kHz", "DdsMonitorNode.EndToEndAgreesWithRcmMonitor", ""),
 ]
