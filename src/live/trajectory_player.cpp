@@ -267,8 +267,15 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
   }
   in_stall_ = late;
   const double elapsed = static_cast<double>(stamp_ns - start_stamp_ns_ - paused_ns_) * kNs;
+  // A row (and the end) is due within half a period of the arm: the stamps
+  // (whole nanoseconds) and the file's times (decimal seconds) round a period
+  // apart, and each pause adds the stamps' rounding to the file's clock.
+  // Compared exactly, the clock falls a nanosecond short of a row on one
+  // message and finds two rows due on the next, a skipped row each time.
+  const double slack =
+      previous_stamp_ns > 0 ? 0.5 * static_cast<double>(stamp_ns - previous_stamp_ns) * kNs : 1e-9;
   const double end_s = record_only_ ? record_s_ : summary_.file_duration_s + options_.settle_s;
-  if (elapsed > end_s + 1e-9) {
+  if (elapsed > end_s + slack) {
     finish();
     return command_;
   }
@@ -301,13 +308,6 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
 
   if (!record_only_ && !late && next_row_ < trajectory_.num_samples()) {
     // The last row due by the arm's clock; rows due together are skipped but one.
-    // A row is due within half a period of the arm: the stamps (whole
-    // nanoseconds) and the file's times (decimal seconds) round a period apart,
-    // and a pause adds the stamps' rounding to the file's clock: compared
-    // exactly, the clock falls a nanosecond short of a row on one message and
-    // finds two rows due on the next, a skipped row each time.
-    const double slack =
-        previous_stamp_ns > 0 ? 0.5 * static_cast<double>(stamp_ns - previous_stamp_ns) * kNs : 1e-9;
     std::size_t due = next_row_;
     const double t0 = trajectory_.time[0];
     if (trajectory_.time[static_cast<Eigen::Index>(due)] - t0 <= elapsed + slack) {
@@ -331,7 +331,7 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
       next_row_ = due + 1;
     }
   }
-  if (elapsed >= end_s - 1e-9 && (record_only_ || next_row_ >= trajectory_.num_samples())) finish();
+  if (elapsed >= end_s - slack && (record_only_ || next_row_ >= trajectory_.num_samples())) finish();
   return command_;
 }
 
