@@ -129,13 +129,14 @@ def main():
     if all(r is None for _, _, _, r in results):
         sys.exit(f"{build}: neither node's end-to-end test is built; nothing written")
     when = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
-    names = " and ".join(f"`{n}`" for _, _, n, _ in NODES)
+    # Both tests are named <suite>.<test>, one name across the suites: one ctest pattern.
+    pattern = "|".join(sorted({n.split(".", 1)[1] for _, _, n, _ in NODES}))
     over = "one run" if args.runs == 1 else f"the range over {args.runs} runs"
     lines = [
         f"Measured by `bench/live_nodes_report.py --runs {args.runs}` on {when}, {os.cpu_count()} cores of "
         f"{cpu_model()}, load average {load_start:.1f} at the start and {os.getloadavg()[0]:.1f} at the end; "
-        f"the other core may be busy. Each node's end-to-end test ({names}, run by "
-        "`ctest -R`) streams the simulated trial through the node, with bad messages among the samples. The "
+        f"the other core may be busy. Each node's end-to-end test (`ctest -R {pattern}`) streams the simulated "
+        "trial through the node, with bad messages among the samples. The "
         "figures are what the node prints at exit (`rcm: per sample:` and `rcm: publishing (own thread):`), "
         f"{over}. Model: linear, 3 joints.", "",
         "| node, publisher | samples accepted | model + estimator | whole callback (with the correction and the "
