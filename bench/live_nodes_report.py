@@ -40,7 +40,7 @@ SAMPLE_PERIOD_US = 1e6 / 1500.0  # the dVRK's fastest joint-state rate
 # (node, how the test publishes, ctest name, where the node publishes when it prints no line of its own)
 NODES = [
     ("`rcm_monitor_node` (ROS 1)", "unpaced publisher", "MonitorNode.EndToEndAgreesWithRcmMonitor",
-     "Queued in the callback. roscpp's thread writes."),
+     "Queued in the callback. The roscpp thread writes."),
     ("`rcm_monitor_dds` (DDS)", "publisher paced at 1.5 kHz", "DdsMonitorNode.EndToEndAgreesWithRcmMonitor", ""),
 ]
 
@@ -134,8 +134,8 @@ def main():
     over = "one run" if args.runs == 1 else f"the range over {args.runs} runs"
     lines = [
         f"Measured by `bench/live_nodes_report.py --runs {args.runs}` on {when}, {os.cpu_count()} cores of "
-        f"{cpu_model()}, load average {load_start:.1f} at the start and {os.getloadavg()[0]:.1f} at the end; "
-        f"the other core may be busy. Each node's end-to-end test (`ctest -R {pattern}`) streams the simulated "
+        f"{cpu_model()}, load average {load_start:.1f} at the start and {os.getloadavg()[0]:.1f} at the end. "
+        f"The other core may be busy. Each node's end-to-end test (`ctest -R {pattern}`) streams the simulated "
         "trial through the node, with bad messages among the samples. The "
         "figures are what the node prints at exit (`rcm: per sample:` and `rcm: publishing (own thread):`), "
         f"{over}. Model: linear, 3 joints.", "",

@@ -212,11 +212,11 @@ def main():
     minutes = (time.monotonic() - started) / 60
     head = (f"Measured by `bench/live_procedure_report.py --seeds {','.join(map(str, seeds))} --full-seeds "
             f"{','.join(map(str, full_seeds)) or chr(39) * 2} --rate {args.rate:g} --time-scale {args.time_scale:g}` on {stamp}, "
-            f"{cpu_model()}, {os.cpu_count()} cores (load average {load:.1f} at the end), "
+            f"{cpu_model()}, {os.cpu_count()} cores. Load average {load:.1f} at the end, "
             f"{minutes:.0f} min in all. Each run: `rcm_sim_psm_dds --rate {args.rate:g} --time-scale {args.time_scale:g} --teleop --software-rcm` "
             f"and `rcm_procedure_dds --simulator --power "
             "--software-rcm --incision-motion large_step --measured-timeout-s 5` over loopback DDS, three processes "
-            "in the loop (simulator, monitor, procedure).")
+            "(simulator, monitor, procedure).")
     rows = ["| seed | across processes: onset to < 2 N for good (s) / RMS after settling (N) / wrong moves / peak (N) "
             "| in process (the bench) | the check's live estimate error (mm) |",
             "|---|---|---|---|"]
@@ -301,9 +301,9 @@ def main():
     bench_lines = []
     if steps:
         bench_lines = [f"Measured by `bench/live_procedure_report.py` on {stamp}, {cpu_model()}. "
-                       "`bench_sim --benchmark_filter=SimulatedPsm` times one publishing period: a servo_jp taken, "
-                       "the period's physics steps with the tissue engaged, the sample filled. `rcm_sim_psm_dds "
-                       "--rate 1500` then runs in real time while `rcm_play_dds` holds and records it (CPU time "
+                       "The benchmark `bench_sim --benchmark_filter=SimulatedPsm` times one publishing period: a servo_jp taken, "
+                       "the period's physics steps with the tissue engaged, the sample filled. Then `rcm_sim_psm_dds "
+                       "--rate 1500` runs in real time while `rcm_play_dds` holds and records it (CPU "
                        "over wall time, from /proc).", "",
                        "| rate | physics steps per period | time per period | share of the period |",
                        "|---|---|---|---|"]
