@@ -45,6 +45,8 @@ TrajectoryPlayer::TrajectoryPlayer(const JointTrajectory& trajectory, const Play
   if (trajectory_.num_samples() < 1) throw std::invalid_argument("TrajectoryPlayer: an empty trajectory");
   summary_.rows = trajectory_.num_samples();
   summary_.file_duration_s = trajectory_.time[trajectory_.time.size() - 1] - trajectory_.time[0];
+  if (trajectory_.num_samples() >= 2)
+    half_row_period_s_ = 0.5 * summary_.file_duration_s / static_cast<double>(trajectory_.num_samples() - 1);
 }
 
 TrajectoryPlayer::TrajectoryPlayer(double record_s, const PlayerOptions& options)
@@ -272,8 +274,12 @@ const PlayerCommand& TrajectoryPlayer::compute_measured(const JointStateView& m,
   // apart, and each pause adds the stamps' rounding to the file's clock.
   // Compared exactly, the clock falls a nanosecond short of a row on one
   // message and finds two rows due on the next, a skipped row each time.
+  // A message after a gap too short to pause on sends no row more than half
+  // the file's period early.
   const double slack =
-      previous_stamp_ns > 0 ? 0.5 * static_cast<double>(stamp_ns - previous_stamp_ns) * kNs : 1e-9;
+      previous_stamp_ns > 0
+          ? std::min(0.5 * static_cast<double>(stamp_ns - previous_stamp_ns) * kNs, half_row_period_s_)
+          : 1e-9;
   const double end_s = record_only_ ? record_s_ : summary_.file_duration_s + options_.settle_s;
   if (elapsed > end_s + slack) {
     finish();

@@ -38,6 +38,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -145,6 +146,8 @@ class TrajectoryPlayer {
   // the arm time the file paused.
   std::int64_t age_floor_ns_ = -1, first_measured_stamp_ns_ = -1, first_measured_wall_ns_ = -1;
   std::int64_t paused_ns_ = 0;
+  // Half the file's mean row period: the most a row may be sent ahead of its time.
+  double half_row_period_s_ = std::numeric_limits<double>::infinity();
   bool in_stall_ = false;
   double get_lateness_s(std::int64_t age_ns, std::int64_t stamp_ns, std::int64_t previous_stamp_ns,
                         std::int64_t wall_ns);
