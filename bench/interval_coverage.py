@@ -259,7 +259,8 @@ def tables(results, wall_s, where, finished=None):
             flagged = r["corrected"]["self_check_m"] > SELF_CHECK_M
             n[(0 if off(r) else 1) if flagged else (2 if off(r) else 3)] += 1
         return "/".join(str(x) for x in n)
-    mean_off = lambda r: max(per_seed(r["corrected"]["trials"], "joint_m")) > SELF_CHECK_M
+    mean_off = lambda r: max((e for e in per_seed(r["corrected"]["trials"], "joint_m") if not math.isnan(e)),
+                             default=0.0) > SELF_CHECK_M
     worst_off = lambda r: max(t["joint_m"] for t in r["corrected"]["trials"]) > SELF_CHECK_M
     cells = []
     for row in ROWS:
