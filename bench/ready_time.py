@@ -110,11 +110,12 @@ def main():
             json.dump(rows, f, indent=2)
 
     stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
-    lines = [f"Measured by `bench/ready_time.py` on {stamp}, {cpu_model()}, {os.cpu_count()} cores: "
-             f"`rcm excite --duration {args.free_space_s:g}`, `rcm simulate --free-space-trajectory` with "
+    lines = [f"Measured by `bench/ready_time.py` on {stamp}, {cpu_model()}, {os.cpu_count()} cores. "
+             f"Per seed: `rcm excite --duration {args.free_space_s:g}`, `rcm simulate --free-space-trajectory` with "
              f"`--calibration-s {args.calibration_s:g} --trial-s {args.trial_s:g}`, `rcm setup`, then "
-             "`rcm monitor --model-file` on every trial of the session (its final estimate against the truth, and "
-             "the time from the trial's first motion until the running estimate stays within 5 mm of its final value).",
+             "`rcm monitor --model-file` on every trial of the session, its final estimate against the truth. "
+             "Settling: from the trial's first motion until the running estimate stays within "
+             "5 mm of the final one.",
              "",
              "| seed | ready | robot time: free space + baseline + calibration (s) | `rcm setup` computation (s) | "
              "force error of the model (N) | calibration self-check (mm) | mean e, D > 20 mm (mm) | "
