@@ -377,6 +377,59 @@ TEST(MonitorNodeCore, PublishesEveryNthEstimateFlagsOnChangeAndCountsRejections)
   EXPECT_THROW(rcm::parse_joint_names("a,,b", where("joint_names")), rcm::InputError);
 }
 
+// Messages lost on the way are counted missing from the stamps and logged, not
+// rejected: a message rejected in a gap held its slot, and one that arrives
+// late fills its own back. A stream timed by its receive times is not judged.
+TEST(MonitorNodeCore, CountsAndLogsTheMessagesAStreamSkipped) {
+  rcm::MonitorNodeParameters p;
+  p.session = "s.json";
+  p.model_file = "m.json";
+  p.status_period_s = 0;
+  RecordingSink sink;
+  rcm::MonitorNode node(p, std::make_unique<rcm::OnlinePipeline>(*make_pipeline()),
+                        rcm::LiveMonitor::ZeroStamp::invalid, sink);
+  const std::vector<int> order = {0, 1, 2, 3};
+  auto send = [&](int k, bool nan = false) {
+    Message m = make_message(make_sample(k), order, kBase);
+    if (nan) m.position[0] = std::numeric_limits<double>::quiet_NaN();
+    node.compute_message(rcm::view_joint_state(m), m.stamp_ns, m.stamp_ns);
+  };
+  for (int k = 0; k < 400; ++k) {
+    if (k >= 100 && k < 105) continue;  // five lost
+    if (k == 300 || k == 302) continue;  // two lost, one at a time
+    if (k == 200) continue;              // sent after 201
+    send(k, k == 150);                   // a NaN: received and rejected
+    if (k == 201) send(200);
+    if (k == 250) send(250);             // a duplicate
+  }
+  const auto& c = node.get_monitor().get_counters();
+  EXPECT_EQ(c.missing, 7u);
+  EXPECT_EQ(c.gaps, 3u);
+  EXPECT_EQ(c.malformed, 1u);
+  EXPECT_EQ(c.out_of_order, 1u);
+  EXPECT_EQ(c.duplicate_stamp, 1u);
+  EXPECT_EQ(node.get_monitor().get_median_interval_ns(), 2000000);
+  int gap_lines = 0;
+  for (const auto& l : sink.lines)
+    if (l.find("missing before stamp") != std::string::npos) {
+      ++gap_lines;
+      if (gap_lines == 1) EXPECT_NE(l.find("5 message(s) missing before stamp 1700000000.210000 s: 12.0 ms"), std::string::npos) << l;
+    }
+  EXPECT_EQ(gap_lines, 4);  // 201's gap, taken back when 200 came late, was logged too
+  EXPECT_NE(node.get_summary().find("7 missing in 3 gap(s) of the stamps"), std::string::npos) << node.get_summary();
+
+  // Receive times jitter with the network, not with the publisher: not judged.
+  rcm::MonitorNode unstamped(p, std::make_unique<rcm::OnlinePipeline>(*make_pipeline()),
+                             rcm::LiveMonitor::ZeroStamp::receive_time_when_unstamped, sink);
+  for (int k = 0; k < 200; ++k) {
+    if (k == 100) continue;
+    const Message m = make_message(make_sample(k), order, kBase);
+    unstamped.compute_message(rcm::view_joint_state(m), 0, m.stamp_ns);
+  }
+  EXPECT_EQ(unstamped.get_monitor().get_counters().missing, 0u);
+  EXPECT_TRUE(unstamped.get_monitor().uses_receive_time());
+}
+
 // With a model whose torque trails, an estimate is for the sample that long
 // before: the node publishes nothing until the stream is that long, then each
 // estimate once, stamped with its own sample's stamp, not the newest message's.

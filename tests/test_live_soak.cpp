@@ -1,8 +1,9 @@
 // The stream soak, short: 10^5 messages of a simulated trial, looped, through the
 // live nodes' per-message path (MonitorNode) with every kind of fault injected
 // (tests/support/faulty_stream.hpp). Nothing thrown, every rejection counted by
-// reason as predicted, the estimate back within 1 mm of the clean run's within
-// 5 s of sample time after every fault, memory flat. `make soak` runs 10^7.
+// reason and every lost message counted missing as predicted, the estimate
+// back within 1 mm of the clean run's within 5 s of sample time after every
+// fault (10 s after a silence), memory flat. `make soak` runs 10^7.
 
 #include <gtest/gtest.h>
 
@@ -37,7 +38,7 @@ void check(const rcm::test::SoakReport& r) {
   for (int k = 0; k < rcm::test::kNumStreamFaults; ++k)
     EXPECT_GE(r.injected[static_cast<std::size_t>(k)], 1u)
         << rcm::test::to_string(static_cast<rcm::test::StreamFault>(k)) << "\n" << text;
-  EXPECT_EQ(r.get_unrecovered(5.0), 0u) << text;
+  EXPECT_EQ(r.get_unrecovered(), 0u) << text;
   EXPECT_LT(r.final_deviation_m, 1e-3) << text;
   // Flat memory: what the short run can show (the soak holds it to 1 MB over hours).
   EXPECT_LT(r.rss_peak_after_kb - r.rss_baseline_kb, 1024) << text;

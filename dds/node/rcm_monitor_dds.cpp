@@ -98,7 +98,9 @@ int run(int argc, char** argv) {
       dds_create_topic(participant, &sensor_msgs_msg_dds__JointState__desc, input.c_str(), nullptr, nullptr), "topic");
   // The estimator wants every sample: a history as deep as the outputs' lets
   // the node fall behind for a while (another process, a slow disk) without
-  // Cyclone overwriting samples it has not taken, which nothing would count.
+  // Cyclone overwriting samples it has not taken. DDS reports no sample it
+  // overwrote or lost (Cyclone 0.10's sample-lost status stays at zero): the
+  // monitor counts them as missing from the stamps (StreamGaps).
   dds_qos_t* qos = make_qos(best_effort ? DDS_RELIABILITY_BEST_EFFORT : DDS_RELIABILITY_RELIABLE, p.queue_size,
                             DDS_DURABILITY_VOLATILE);
   const dds_entity_t reader = check(dds_create_reader(participant, topic, qos, nullptr), "reader");

@@ -5,7 +5,8 @@
 // short message among them), paced at 1.5 kHz; the node's published
 // estimates must equal `rcm monitor` on the same recording to 1e-9 m, every
 // bad message must be rejected and counted, and the latched topics must follow
-// the monitor's events. The DDS configuration in use must name `lo` only.
+// the monitor's events. A lossy link's lost messages are counted missing. The
+// DDS configuration in use must name `lo` only.
 
 #include <gtest/gtest.h>
 #include <dds/dds.h>
@@ -16,6 +17,7 @@
 #include <limits>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <thread>
 
 #include "child_process.hpp"
@@ -44,6 +46,18 @@ dds_qos_t* make_qos(dds_reliability_kind_t r, dds_history_kind_t h, int depth, d
   dds_qset_history(q, h, depth);
   dds_qset_durability(q, d);
   return q;
+}
+
+// A writer of rt/PSM1/measured_js as the dVRK's (KEEP_LAST 100, VOLATILE) with
+// `reliability`; a DDS return code below zero on failure.
+dds_entity_t make_joint_state_writer(dds_entity_t participant, dds_reliability_kind_t reliability) {
+  const dds_entity_t topic = dds_create_topic(participant, &sensor_msgs_msg_dds__JointState__desc,
+                                              "rt/PSM1/measured_js", nullptr, nullptr);
+  if (topic < 0) return topic;
+  dds_qos_t* q = make_qos(reliability, DDS_HISTORY_KEEP_LAST, 100, DDS_DURABILITY_VOLATILE);
+  const dds_entity_t writer = dds_create_writer(participant, topic, q, nullptr);
+  dds_delete_qos(q);
+  return writer;
 }
 
 // One JointState_ sample built from sample k; owns the memory its pointers use.
@@ -188,12 +202,7 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
                          rejected_reader, correction_reader, advice_reader})
     ASSERT_GT(r, 0) << dds_strretcode(r);
 
-  // The dVRK's publisher QoS.
-  const dds_entity_t js_topic = dds_create_topic(participant, &sensor_msgs_msg_dds__JointState__desc,
-                                                 "rt/PSM1/measured_js", nullptr, nullptr);
-  dds_qos_t* wq = make_qos(DDS_RELIABILITY_RELIABLE, DDS_HISTORY_KEEP_LAST, 100, DDS_DURABILITY_VOLATILE);
-  const dds_entity_t writer = dds_create_writer(participant, js_topic, wq, nullptr);
-  dds_delete_qos(wq);
+  const dds_entity_t writer = make_joint_state_writer(participant, DDS_RELIABILITY_RELIABLE);  // the dVRK's QoS
   ASSERT_GT(writer, 0) << dds_strretcode(writer);
 
   ChildProcess node({RCM_DDS_NODE_PATH, "--session", kSession.string(), "--model-file", kModel.string(),
@@ -329,6 +338,7 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
                                           rejected);
   EXPECT_NE(node_log.find("zero stamp 1,"), std::string::npos) << node_log;
   EXPECT_NE(node_log.find(", 0 outputs dropped"), std::string::npos) << node_log;
+  EXPECT_NE(node_log.find("; 0 missing in 0 gap(s)"), std::string::npos) << node_log;
   EXPECT_NE(node_log.find("3 joints by name: outer_yaw, outer_pitch, outer_insertion; time from header.stamp"),
             std::string::npos)
       << node_log;
@@ -354,6 +364,76 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
   ASSERT_FALSE(regime.empty());
   EXPECT_FALSE(regime.front());
   if (::testing::Test::HasFailure()) std::cout << "node log:\n" << node_log;
+  fs::remove_all(dir);
+}
+
+// A lossy link: the publisher, best effort, drops a fifth of its packets on
+// the way out (Cyclone's Internal/Test/XmitLossiness, in this process only).
+// DDS tells the node nothing; the node counts every lost message it can see
+// as missing: all but those before its first median interval (16 intervals)
+// and after the last sample it received.
+TEST(DdsMonitorNode, CountsTheMessagesALossyLinkLost) {
+  ASSERT_TRUE(fs::exists(kSession) && fs::exists(kModel)) << "run through ctest (fixture live_test_session)";
+  const rcm::Recording rec = rcm::load_recording(kTrial);
+  const fs::path dir = fs::temp_directory_path() / ("rcm_test_dds_lossy_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const int domain = 200 + ::getpid() % 30;
+  const char* uri = std::getenv("CYCLONEDDS_URI");
+  ASSERT_NE(uri, nullptr) << "ctest sets CYCLONEDDS_URI to dds/cyclonedds-lo.xml";
+  std::string config = read_text(std::string(uri).substr(std::string(uri).rfind("file://", 0) == 0 ? 7 : 0));
+  const std::size_t end = config.find("</Domain>");
+  ASSERT_NE(end, std::string::npos);
+  config.insert(end, "<Internal><Test><XmitLossiness>200</XmitLossiness></Test></Internal>");
+  const dds_entity_t lossy = dds_create_domain(static_cast<dds_domainid_t>(domain), config.c_str());
+  ASSERT_GT(lossy, 0) << dds_strretcode(lossy);
+  struct Delete {
+    dds_entity_t e;
+    ~Delete() { dds_delete(e); }
+  } delete_domain{lossy};
+  const dds_entity_t participant = dds_create_participant(static_cast<dds_domainid_t>(domain), nullptr, nullptr);
+  ASSERT_GT(participant, 0) << dds_strretcode(participant);
+  const dds_entity_t writer = make_joint_state_writer(participant, DDS_RELIABILITY_BEST_EFFORT);
+  ASSERT_GT(writer, 0) << dds_strretcode(writer);
+
+  ChildProcess node({RCM_DDS_NODE_PATH, "--session", kSession.string(), "--model-file", kModel.string(), "--domain",
+                     std::to_string(domain), "--best-effort", "--queue-size", "100000", "--status-period-s", "0",
+                     "--joint-names", "outer_yaw,outer_pitch,outer_insertion"},
+                    dir / "node.log");
+  ASSERT_TRUE(node.started());
+  const bool up = wait_for(
+      [&] {
+        dds_publication_matched_status_t pm;
+        return !node.alive() || (dds_get_publication_matched_status(writer, &pm) == DDS_RETCODE_OK &&
+                                 pm.current_count > 0 && rcm::test::node_matched_joint_states(node.log()));
+      },
+      60s);
+  ASSERT_TRUE(up && node.alive()) << "the node did not come up:\n" << node.log();
+
+  const Eigen::Index sent = std::min<Eigen::Index>(rec.time.size(), 3000);
+  const auto start = Clock::now();
+  for (Eigen::Index k = 0; k < sent; ++k) {
+    std::this_thread::sleep_until(start + std::chrono::microseconds(k * 2000 / 3));
+    JointStateSample sample(rec, k, kStampBaseNs + std::llround(rec.time(k) * 1e9), {});
+    ASSERT_EQ(dds_write(writer, sample.get()), DDS_RETCODE_OK);
+  }
+  std::this_thread::sleep_for(500ms);
+  const int node_exit = node.stop(10s);
+  const std::string node_log = node.log();
+  EXPECT_EQ(node_exit, 0) << node_log;
+  rcm::test::print_node_log_lines(node_log, {"samples accepted"});
+
+  const std::regex summary(R"(rcm: ([0-9]+) samples accepted, ([0-9]+) rejected .*; ([0-9]+) missing in ([0-9]+) gap)");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(node_log, m, summary)) << node_log;
+  const long accepted = std::stol(m[1]), rejected = std::stol(m[2]), missing = std::stol(m[3]), gaps = std::stol(m[4]);
+  const long lost = static_cast<long>(sent) - accepted;
+  EXPECT_EQ(rejected, 0);
+  EXPECT_GT(lost, sent / 10) << "the link lost too few messages to test:\n" << node_log;
+  EXPECT_LE(missing, lost);
+  EXPECT_GE(missing, lost - 30) << node_log;
+  EXPECT_GT(gaps, 0);
+  EXPECT_LE(gaps, missing);
+  EXPECT_NE(node_log.find("message(s) missing before stamp"), std::string::npos) << node_log;
   fs::remove_all(dir);
 }
 

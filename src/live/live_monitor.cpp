@@ -11,7 +11,8 @@ LiveMonitor::LiveMonitor(const OnlinePipeline& pipeline, std::vector<std::string
       workspace_(pipeline.create_workspace()),
       wanted_names_(std::move(joint_names)),
       zero_stamp_(zero_stamp),
-      stamp_rules_(stamp_rules) {
+      stamp_rules_(stamp_rules),
+      gaps_(stamp_rules.max_gap_s) {
   if (!(stamp_rules_.max_lead_s >= 0.0) || stamp_rules_.retime_after < 0)
     throw std::invalid_argument("LiveMonitor: max_lead_s must be >= 0 and retime_after >= 0");
   if (!wanted_names_.empty()) {
@@ -77,9 +78,16 @@ LiveMonitor::Verdict LiveMonitor::compute_message(const JointStateView& m, std::
           const std::int64_t elapsed_ns = std::max<std::int64_t>(receive_time_ns - last_receive_ns_, 1);
           t_ns = last_ns_ + elapsed_ns;
           origin_ns_ = stamp_ns - t_ns;
+          gaps_.restart_interval();
         } else {
+          if (verdict == Verdict::out_of_order && t_ns > previous_ns_) count_late_arrival();
           return verdict;
         }
+      } else {
+        const std::uint64_t between = get_slot_rejections() - late_since_accept_ - rejected_at_accept_;
+        const std::uint64_t missing = gaps_.compute_interval(t_ns - last_ns_, between);
+        counters_.missing += missing;
+        counters_.gaps += missing > 0 ? 1 : 0;
       }
     } else if (t_ns < last_ns_) {
       ++counters_.out_of_order;
@@ -88,7 +96,10 @@ LiveMonitor::Verdict LiveMonitor::compute_message(const JointStateView& m, std::
   }
   candidates_ = 0;
   started_ = true;
+  previous_ns_ = last_ns_;
   last_ns_ = t_ns;
+  rejected_at_accept_ = get_slot_rejections();
+  late_since_accept_ = 0;
   last_receive_ns_ = receive_time_ns;
   pipeline_.compute_sample(workspace_, static_cast<double>(t_ns) * 1e-9, map_ws_.position.data(),
                            map_ws_.velocity.data(), map_ws_.effort.data());
@@ -111,6 +122,17 @@ LiveMonitor::Verdict LiveMonitor::reject_by_time(Verdict verdict, std::int64_t s
   if (verdict == Verdict::out_of_order) ++counters_.out_of_order;
   else ++counters_.time_jump;
   return verdict;
+}
+
+// Every rejection but a repeated stamp may be a message that held a slot of
+// the stream (a late arrival included: count_late_arrival takes it back).
+std::uint64_t LiveMonitor::get_slot_rejections() const { return counters_.get_rejected() - counters_.duplicate_stamp; }
+
+void LiveMonitor::count_late_arrival() {
+  ++late_since_accept_;
+  if (gaps_.compute_late_arrival() == 0) return;
+  --counters_.missing;
+  if (gaps_.get_last_missing() == 0) --counters_.gaps;
 }
 
 std::string LiveMonitor::describe_rejection(Verdict v, const JointStateView& m, std::int64_t stamp_ns) const {

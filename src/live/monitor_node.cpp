@@ -151,6 +151,7 @@ void MonitorNode::compute_message(const JointStateView& message, std::int64_t st
   step_.add(std::chrono::duration<double>(stepped - start).count());
   const OnlineOutput& out = monitor_.get_output();
   if (monitor_.get_counters().accepted == 1) on_first_sample(stamp_ns);
+  if (monitor_.get_last_missing() > 0) on_gap(stamp_ns);
   if (monitor_.get_counters().retimed != retimed_) {
     retimed_ = monitor_.get_counters().retimed;
     sink_.log(LogLevel::warn,
@@ -233,6 +234,19 @@ void MonitorNode::on_first_sample(std::int64_t stamp_ns) {
                    monitor_.uses_receive_time() ? "the receive time (the stamps are zero)" : "header.stamp"));
 }
 
+void MonitorNode::on_gap(std::int64_t stamp_ns) {
+  const LiveMonitor::Counters& c = monitor_.get_counters();
+  const double interval_ms = 1e-6 * static_cast<double>(monitor_.get_median_interval_ns());
+  sink_.log(LogLevel::warn,
+            format("rcm: %llu message(s) missing before stamp %.6f s: %.1f ms without one, the stream's interval "
+                   "%.3f ms (lost on the way, overwritten in a full queue, or never sent) [%llu missing in %llu "
+                   "gap(s) so far]",
+                   ull(monitor_.get_last_missing()), static_cast<double>(stamp_ns) * 1e-9,
+                   1e-6 * static_cast<double>(monitor_.get_last_interval_ns()), interval_ms,
+                   ull(c.missing), ull(c.gaps)),
+            c.gaps <= 10 ? 0.0 : 2.0);
+}
+
 void MonitorNode::on_rejected(LiveMonitor::Verdict verdict, const JointStateView& message, std::int64_t stamp_ns) {
   const std::uint64_t n = monitor_.get_counters().get_rejected();
   sink_.publish_rejected(n);
@@ -246,9 +260,9 @@ std::string MonitorNode::get_summary() const {
   const auto& c = monitor_.get_counters();
   std::string s = format(
       "rcm: %llu samples accepted, %llu rejected (duplicate stamp %llu, out of order %llu, zero stamp %llu, "
-      "malformed %llu, too few joints %llu, time jump %llu)%s\n",
+      "malformed %llu, too few joints %llu, time jump %llu); %llu missing in %llu gap(s) of the stamps%s\n",
       ull(c.accepted), ull(c.get_rejected()), ull(c.duplicate_stamp), ull(c.out_of_order), ull(c.bad_stamp),
-      ull(c.malformed), ull(c.too_few_joints), ull(c.time_jump),
+      ull(c.malformed), ull(c.too_few_joints), ull(c.time_jump), ull(c.missing), ull(c.gaps),
       c.retimed ? format("; the publisher's clock moved %llu time(s) and was followed", ull(c.retimed)).c_str() : "");
   s += format(
       "rcm: per sample: model + estimator %.2f us mean, %.1f us max; whole callback with publishing %.2f us mean, "

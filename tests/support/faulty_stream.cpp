@@ -143,8 +143,8 @@ class Soak {
     next_fault_s_ = options_.first_fault_s;
     for (std::uint64_t i = 0; i < options_.messages; ++i) {
       const double t = get_time(i);
-      if (left_ == 0 && t >= next_fault_s_ && t + window_time(order_[next_kind_ % kNumStreamFaults]) +
-                                                      options_.recovery_window_s + 2.0 < total_s)
+      const StreamFault next = order_[next_kind_ % kNumStreamFaults];
+      if (left_ == 0 && t >= next_fault_s_ && t + window_time(next) + get_recovery_window(next) + 2.0 < total_s)
         start_fault(i, t);
       fill(clean_message_, i, t, false);
       feed(reference_, clean_message_, nullptr);
@@ -222,11 +222,12 @@ class Soak {
     f.start_s = t;
     f.messages = left_;
     f.end_s = t + static_cast<double>(left_ - 1) * dt_;
+    f.window_s = get_recovery_window(kind_);
     report_.faults.push_back(f);
     fault_end_index_ = i + left_ - 1;
     last_bad_index_ = 0;
     any_bad_ = false;
-    next_fault_s_ = std::max(t + options_.fault_period_s, f.end_s + options_.recovery_window_s + 2.0);
+    next_fault_s_ = std::max(t + options_.fault_period_s, f.end_s + f.window_s + 2.0);
     if (kind_ == StreamFault::clock_back) shift_ns_ -= 2 * kHourNs;
     if (kind_ == StreamFault::clock_forward) shift_ns_ += 2 * kHourNs;
     if (kind_ == StreamFault::clock_back || kind_ == StreamFault::clock_forward) ++report_.expected.retimed;
@@ -235,6 +236,11 @@ class Soak {
       burst_left_ = left_;
       burst_receive_ns_ = kBaseNs + std::llround(t * 1e9) + silence_ns_;
     }
+  }
+
+  double get_recovery_window(StreamFault kind) const {
+    if (kind != StreamFault::silence) return options_.recovery_window_s;
+    return std::max(options_.recovery_window_s, pipeline_->estimator().options().max_drift_gap_s);
   }
 
   void finish_fault() {
@@ -291,7 +297,9 @@ class Soak {
         std::swap(held_message_, m);
         v = Verdict::out_of_order;
         break;
-      case StreamFault::drop:
+      case StreamFault::drop:  // one gap of the stamps, every message of it missing
+        if (step == 0) ++report_.expected.gaps;
+        ++report_.expected.missing;
         return;
       case StreamFault::stamp_ahead:
         m.stamp_ns += 3 * kHourNs;
@@ -382,9 +390,9 @@ double SoakReport::get_max_recovery_s() const {
   return r;
 }
 
-std::uint64_t SoakReport::get_unrecovered(double window_s) const {
+std::uint64_t SoakReport::get_unrecovered() const {
   std::uint64_t n = 0;
-  for (const SoakFault& f : faults) n += f.recovery_s > window_s ? 1 : 0;
+  for (const SoakFault& f : faults) n += f.recovery_s > f.window_s ? 1 : 0;
   return n;
 }
 
@@ -394,7 +402,8 @@ bool SoakReport::counts_match() const {
   return exceptions == 0 && c.accepted == e.accepted && c.duplicate_stamp == e.duplicate_stamp &&
          c.out_of_order == e.out_of_order && c.bad_stamp == e.bad_stamp && c.malformed == e.malformed &&
          c.too_few_joints == e.too_few_joints && c.time_jump == e.time_jump &&
-         c.retimed == e.retimed && verdict_mismatches == 0 && retime_log_lines == c.retimed;
+         c.retimed == e.retimed && c.missing == e.missing && c.gaps == e.gaps && verdict_mismatches == 0 &&
+         retime_log_lines == c.retimed;
 }
 
 std::string SoakReport::to_text() const {
@@ -419,6 +428,8 @@ std::string SoakReport::to_text() const {
   row("malformed", counters.malformed, expected.malformed);
   row("too few joints", counters.too_few_joints, expected.too_few_joints);
   row("retimed", counters.retimed, expected.retimed);
+  row("missing", counters.missing, expected.missing);
+  row("gaps", counters.gaps, expected.gaps);
   std::snprintf(line, sizeof line, "  exceptions %llu%s%s; verdicts unlike the prediction %llu%s%s; clock-moved log lines %llu\n",
                 static_cast<unsigned long long>(exceptions), first_exception.empty() ? "" : ": ",
                 first_exception.c_str(), static_cast<unsigned long long>(verdict_mismatches),

@@ -24,6 +24,10 @@
 // estimator's time goes on from the last accepted sample by what the receive
 // clock says elapsed, so that its own time never runs backwards.
 //
+// Messages the stream skipped (lost on the way, overwritten in a full queue)
+// are counted from the stamps (StreamGaps), not rejections: `missing` in
+// `gaps`. Not with receive times, whose jitter is not the publisher's.
+//
 // No allocation per message once the first message has been accepted (the
 // joint order and the buffers are set up then).
 
@@ -34,6 +38,7 @@
 
 #include "rcm/estimation/online.hpp"
 #include "rcm/io/joint_state_map.hpp"
+#include "rcm/live/stream_gaps.hpp"
 
 namespace rcm {
 
@@ -46,6 +51,9 @@ struct LiveStampRules {
   // Consecutive rejected but mutually consistent messages that make the
   // monitor follow the publisher's new timeline (0: never).
   int retime_after = 10;
+  // An interval between two stamps longer than this is a silence (the
+  // publisher paused), not messages missing.
+  double max_gap_s = 1.0;
 };
 
 class LiveMonitor {
@@ -63,6 +71,9 @@ class LiveMonitor {
     std::uint64_t accepted = 0, duplicate_stamp = 0, out_of_order = 0, bad_stamp = 0, malformed = 0,
                   too_few_joints = 0, time_jump = 0;
     std::uint64_t retimed = 0;  // times the monitor followed a publisher's timeline that moved (not a rejection)
+    // Messages the stamps say the stream skipped, and the intervals they were
+    // in (not rejections: they never arrived).
+    std::uint64_t missing = 0, gaps = 0;
     std::uint64_t get_rejected() const {
       return duplicate_stamp + out_of_order + bad_stamp + malformed + too_few_joints + time_jump;
     }
@@ -94,6 +105,11 @@ class LiveMonitor {
   std::int64_t get_time_origin_ns() const { return origin_ns_; }
   // The absolute time (ns) of the last accepted sample.
   std::int64_t get_last_time_ns() const { return origin_ns_ + last_ns_; }
+  // The messages missing just before the last accepted sample, the interval
+  // (ns) it closed, and the stream's median interval (ns; 0 until known).
+  std::uint64_t get_last_missing() const { return gaps_.get_last_missing(); }
+  std::int64_t get_last_interval_ns() const { return last_ns_ - previous_ns_; }
+  std::int64_t get_median_interval_ns() const { return gaps_.get_median_interval_ns(); }
   // The absolute time (ns) of the sample get_output() is for, the stamp to
   // publish it with: the last accepted one's, or, with a model whose torque
   // trails, that of the sample that long before (exact to the nanosecond for
@@ -120,6 +136,13 @@ class LiveMonitor {
   std::int64_t candidate_stamp_ns_ = 0, candidate_receive_ns_ = 0;
   Counters counters_;
   JointStateDefect defect_;
+  StreamGaps gaps_;
+  std::int64_t previous_ns_ = 0;            // the accepted sample before the last
+  std::uint64_t rejected_at_accept_ = 0;    // rejections that may hold a slot, at the last acceptance
+  std::uint64_t late_since_accept_ = 0;     // late arrivals since then (they held a slot before it)
+
+  std::uint64_t get_slot_rejections() const;
+  void count_late_arrival();
 
   Verdict reject_by_time(Verdict verdict, std::int64_t stamp_ns, std::int64_t receive_time_ns);
 };

@@ -125,6 +125,7 @@ class MonitorNode {
   };
   void on_first_sample(std::int64_t stamp_ns);
   void on_rejected(LiveMonitor::Verdict verdict, const JointStateView& message, std::int64_t stamp_ns);
+  void on_gap(std::int64_t stamp_ns);
 
   MonitorNodeParameters params_;
   std::unique_ptr<OnlinePipeline> pipeline_;
