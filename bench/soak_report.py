@@ -58,7 +58,7 @@ def main():
         failed |= proc.returncode != 0
         results.append((name, json.load(open(out))))
 
-    lines = [f"Run {datetime.date.today().isoformat()} by `make soak` on {cpu_model()}, {os.cpu_count()} cores: "
+    lines = [f"Run {datetime.date.today().isoformat()} by `make soak` on {cpu_model()}, {os.cpu_count()} cores. "
              f"{args.messages:,} clean samples of a simulated trial (D = 30 mm, radial (10, 15) mm, 200 Hz, "
              "looped), linear free-space model; one fault every 12 s of sample time or more.", ""]
     # The recovery each fault is allowed: one window, a longer one after a silence.
