@@ -51,8 +51,8 @@ inline std::size_t get_expected_estimates(const nlohmann::json& monitor) {
 }
 
 // Every one of the `samples` accepted, each estimate answered once on the three
-// estimate topics (as many as `rcm monitor` estimated), and the `injected` bad
-// messages counted on rejected_samples and in the exit summary.
+// estimate topics (as many as `rcm monitor` estimated), the `injected` bad
+// messages counted on rejected_samples and in the exit summary, none missing.
 inline void expect_every_sample_answered(const std::string& log, const nlohmann::json& monitor, std::size_t samples,
                                          std::size_t injected, std::size_t estimates, std::size_t sds,
                                          std::size_t forces, std::uint64_t rejected) {
@@ -64,6 +64,7 @@ inline void expect_every_sample_answered(const std::string& log, const nlohmann:
   EXPECT_NE(log.find(std::to_string(samples) + " samples accepted, " + std::to_string(injected) + " rejected"),
             std::string::npos)
       << log;
+  EXPECT_NE(log.find("; 0 missing in 0 gap(s)"), std::string::npos) << log;  // none lost on the way
 }
 
 // Prints the node's log lines that contain each key ("[ node log ] ...").
