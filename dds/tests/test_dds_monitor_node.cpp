@@ -48,6 +48,12 @@ dds_qos_t* make_qos(dds_reliability_kind_t r, dds_history_kind_t h, int depth, d
   return q;
 }
 
+// Deletes a DDS entity (and what it holds) when the test returns, passed or not.
+struct DeleteOnExit {
+  dds_entity_t e;
+  ~DeleteOnExit() { dds_delete(e); }
+};
+
 // A writer of rt/PSM1/measured_js as the dVRK's (KEEP_LAST 100, VOLATILE) with
 // `reliability`; a DDS return code below zero on failure.
 dds_entity_t make_joint_state_writer(dds_entity_t participant, dds_reliability_kind_t reliability) {
@@ -173,10 +179,7 @@ TEST(DdsMonitorNode, EndToEndAgreesWithRcmMonitor) {
 
   const dds_entity_t participant = dds_create_participant(static_cast<dds_domainid_t>(domain), nullptr, nullptr);
   ASSERT_GT(participant, 0) << dds_strretcode(participant);
-  struct Delete {
-    dds_entity_t e;
-    ~Delete() { dds_delete(e); }
-  } delete_participant{participant};
+  const DeleteOnExit delete_participant{participant};
 
   auto reader = [&](const dds_topic_descriptor_t* type, const char* name, bool latched) {
     const dds_entity_t t = dds_create_topic(participant, type, name, nullptr, nullptr);
@@ -385,10 +388,7 @@ TEST(DdsMonitorNode, CountsTheMessagesALossyLinkLost) {
   config.insert(end, "<Internal><Test><XmitLossiness>200</XmitLossiness></Test></Internal>");
   const dds_entity_t lossy = dds_create_domain(static_cast<dds_domainid_t>(domain), config.c_str());
   ASSERT_GT(lossy, 0) << dds_strretcode(lossy);
-  struct Delete {
-    dds_entity_t e;
-    ~Delete() { dds_delete(e); }
-  } delete_domain{lossy};
+  const DeleteOnExit delete_domain{lossy};
   const dds_entity_t participant = dds_create_participant(static_cast<dds_domainid_t>(domain), nullptr, nullptr);
   ASSERT_GT(participant, 0) << dds_strretcode(participant);
   const dds_entity_t writer = make_joint_state_writer(participant, DDS_RELIABILITY_BEST_EFFORT);

@@ -85,9 +85,8 @@ LiveMonitor::Verdict LiveMonitor::compute_message(const JointStateView& m, std::
         }
       } else {
         const std::uint64_t between = get_slot_rejections() - late_since_accept_ - rejected_at_accept_;
-        const std::uint64_t missing = gaps_.compute_interval(t_ns - last_ns_, between);
-        counters_.missing += missing;
-        counters_.gaps += missing > 0 ? 1 : 0;
+        gaps_.compute_interval(t_ns - last_ns_, between);
+        copy_gap_counts();
       }
     } else if (t_ns < last_ns_) {
       ++counters_.out_of_order;
@@ -130,9 +129,14 @@ std::uint64_t LiveMonitor::get_slot_rejections() const { return counters_.get_re
 
 void LiveMonitor::count_late_arrival() {
   ++late_since_accept_;
-  if (gaps_.compute_late_arrival() == 0) return;
-  --counters_.missing;
-  if (gaps_.get_last_missing() == 0) --counters_.gaps;
+  gaps_.compute_late_arrival();
+  copy_gap_counts();
+}
+
+// Counters is the snapshot of everything counted; StreamGaps keeps the totals.
+void LiveMonitor::copy_gap_counts() {
+  counters_.missing = gaps_.get_missing();
+  counters_.gaps = gaps_.get_gaps();
 }
 
 std::string LiveMonitor::describe_rejection(Verdict v, const JointStateView& m, std::int64_t stamp_ns) const {

@@ -26,12 +26,16 @@ std::uint64_t StreamGaps::compute_interval(std::int64_t interval_ns, std::uint64
       std::llround(static_cast<double>(interval_ns) / static_cast<double>(median_ns_)));
   const std::uint64_t skipped = slots > 1 ? slots - 1 : 0;
   last_missing_ = skipped > rejected_between ? skipped - rejected_between : 0;
+  missing_ += last_missing_;
+  gaps_ += last_missing_ > 0 ? 1 : 0;
   return last_missing_;
 }
 
 std::uint64_t StreamGaps::compute_late_arrival() {
   if (last_missing_ == 0) return 0;
   --last_missing_;
+  --missing_;
+  if (last_missing_ == 0) --gaps_;  // the gap is filled
   return 1;
 }
 

@@ -143,6 +143,7 @@ class LiveMonitor {
 
   std::uint64_t get_slot_rejections() const;
   void count_late_arrival();
+  void copy_gap_counts();
 
   Verdict reject_by_time(Verdict verdict, std::int64_t stamp_ns, std::int64_t receive_time_ns);
 };

@@ -44,6 +44,9 @@ class StreamGaps {
   std::int64_t get_median_interval_ns() const { return median_ns_; }
   // The missing messages the last interval still counts (after late arrivals).
   std::uint64_t get_last_missing() const { return last_missing_; }
+  // Since the start: messages missing, and the intervals that still count some.
+  std::uint64_t get_missing() const { return missing_; }
+  std::uint64_t get_gaps() const { return gaps_; }
 
  private:
   std::int64_t max_gap_ns_;
@@ -51,6 +54,7 @@ class StreamGaps {
   std::uint64_t intervals_ = 0;
   std::int64_t median_ns_ = 0;
   std::uint64_t last_missing_ = 0;
+  std::uint64_t missing_ = 0, gaps_ = 0;
 };
 
 }  // namespace rcm
